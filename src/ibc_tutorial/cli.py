@@ -1,0 +1,43 @@
+"""The ``ibc-tutorial`` command line.
+
+Each sub-command lives in the module that owns its work and registers itself here through
+``SUBCOMMANDS``: a mapping from name to ``(module, add_arguments, run)`` names, imported lazily so
+that ``ibc-tutorial --version`` is instant.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from ibc_tutorial import __version__
+
+# name -> (module path, function that adds arguments to a sub-parser, function that runs it)
+SUBCOMMANDS: dict[str, tuple[str, str, str, str]] = {
+    # "collect": ("ibc_tutorial.driving.collect", "add_arguments", "run", "drive the expert and store demonstrations"),
+}
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="ibc-tutorial", description="Implicit behavioral cloning tutorial: command line.")
+    parser.add_argument("--version", action="version", version=f"ibc-tutorial {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name, (module, add_args, _run, help_text) in SUBCOMMANDS.items():
+        p = sub.add_parser(name, help=help_text, description=help_text)
+        getattr(importlib.import_module(module), add_args)(p)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.command is None:
+        parser.print_help()
+        return 0
+    module, _add, run, _help = SUBCOMMANDS[args.command]
+    return int(getattr(importlib.import_module(module), run)(args) or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,63 @@
+"""The feedback type and the safe-call wrapper shared by all exercise checkers."""
+
+from __future__ import annotations
+
+import traceback
+from dataclasses import dataclass
+from typing import Callable
+
+NOT_ATTEMPTED = "not attempted"
+CORRECT = "correct"
+HINT = "hint"
+
+
+class NotAttempted(Exception):
+    """Raised inside a checker when the reader's answer is still the stub."""
+
+
+@dataclass(frozen=True)
+class Feedback:
+    """A checker's answer: ``status`` is one of "not attempted", "correct", "hint"."""
+
+    status: str
+    """"not attempted", "correct" or "hint"."""
+    message: str
+    """One or two sentences for the reader."""
+
+    def __repr__(self) -> str:  # what a notebook cell prints
+        return f"[{self.status}] {self.message}"
+
+    def _repr_markdown_(self) -> str:
+        mark = {CORRECT: "✅", HINT: "💡", NOT_ATTEMPTED: "⬜"}.get(self.status, "")
+        return f"{mark} **{self.status}**: {self.message}"
+
+    @property
+    def correct(self) -> bool:
+        return self.status == CORRECT
+
+
+def not_attempted(what: str = "this exercise") -> Feedback:
+    return Feedback(NOT_ATTEMPTED, f"Replace the `raise NotImplementedError` in {what} with your code, then run this cell again.")
+
+
+def correct(message: str = "Well done.") -> Feedback:
+    return Feedback(CORRECT, message)
+
+
+def hint(message: str) -> Feedback:
+    return Feedback(HINT, message)
+
+
+def run_check(check: Callable[[], Feedback], what: str = "this exercise") -> Feedback:
+    """Run ``check`` and turn anything the reader's code raises into feedback.
+
+    A ``NotImplementedError`` (the stub) or ``NotAttempted`` means "not attempted"; any other
+    exception becomes a hint naming the exception, never a traceback in the reader's face.
+    """
+    try:
+        return check()
+    except (NotImplementedError, NotAttempted):
+        return not_attempted(what)
+    except Exception as exc:  # the reader's code failed: tell them how, do not raise
+        last = traceback.extract_tb(exc.__traceback__)[-1]
+        return hint(f"your code raised {type(exc).__name__}: {exc} (line {last.lineno} of {last.name}).")
