@@ -8,7 +8,151 @@ soft targets (eq. 5 of the steering-EBM paper) and temporal smoothing (its eq. 4
 
 from __future__ import annotations
 
+import math
+
 import torch
 import torch.nn.functional as F  # noqa: F401
 
-from ibc_tutorial.utils import check_tensor  # noqa: F401
+from ibc_tutorial.utils import check_choice, check_int, check_tensor  # noqa: F401
+
+
+# =========================================================================== explicit policies (chapter 02)
+BETA_EPS = 1e-4
+"""``beta_nll`` clamps the rescaled action y' = (y + 1)/2 to [BETA_EPS, 1 - BETA_EPS].
+
+Expert data holds actions exactly at -1 and +1 (full brake, full steering lock), where
+y' = 0 or 1 and log y' or log(1 - y') is -inf. Evaluating the Beta density at the nearest
+point 1e-4 inside the interval keeps the loss and its gradients finite and changes nothing
+for actions further than 2e-4 (in [-1, 1] units) from a bound."""
+
+
+def _check_actions(name: str, actions: torch.Tensor) -> torch.Tensor:
+    check_tensor(name, actions, ndim=2)
+    if not actions.is_floating_point():
+        raise ValueError(f"{name} must be a floating-point tensor, got dtype {actions.dtype}")
+    if (actions < -1).any() or (actions > 1).any():
+        raise ValueError(f"{name} must lie in [-1, 1], got values in [{float(actions.min()):.3g}, {float(actions.max()):.3g}]")
+    return actions
+
+
+def beta_nll(alpha: torch.Tensor, beta: torch.Tensor, actions: torch.Tensor, *, eps: float = BETA_EPS) -> torch.Tensor:
+    """Negative log-likelihood of actions under per-dimension Beta distributions: eq. 1 of the DA-IBC paper.
+
+    The paper rescales each action y in [-1, 1] to y' = (y + 1)/2 in [0, 1] and scores it with
+    the Beta density f(y'; α, β) = y'^(α-1) (1 - y')^(β-1) / B(α, β), with no change-of-variables
+    term (so the loss is the NLL of y', i.e. that of y plus the constant D·log 2). Eq. 1 sums the
+    dimensions (acceleration and steering) and averages over the N samples:
+
+        L = -(1/N) Σ_i Σ_d log f((y_id + 1)/2; α_id, β_id)
+
+    Clamp: y' is clamped to [eps, 1 - eps] (``BETA_EPS`` = 1e-4 by default), so actions exactly
+    at -1 or +1 give a finite loss with finite gradients (see ``BETA_EPS``).
+
+    Args:
+        alpha, beta: (B, D) concentrations, finite and > 0.
+        actions: (B, D) actions in [-1, 1].
+        eps: the clamp margin, in (0, 0.5).
+    Returns:
+        a scalar tensor.
+    """
+    _check_actions("actions", actions)
+    check_tensor("alpha", alpha, shape=tuple(actions.shape))
+    check_tensor("beta", beta, shape=tuple(actions.shape))
+    if (alpha <= 0).any():
+        raise ValueError(f"alpha must be > 0 everywhere, got minimum {float(alpha.min()):.3g}")
+    if (beta <= 0).any():
+        raise ValueError(f"beta must be > 0 everywhere, got minimum {float(beta.min()):.3g}")
+    if not 0.0 < float(eps) < 0.5:
+        raise ValueError(f"eps must lie in (0, 0.5), got {eps!r}")
+    y = ((actions + 1.0) / 2.0).clamp(eps, 1.0 - eps)  # (B, D), y' of eq. 1
+    log_b = torch.lgamma(alpha) + torch.lgamma(beta) - torch.lgamma(alpha + beta)  # log B(α, β)
+    log_f = (alpha - 1.0) * torch.log(y) + (beta - 1.0) * torch.log1p(-y) - log_b  # (B, D)
+    return -log_f.sum(dim=1).mean()
+
+
+def regression_loss(predictions: torch.Tensor, actions: torch.Tensor, kind: str = "mae") -> torch.Tensor:
+    """Regression loss of the steering-EBM paper's baseline: mean over the batch of the summed
+    absolute ("mae", the paper's choice) or squared ("mse") errors over action dimensions.
+
+    Args:
+        predictions, actions: (B, D) tensors.
+        kind: "mae" or "mse".
+    """
+    check_choice("kind", kind, ("mae", "mse"))
+    check_tensor("actions", actions, ndim=2)
+    check_tensor("predictions", predictions, shape=tuple(actions.shape))
+    err = predictions - actions  # (B, D)
+    per_dim = err.abs() if kind == "mae" else err.square()
+    return per_dim.sum(dim=1).mean()
+
+
+def bin_centers(n_bins: int, low: float = -1.0, high: float = 1.0) -> torch.Tensor:
+    """Centres of ``n_bins`` equal bins dividing [low, high]: (n_bins,)."""
+    check_int("n_bins", n_bins, minimum=2)
+    width = (high - low) / n_bins
+    return low + width * (torch.arange(n_bins, dtype=torch.float32) + 0.5)
+
+
+def action_to_bin(actions: torch.Tensor, n_bins: int) -> torch.Tensor:
+    """Index of the bin of [-1, 1] (divided into ``n_bins`` equal bins) holding each action.
+
+    ``actions`` (B, D) in [-1, 1] -> (B, D) int64 in [0, n_bins - 1]; +1 falls in the last bin.
+    """
+    check_int("n_bins", n_bins, minimum=2)
+    _check_actions("actions", actions)
+    idx = torch.floor((actions + 1.0) / 2.0 * n_bins).long()
+    return idx.clamp(0, n_bins - 1)
+
+
+def classification_loss(logits: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
+    """Cross-entropy over bins of the action range, the steering-EBM paper's classification baseline.
+
+    Each action dimension is classified separately into N equal bins of [-1, 1] (the paper
+    used N = 512 for steering); the loss is the mean over the batch of the sum over dimensions
+    of -log softmax(logits)[bin of the expert action].
+
+    Args:
+        logits: (B, D, N) unnormalised scores of the bins of each action dimension.
+        actions: (B, D) actions in [-1, 1].
+    """
+    _check_actions("actions", actions)
+    b, d = actions.shape
+    check_tensor("logits", logits, shape=(b, d, None))
+    n = logits.shape[2]
+    if n < 2:
+        raise ValueError(f"logits must score at least 2 bins per dimension, got {n}")
+    target = action_to_bin(actions, n)  # (B, D)
+    log_p = torch.log_softmax(logits, dim=-1)  # (B, D, N)
+    nll = -log_p.gather(-1, target.unsqueeze(-1)).squeeze(-1)  # (B, D)
+    return nll.sum(dim=1).mean()
+
+
+def mdn_nll(logits: torch.Tensor, means: torch.Tensor, stds: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
+    """Negative log-likelihood under a mixture density network's Gaussian mixture (Bishop 1994).
+
+    The steering-EBM paper's MDN baseline outputs K triplets (mixture weight π_k, mean μ_k,
+    standard deviation σ_k); with D action dimensions each component is a diagonal Gaussian:
+
+        p(y | x) = Σ_k π_k Π_d N(y_d; μ_kd, σ_kd²),   π = softmax(logits)
+
+    Returns the mean over the batch of -log p(y | x), computed with log-sum-exp.
+
+    Args:
+        logits: (B, K) unnormalised mixture weights.
+        means: (B, K, D) component means.
+        stds: (B, K, D) component standard deviations, > 0.
+        actions: (B, D) target actions.
+    """
+    check_tensor("actions", actions, ndim=2)
+    b, d = actions.shape
+    check_tensor("logits", logits, shape=(b, None))
+    k = logits.shape[1]
+    check_tensor("means", means, shape=(b, k, d))
+    check_tensor("stds", stds, shape=(b, k, d))
+    if (stds <= 0).any():
+        raise ValueError(f"stds must be > 0 everywhere, got minimum {float(stds.min()):.3g}")
+    z = (actions.unsqueeze(1) - means) / stds  # (B, K, D)
+    log_normal = -0.5 * z.square() - torch.log(stds) - 0.5 * math.log(2.0 * math.pi)  # (B, K, D)
+    log_comp = log_normal.sum(dim=2)  # (B, K): log Π_d N(y_d; μ_kd, σ_kd²)
+    log_p = torch.logsumexp(torch.log_softmax(logits, dim=1) + log_comp, dim=1)  # (B,)
+    return -log_p.mean()

@@ -1,0 +1,104 @@
+"""The energy model E(x, y) of implicit behavioral cloning, with late fusion.
+
+An implicit policy acts by ŷ = argmin_y E_θ(x, y) (sec. 2.3 of the DA-IBC paper; eq. 1 of the
+steering-EBM paper). Inference and training score many candidate actions y for the same
+observation x, so the model is split into two parts (the DA-IBC paper's Fig. 2; sec. 3 of the
+steering-EBM paper: "the convolutional part of the network runs on an image only once, with
+actions fused into the model before the MLP head"):
+
+- an observation encoder (any ``ObservationEncoder``) maps x to an embedding z, once per
+  observation;
+- an action head maps (z, y) to a scalar energy. Its first layer is the linear map of the
+  concatenation [z; y], W·[z; y] + b = (W_z·z + b) + W_a·y, computed *factorised*: the
+  observation's part W_z·z + b once per observation, the action's part W_a·y per candidate,
+  then a broadcast add. The remaining hidden layers run per candidate.
+
+So scoring N candidates costs one encoder pass plus, per candidate, one small matmul for
+W_a·y and the head's hidden layers. ``embed`` and ``energy_from_embedding`` expose the two
+halves separately, so an optimiser (grid argmin, DFO, Langevin) encodes x once and then
+scores as many candidate sets against z as it likes.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+from ibc_tutorial.policies.encoders import ObservationEncoder
+from ibc_tutorial.utils import check_int
+
+
+class EnergyModel(nn.Module):
+    """E_θ(x, y): an observation encoder and an action head with a factorised first layer.
+
+    Args:
+        encoder: maps a batch of observations (a tensor, or a dict of tensors) to (B, E).
+        action_dim: D, the size of an action (1 for steering, 2 for steering and acceleration).
+        hidden: width of the head's hidden layers.
+        layers: number of hidden layers in the head (>= 1); the first is the fused layer.
+
+    Shapes: ``energy(obs, actions)`` takes obs of batch B and actions (B, N, D), or (N, D)
+    shared by every observation, and returns energies (B, N). Lower energy = better action.
+    """
+
+    def __init__(self, encoder: ObservationEncoder, action_dim: int, hidden: int = 64, layers: int = 2):
+        super().__init__()
+        if not isinstance(encoder, nn.Module) or not hasattr(encoder, "embed_dim"):
+            raise ValueError(f"encoder must be an ObservationEncoder (an nn.Module with embed_dim), got {type(encoder).__name__}")
+        self.encoder = encoder
+        self.action_dim = check_int("action_dim", action_dim, minimum=1)
+        self.hidden = check_int("hidden", hidden, minimum=1)
+        self.layers = check_int("layers", layers, minimum=1)
+        self.embed_dim = int(encoder.embed_dim)
+        # First layer of the head, W·[z; y] + b split into its two column blocks.
+        self.obs_proj = nn.Linear(self.embed_dim, hidden)  # W_z z + b, once per observation
+        self.act_proj = nn.Linear(self.action_dim, hidden, bias=False)  # W_a y, per candidate
+        self._init_fused_layer()
+        mods: list[nn.Module] = []
+        for _ in range(layers - 1):
+            mods += [nn.Linear(hidden, hidden), nn.ReLU()]
+        mods.append(nn.Linear(hidden, 1))
+        self.head = nn.Sequential(*mods)  # per candidate: (..., hidden) -> (..., 1)
+
+    def _init_fused_layer(self) -> None:
+        """Initialise W_z, W_a, b as nn.Linear would initialise the unsplit layer on [z; y]."""
+        unsplit = nn.Linear(self.embed_dim + self.action_dim, self.hidden)
+        with torch.no_grad():
+            self.obs_proj.weight.copy_(unsplit.weight[:, : self.embed_dim])
+            self.obs_proj.bias.copy_(unsplit.bias)
+            self.act_proj.weight.copy_(unsplit.weight[:, self.embed_dim :])
+
+    # ------------------------------------------------------------------ the two halves
+    def embed(self, obs) -> torch.Tensor:
+        """Encode observations once: obs of batch B -> z (B, E)."""
+        return self.encoder(obs)
+
+    def energy_from_embedding(self, z: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
+        """Score candidate actions against embeddings: z (B, E), actions (B, N, D) or (N, D) -> (B, N)."""
+        if not isinstance(z, torch.Tensor) or z.ndim != 2 or z.shape[1] != self.embed_dim:
+            got = tuple(z.shape) if isinstance(z, torch.Tensor) else type(z).__name__
+            raise ValueError(f"z must be a tensor of shape (B, {self.embed_dim}), got {got}")
+        actions = self._check_actions(actions, len(z))
+        h_obs = self.obs_proj(z)  # (B, H): W_z z + b, once per observation
+        h_act = actions @ self.act_proj.weight.T  # (B, N, H) or (N, H): W_a y, per candidate
+        h = torch.relu(h_obs[:, None, :] + h_act)  # (B, N, H): broadcast add = W [z; y] + b
+        return self.head(h).squeeze(-1)  # (B, N)
+
+    def energy(self, obs, actions: torch.Tensor) -> torch.Tensor:
+        """E_θ(x, y) for every candidate: obs of batch B, actions (B, N, D) or (N, D) -> (B, N)."""
+        return self.energy_from_embedding(self.embed(obs), actions)
+
+    def forward(self, obs, actions: torch.Tensor) -> torch.Tensor:
+        return self.energy(obs, actions)
+
+    # ------------------------------------------------------------------ checks
+    def _check_actions(self, actions, batch: int) -> torch.Tensor:
+        ok = isinstance(actions, torch.Tensor) and actions.ndim in (2, 3) and actions.shape[-1] == self.action_dim
+        if ok and actions.ndim == 3 and actions.shape[0] != batch:
+            ok = False
+        if not ok:
+            got = tuple(actions.shape) if isinstance(actions, torch.Tensor) else type(actions).__name__
+            raise ValueError(
+                f"actions must be a tensor of shape ({batch}, N, {self.action_dim}) or (N, {self.action_dim}), got {got}"
+            )
+        return actions
