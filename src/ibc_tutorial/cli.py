@@ -15,7 +15,7 @@ from ibc_tutorial import __version__
 
 # name -> (module path, function that adds arguments to a sub-parser, function that runs it)
 SUBCOMMANDS: dict[str, tuple[str, str, str, str]] = {
-    # "collect": ("ibc_tutorial.driving.collect", "add_arguments", "run", "drive the expert and store demonstrations"),
+    "collect": ("ibc_tutorial.driving.collect", "add_arguments", "run", "drive the expert and store demonstrations"),
 }
 
 

@@ -156,3 +156,135 @@ def mdn_nll(logits: torch.Tensor, means: torch.Tensor, stds: torch.Tensor, actio
     log_comp = log_normal.sum(dim=2)  # (B, K): log Π_d N(y_d; μ_kd, σ_kd²)
     log_p = torch.logsumexp(torch.log_softmax(logits, dim=1) + log_comp, dim=1)  # (B,)
     return -log_p.mean()
+
+
+# =========================================================================== energy models (chapters 03-04)
+from ibc_tutorial.utils import check_positive as _check_positive  # noqa: E402
+
+
+def _check_energies(pos_energy: torch.Tensor, neg_energy: torch.Tensor, weights: torch.Tensor | None) -> None:
+    check_tensor("pos_energy", pos_energy, ndim=1)
+    b = len(pos_energy)
+    check_tensor("neg_energy", neg_energy, shape=(b, None))
+    if neg_energy.shape[1] < 1:
+        raise ValueError(f"neg_energy must hold at least one counter-example per sample, got shape {tuple(neg_energy.shape)}")
+    if weights is not None:
+        check_tensor("weights", weights, shape=(b,))
+        if (weights < 0).any():
+            raise ValueError(f"weights must be >= 0, got minimum {float(weights.min()):.3g}")
+
+
+def info_nce(pos_energy: torch.Tensor, neg_energy: torch.Tensor, weights: torch.Tensor | None = None) -> torch.Tensor:
+    """InfoNCE over counter-examples: eqs. 2-3 of the DA-IBC paper, weighted as in its eq. 5.
+
+    For sample i with expert action y_i and counter-examples ỹ_i^1..ỹ_i^N (eq. 3):
+
+        p̃_i = exp(-E(x_i, y_i)) / (exp(-E(x_i, y_i)) + Σ_j exp(-E(x_i, ỹ_i^j)))
+
+    i.e. the softmax of the negated energies over the N + 1 candidates, read at the expert's
+    action. The loss is the **mean** over the batch of w_i · (−log p̃_i), with w_i = 1 when
+    ``weights`` is None. (Eqs. 2 and 5 write a sum over the N samples; the mean divides it by
+    the batch size, which changes only the scale of the gradient, so a learning rate does not
+    depend on the batch size. The weights are used as given, not renormalised: with KDE
+    weights w_i = 1/ĝ(y_i) of eq. 5, the loss scales with their mean.)
+
+    Computed as -log p̃_i = logsumexp_k(-e_ik) + E(x_i, y_i), which stays finite and exact for
+    energies in the thousands, where exp(-E) under- or overflows.
+
+    Args:
+        pos_energy: (B,) energies of the expert actions, E(x_i, y_i).
+        neg_energy: (B, N) energies of the counter-examples, E(x_i, ỹ_i^j).
+        weights: optional (B,) non-negative sample weights w_i of eq. 5.
+    Returns:
+        a scalar tensor.
+    """
+    _check_energies(pos_energy, neg_energy, weights)
+    logits = torch.cat([-pos_energy[:, None], -neg_energy], dim=1)  # (B, 1 + N): -E, expert first
+    nll = torch.logsumexp(logits, dim=1) + pos_energy  # (B,): -log p̃_i of eq. 3
+    if weights is None:
+        return nll.mean()  # eq. 2 (divided by B)
+    return (weights * nll).mean()  # eq. 5 (divided by B)
+
+
+def soft_targets(candidates: torch.Tensor, actions: torch.Tensor, temperature: float) -> torch.Tensor:
+    """Target probabilities over candidate actions that fall with distance from the ground truth.
+
+    Eq. 5 of the steering-EBM paper in its intended form:
+
+        p* = softmax(-(a - a_GT)² / T)
+
+    The transcription prints softmax(+(a - a_GT)² / T), which would give the **most** weight to
+    the candidate farthest from the ground truth; the paper's text ("assigning some of the
+    probability to actions a few degrees away from the ground truth", its Fig. 4, and "99.9% of
+    the probability mass was on ±5 degrees around the ground truth") says the weight falls with
+    distance, which needs the minus sign. For D > 1, (a - a_GT)² is the squared Euclidean
+    distance. The paper used T = 2.5e-3 with angles in radians.
+
+    Args:
+        candidates: (B, K, D) candidates per sample, or (K, D) shared by every sample.
+        actions: (B, D) ground-truth actions a_GT.
+        temperature: T > 0; smaller is sharper (T -> 0 gives the one-hot target).
+    Returns:
+        (B, K) probabilities, each row summing to 1.
+    """
+    temperature = _check_positive("temperature", temperature)
+    check_tensor("actions", actions, ndim=2)
+    b, d = actions.shape
+    if candidates.ndim == 2:
+        check_tensor("candidates", candidates, shape=(None, d))
+        diff = candidates[None, :, :] - actions[:, None, :]  # (B, K, D)
+    else:
+        check_tensor("candidates", candidates, shape=(b, None, d))
+        diff = candidates - actions[:, None, :]  # (B, K, D)
+    sq = diff.square().sum(dim=-1)  # (B, K): (a - a_GT)²
+    return torch.softmax(-sq / temperature, dim=1)  # eq. 5 of the steering-EBM paper, intended sign
+
+
+def grid_cross_entropy(energies: torch.Tensor, targets: torch.Tensor) -> torch.Tensor:
+    """Cross-entropy between target probabilities and softmax(-e): eq. 3 of the steering-EBM paper.
+
+        L_EBM = CE(softmax(-e), y) = -Σ_k y_k log softmax(-e)_k
+
+    averaged over the batch. ``energies`` holds e_k = E(o, a_k) for the K = n + 1 candidates
+    (n grid actions and the ground truth); ``targets`` is the one-hot vector of the ground truth
+    (then this equals ``info_nce`` with the grid as counter-examples) or soft targets
+    (``soft_targets``, eq. 5).
+
+    Args:
+        energies: (B, K) energies of the candidates.
+        targets: (B, K) non-negative target probabilities, rows summing to 1.
+    """
+    check_tensor("energies", energies, ndim=2)
+    check_tensor("targets", targets, shape=tuple(energies.shape))
+    if (targets < 0).any() or not torch.allclose(targets.sum(dim=1), torch.ones(len(targets), dtype=targets.dtype), atol=1e-4):
+        raise ValueError("targets must be non-negative with rows summing to 1")
+    log_p = torch.log_softmax(-energies, dim=1)  # (B, K)
+    return -(targets * log_p).sum(dim=1).mean()
+
+
+def temporal_smoothing(
+    energies_t: torch.Tensor, energies_next: torch.Tensor, alpha: float = 1.0, mask: torch.Tensor | None = None
+) -> torch.Tensor:
+    """Temporal smoothing loss, eq. 4 of the steering-EBM paper: L_temp = α ‖e_t − e_{t+1}‖.
+
+    e_t and e_{t+1} are the energies of the **same** candidate actions (a fixed grid) at two
+    consecutive frames of one episode. The ground truth's column differs between the frames,
+    so the paper masks it from this term: pass ``mask`` (False = masked), or pass only the grid
+    columns. ‖·‖ is the Euclidean norm over the unmasked candidates (the paper does not name
+    the norm); the result is averaged over the B pairs. The paper used α = 1.
+
+    Args:
+        energies_t, energies_next: (B, K) energies at frames t and t + 1.
+        alpha: smoothing strength α >= 0.
+        mask: optional (K,) or (B, K) bool, True for the columns that enter the loss.
+    """
+    alpha = _check_positive("alpha", alpha, allow_zero=True)
+    check_tensor("energies_t", energies_t, ndim=2)
+    check_tensor("energies_next", energies_next, shape=tuple(energies_t.shape))
+    diff = energies_t - energies_next  # (B, K)
+    if mask is not None:
+        if not isinstance(mask, torch.Tensor) or mask.dtype != torch.bool or mask.shape not in (diff.shape[1:], diff.shape):
+            got = (tuple(mask.shape), mask.dtype) if isinstance(mask, torch.Tensor) else type(mask).__name__
+            raise ValueError(f"mask must be a bool tensor of shape ({diff.shape[1]},) or {tuple(diff.shape)}, got {got}")
+        diff = diff * mask
+    return alpha * torch.linalg.vector_norm(diff, dim=1).mean()

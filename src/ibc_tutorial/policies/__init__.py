@@ -1,0 +1,23 @@
+"""Policies: observation encoders, explicit policies (chapter 02) and the energy model."""
+
+from ibc_tutorial.policies.encoders import MLPEncoder, ObservationEncoder
+
+# the energy model (chapters 03-06)
+from ibc_tutorial.policies.energy import EnergyModel, GridArgminPolicy
+
+# explicit policies (chapter 02)
+from ibc_tutorial.policies.explicit import BetaPolicy, ClassifierPolicy, ExplicitPolicy, MDNPolicy, RegressionPolicy
+
+__all__ = [
+    "ObservationEncoder",
+    "MLPEncoder",
+    # the energy model (chapters 03-06)
+    "EnergyModel",
+    "GridArgminPolicy",
+    # explicit policies (chapter 02)
+    "ExplicitPolicy",
+    "RegressionPolicy",
+    "BetaPolicy",
+    "ClassifierPolicy",
+    "MDNPolicy",
+]

@@ -25,7 +25,7 @@ import torch
 from torch import nn
 
 from ibc_tutorial.policies.encoders import ObservationEncoder
-from ibc_tutorial.utils import check_int
+from ibc_tutorial.utils import check_int, check_tensor
 
 
 class EnergyModel(nn.Module):
@@ -102,3 +102,27 @@ class EnergyModel(nn.Module):
                 f"actions must be a tensor of shape ({batch}, N, {self.action_dim}) or (N, {self.action_dim}), got {got}"
             )
         return actions
+
+
+class GridArgminPolicy:
+    """An implicit policy for rollouts: obs (B, obs_dim) -> argmin over ``grid`` of E(obs, ·), (B, D).
+
+    A plain callable (the toy worlds' policy interface), evaluated without gradients, with the
+    model in eval mode. ``grid`` is (G, D), e.g. ``inference.action_grid(201)`` for steering.
+    """
+
+    def __init__(self, model: EnergyModel, grid: torch.Tensor):
+        check_tensor("grid", grid, ndim=2)
+        if grid.shape[1] != model.action_dim:
+            raise ValueError(f"grid must have shape (G, {model.action_dim}), got {tuple(grid.shape)}")
+        self.model, self.grid = model, grid
+
+    def __call__(self, obs) -> torch.Tensor:
+        from ibc_tutorial.inference import grid_argmin
+
+        was_training = self.model.training
+        self.model.eval()
+        try:
+            return grid_argmin(self.model, obs, self.grid)  # (B, D)
+        finally:
+            self.model.train(was_training)

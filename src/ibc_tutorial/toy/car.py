@@ -1,15 +1,19 @@
 """The car of the toy worlds: a point on the plane moving forward at constant speed.
 
 State: ``(x, y, heading)`` in metres and radians, ``x`` along the road, ``y`` to the left
-(so a positive heading turns the car to the left). The only action is the steering
-command ``steer`` in [-1, 1], which sets the yaw rate, ``omega = steer * omega_max``
-(a kinematic unicycle: no slip, no inertia). This is the simplest car for which the
-steering-EBM paper's Fig. 1 makes sense: the speed is given, the policy only steers,
-exactly as in that paper's experiments ("the models controlled only the car's steering").
+(a positive heading points the car to the left). The only action is the steering command
+``steer`` in [-1, 1], and it sets the direction of travel relative to the road,
+``heading = steer * heading_max``: a car that follows its wheels at once, with no yaw
+inertia (the first-order simplification of a kinematic car). This is the simplest car for
+which the steering-EBM paper's Fig. 1 makes sense: the speed is given and the policy only
+steers, as in that paper's experiments ("the models controlled only the car's steering").
 
-One step of length ``dt`` (semi-implicit Euler: the new heading moves the car)::
+Because the heading is the action just applied, the state that matters to the future is
+the position ``(x, y)``; the observations of the toy worlds are built from it alone.
 
-    heading' = heading + omega_max * steer * dt
+One step of length ``dt``::
+
+    heading' = heading_max * steer
     x'       = x + speed * cos(heading') * dt
     y'       = y + speed * sin(heading') * dt
 """
@@ -21,16 +25,16 @@ import torch
 from ibc_tutorial.utils import check_positive, check_tensor
 
 
-def step(states: torch.Tensor, steer: torch.Tensor, *, speed: float, omega_max: float, dt: float) -> torch.Tensor:
+def step(states: torch.Tensor, steer: torch.Tensor, *, speed: float, heading_max: float, dt: float) -> torch.Tensor:
     """Advance ``states`` (B, 3) by one step of steering ``steer`` (B, 1) or (B,); returns (B, 3)."""
     check_tensor("states", states, ndim=2, shape=(None, 3))
     check_positive("speed", speed)
-    check_positive("omega_max", omega_max)
+    check_positive("heading_max", heading_max)
     check_positive("dt", dt)
     steer = steer.reshape(-1)  # (B,)
     if steer.shape[0] != states.shape[0]:
         raise ValueError(f"steer must hold one action per state ({states.shape[0]}), got shape {tuple(steer.shape)}")
-    heading = states[:, 2] + omega_max * steer * dt  # (B,)
+    heading = heading_max * steer  # (B,)
     x = states[:, 0] + speed * torch.cos(heading) * dt
     y = states[:, 1] + speed * torch.sin(heading) * dt
     return torch.stack([x, y, heading], dim=-1)  # (B, 3)

@@ -1,0 +1,205 @@
+"""Checkers for ``exercises/07_car_and_town.ipynb``.
+
+- ``check_yaw_rate(fn)``: the kinematic bicycle's yaw rate, ``fn(speed, steer) -> omega``.
+- ``check_pid(fn)``: a discrete PID, ``fn(errors, kp, ki, kd, dt) -> list of outputs``.
+- ``check_ran_red_light(fn)``: the red-light rule,
+  ``fn(rear_before, rear_after, entry, direction, state) -> bool``.
+- ``check_world_to_bev(fn)``: where a world point appears in the 192 x 192 BEV,
+  ``fn(x, y, car_x, car_y, car_yaw) -> (row, col)``.
+
+Each compares the reader's function with the library's (``ibc_tutorial.driving``) on chosen
+cases and, when they differ, tests the usual mistakes one by one to name the one that was
+made, without giving the answer away.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ibc_tutorial.exercises.core import Feedback, correct, hint, run_check
+
+L = 2.9  # wheelbase (m)
+DELTA_MAX = 0.6  # front-wheel angle at steer = 1 (rad)
+
+
+def _num(value, name: str) -> float | Feedback:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        return hint(f"{name} must return a number, got {type(value).__name__}.")
+    if not math.isfinite(v):
+        return hint(f"{name} returned {v} for an ordinary input.")
+    return v
+
+
+# --------------------------------------------------------------------------- 1. yaw rate
+def _yaw_ref(v, s):
+    return -v * math.tan(DELTA_MAX * s) / L
+
+
+def check_yaw_rate(fn) -> Feedback:
+    """Check ``fn(speed, steer)``: omega = -v tan(0.6 steer) / 2.9 (positive steer turns right)."""
+
+    def check() -> Feedback:
+        cases = [(4.0, 0.5), (6.0, -1.0), (2.5, 0.2), (10.0, 0.9), (0.0, 0.7), (3.0, 0.0)]
+        for v, s in cases:
+            out = _num(fn(v, s), "yaw_rate")
+            if isinstance(out, Feedback):
+                return out
+            ref = _yaw_ref(v, s)
+            if math.isclose(out, ref, rel_tol=1e-6, abs_tol=1e-9):
+                continue
+            if math.isclose(out, -ref, rel_tol=1e-6, abs_tol=1e-9):
+                return hint("the sign: positive steering turns the car right, i.e. clockwise, and yaw angles count "
+                            "counter-clockwise.")
+            if math.isclose(abs(out), abs(v * math.tan(DELTA_MAX) * s / L), rel_tol=1e-6):
+                return hint("the steering angle: steer = 1 means the front wheels at delta_max; the angle is "
+                            "delta_max x steer, and the bicycle needs the tangent of that angle.")
+            if math.isclose(abs(out), abs(v * DELTA_MAX * s / L), rel_tol=1e-6):
+                return hint("the bicycle's yaw rate uses the tangent of the wheel angle, not the angle itself "
+                            "(they differ at large angles).")
+            if math.isclose(abs(out), abs(v * math.tan(math.radians(DELTA_MAX * s)) / L), rel_tol=1e-6):
+                return hint("angles here are in radians: math.tan expects radians.")
+            if math.isclose(abs(out), abs(math.tan(DELTA_MAX * s) / L), rel_tol=1e-6):
+                return hint("the yaw rate grows with speed: a car at rest does not turn.")
+            return hint(f"for speed {v} m/s and steer {s} your yaw rate is {out:.4f} rad/s, which is not the kinematic "
+                        "bicycle's: check the formula term by term (speed, wheel angle, wheelbase, sign).")
+        return correct("That is the kinematic bicycle: the circle's radius is L / tan(delta), whatever the speed.")
+
+    return run_check(check, "`yaw_rate`")
+
+
+# --------------------------------------------------------------------------- 2. PID
+def _pid_ref(errors, kp, ki, kd, dt, integral_dt=True, deriv_dt=True, first_deriv=False):
+    out, integral, prev = [], 0.0, None
+    for e in errors:
+        integral += e * (dt if integral_dt else 1.0)
+        if prev is None:
+            d = (e / (dt if deriv_dt else 1.0)) if first_deriv else 0.0
+        else:
+            d = (e - prev) / (dt if deriv_dt else 1.0)
+        prev = e
+        out.append(kp * e + ki * integral + kd * d)
+    return out
+
+
+def check_pid(fn) -> Feedback:
+    """Check ``fn(errors, kp, ki, kd, dt)`` against ``ibc_tutorial.driving.PID``."""
+    from ibc_tutorial.driving.expert import PID
+
+    def check() -> Feedback:
+        errors = [1.0, 0.5, 0.5, -0.2, 0.0, 0.3]
+        gains = (0.8, 0.3, 0.05, 0.1)
+        out = fn(list(errors), *gains)
+        try:
+            out = [float(u) for u in out]
+        except (TypeError, ValueError):
+            return hint("pid_outputs must return a list of numbers, one per error.")
+        if len(out) != len(errors):
+            return hint(f"pid_outputs must return one output per error: got {len(out)} for {len(errors)} errors.")
+        pid = PID(*gains)
+        ref = [pid.step(e) for e in errors]
+        if np.allclose(out, ref, rtol=1e-6, atol=1e-9):
+            return correct("Your PID matches the expert's controller step by step.")
+        mistakes = [
+            (dict(integral_dt=False), "the integral term: it sums error x dt, an area under the error curve."),
+            (dict(deriv_dt=False), "the derivative term: it is the change of the error divided by dt, a rate."),
+            (dict(first_deriv=True), "the first step: there is no previous error yet, so the derivative term starts at 0."),
+        ]
+        for kwargs, message in mistakes:
+            if np.allclose(out, _pid_ref(errors, *gains, **kwargs), rtol=1e-6, atol=1e-9):
+                return hint(message)
+        if np.allclose(out[0], ref[0]):
+            return hint("your first output is right but later ones are not: check how the integral accumulates and "
+                        "how the derivative uses the previous error.")
+        return hint("your outputs differ from u = kp e + ki sum(e dt) + kd (e - e_prev)/dt from the first step on: "
+                    "check each term and the gain it goes with.")
+
+    return run_check(check, "`pid_outputs`")
+
+
+# --------------------------------------------------------------------------- 3. red-light rule
+def check_ran_red_light(fn) -> Feedback:
+    """Check ``fn(rear_before, rear_after, entry, direction, state)`` against the red-light rule."""
+    from ibc_tutorial.driving.lights import GREEN, RED, YELLOW
+
+    entry, d = np.array([50.0, 10.0]), np.array([0.0, 1.0])  # a northbound lane, its junction entry at y = 10
+    right = np.array([d[1], -d[0]])
+
+    def ask(before, after, state):
+        out = fn(np.array(before, float), np.array(after, float), entry.copy(), d.copy(), state)
+        if not isinstance(out, (bool, np.bool_)):
+            raise TypeError(f"ran_red_light must return True or False, got {type(out).__name__}")
+        return bool(out)
+
+    def check() -> Feedback:
+        cross = (entry - 0.3 * d, entry + 0.4 * d)
+        if not ask(*cross, RED):
+            return hint("the rear moving from just before the line to just past it while red is an infraction: "
+                        "compare the position along the lane before and after the step.")
+        if ask(*cross, YELLOW):
+            return hint("only red counts: crossing at yellow is legal (the light has not turned red yet).")
+        if ask(*cross, GREEN):
+            return hint("crossing at green is not an infraction.")
+        if ask(entry + 0.4 * d, entry + 1.4 * d, RED):
+            return hint("the rear was already past the line before the step: that crossing was counted (or not) "
+                        "earlier; count only the step that crosses it.")
+        if ask(entry - 2.0 * d, entry - 1.0 * d, RED):
+            return hint("the rear is still before the line after the step: no crossing yet.")
+        if ask(entry + 0.4 * d, entry - 0.3 * d, RED):
+            return hint("moving backwards over the line is not running the light: only a forward crossing counts.")
+        if ask(cross[0] + 4.0 * right, cross[1] + 4.0 * right, RED) or ask(cross[0] - 4.0 * right, cross[1] - 4.0 * right, RED):
+            return hint("a crossing 4 m to the side is in another lane: only a crossing within the lane "
+                        "(half a lane width, 2 m, from the lane's centre line) counts.")
+        if not ask(cross[0] + 1.5 * right, cross[1] + 1.5 * right, RED):
+            return hint("a crossing 1.5 m to the side of the centre line is still within the 4 m lane and counts.")
+        return correct("That is the rule the environment applies (``lights.RedLightMonitor``).")
+
+    return run_check(check, "`ran_red_light`")
+
+
+# --------------------------------------------------------------------------- 4. BEV geometry
+def _bev_ref(x, y, cx, cy, yaw):
+    f = (x - cx) * math.cos(yaw) + (y - cy) * math.sin(yaw)  # metres ahead
+    r = (x - cx) * math.sin(yaw) - (y - cy) * math.cos(yaw)  # metres to the right
+    return 152 - 5 * f, 96 + 5 * r
+
+
+def check_world_to_bev(fn) -> Feedback:
+    """Check ``fn(x, y, car_x, car_y, car_yaw) -> (row, col)`` against the 192 view's geometry."""
+
+    def check() -> Feedback:
+        cases = [(10.0, 5.0, 10.0, 5.0, 0.3), (20.0, 0.0, 10.0, 0.0, 0.0), (10.0, -3.0, 10.0, 0.0, 0.0),
+                 (3.0, 12.0, 3.0, 2.0, math.pi / 2), (14.0, 9.0, 10.0, 5.0, 0.7), (-4.0, 2.0, 1.0, -1.0, -2.2)]
+        for x, y, cx, cy, yaw in cases:
+            out = fn(x, y, cx, cy, yaw)
+            try:
+                row, col = (float(v) for v in out)
+            except (TypeError, ValueError):
+                return hint("world_to_bev must return two numbers: (row, col).")
+            ref = _bev_ref(x, y, cx, cy, yaw)
+            if np.allclose((row, col), ref, atol=1e-6):
+                continue
+            if np.allclose((col, row), ref, atol=1e-6):
+                return hint("rows and columns are swapped: return (row, col), row counted down from the top.")
+            mirrored = (ref[0], 192 - ref[1])
+            if np.allclose((row, col), mirrored, atol=1e-6):
+                return hint("left and right are mirrored: a point to the car's right must appear right of the car "
+                            "in the image (a larger column).")
+            if np.allclose((row, col), (304 - ref[0], ref[1]), atol=1e-6):
+                return hint("ahead must be up: image rows grow downwards, so a point ahead of the car has a smaller row.")
+            noturn = (152 - 5 * (x - cx), 96 - 5 * (y - cy))
+            if np.allclose((row, col), noturn, atol=1e-6) and yaw != 0:
+                return hint("the view turns with the car: project the offset onto the car's heading (cos, sin) and "
+                            "onto its right (sin, -cos).")
+            if np.allclose((row, col), ((ref[0] - 152) / 5 + 152, (ref[1] - 96) / 5 + 96), atol=1e-6):
+                return hint("the scale: the view has 5 pixels per metre.")
+            if np.isclose(col, ref[1], atol=1e-6):
+                return hint("the column is right but not the row: the car sits 40 px above the bottom edge of the 192 px view.")
+            return hint(f"the point ({x}, {y}) seen from a car at ({cx}, {cy}) heading {yaw:.2f} rad lands at "
+                        f"({row:.1f}, {col:.1f}) in your view: check the offset's projection, the scale and the car's pixel.")
+        return correct("That is the BEV's geometry: the renderer applies it to all 36,864 pixels at once.")
+
+    return run_check(check, "`world_to_bev`")

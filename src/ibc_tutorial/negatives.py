@@ -1,0 +1,177 @@
+"""Counter-example samplers for InfoNCE training of energy models.
+
+InfoNCE (eqs. 2-3 of the DA-IBC paper) estimates the normalising constant Z(x) from a set of
+counter-examples ỹ_i^1..ỹ_i^N per observation. Where they come from decides where the model
+learns to raise the energy:
+
+- ``uniform_negatives``: uniform over the action box [y_min, y_max], as in the original IBC
+  (Florence et al. 2022; sec. 2.4 of the DA-IBC paper: ỹ ~ U(y_min, y_max)).
+- ``expert_negatives``: DA-IBC (sec. 2.4 of the DA-IBC paper): expert actions drawn with
+  replacement, plus Gaussian noise N(0, σ²I).
+
+Both are also available as *samplers*, callables ``sampler(actions, n_neg, generator)`` that
+``training.info_nce_objective`` calls once per minibatch with that minibatch's expert actions.
+
+**Clipping expert negatives (the paper does not say).** ``expert_negatives`` does not clip by
+default. Clipping y + ε to the bounds would put a point mass of counter-examples exactly on the
+bounds, where the expert itself often acts (full brake, full steering lock): counter-examples
+identical to expert actions cannot be told apart from them and only flatten the landscape
+there. Unclipped counter-examples that fall outside the box cost nothing but the share of the
+budget they use (for σ = 0.1 and actions at most 0.8 from the edge, well under 1 %); they shape
+the energy just beyond the bounds, where no optimiser looks. Pass ``low`` and ``high`` to clip
+anyway (e.g. to compare).
+"""
+
+from __future__ import annotations
+
+from typing import Protocol, Sequence
+
+import torch
+
+from ibc_tutorial.utils import check_int, check_positive, check_tensor
+
+
+def _bounds(low, high) -> tuple[torch.Tensor, torch.Tensor]:
+    """``low``/``high`` (numbers or length-D sequences/tensors) -> two float32 (D,) tensors."""
+    lo = torch.as_tensor(low, dtype=torch.float32).reshape(-1)
+    hi = torch.as_tensor(high, dtype=torch.float32).reshape(-1)
+    if lo.numel() == 0 or hi.numel() == 0:
+        raise ValueError("low and high must each hold at least one number")
+    if lo.shape != hi.shape:
+        if lo.numel() == 1:
+            lo = lo.expand_as(hi)
+        elif hi.numel() == 1:
+            hi = hi.expand_as(lo)
+        else:
+            raise ValueError(f"low and high must have the same length D, got {lo.numel()} and {hi.numel()}")
+    if not torch.isfinite(lo).all() or not torch.isfinite(hi).all():
+        raise ValueError("low and high must be finite")
+    if not (lo < hi).all():
+        raise ValueError(f"low must be < high in every dimension, got low={lo.tolist()}, high={hi.tolist()}")
+    return lo.clone(), hi.clone()
+
+
+def uniform_negatives(
+    batch_size: int,
+    n_neg: int,
+    low: float | Sequence[float] | torch.Tensor,
+    high: float | Sequence[float] | torch.Tensor,
+    generator: torch.Generator | None = None,
+) -> torch.Tensor:
+    """Counter-examples uniform in the box [low, high]: the original IBC's sampler.
+
+    ỹ_i^j ~ U(y_min, y_max), independently for every sample i and counter-example j.
+
+    Args:
+        batch_size: B.
+        n_neg: N, counter-examples per sample.
+        low, high: the action bounds y_min, y_max, each of length D.
+        generator: a seeded ``torch.Generator`` (None = torch's global one).
+    Returns:
+        (B, N, D) float32.
+    """
+    b = check_int("batch_size", batch_size, minimum=1)
+    n = check_int("n_neg", n_neg, minimum=1)
+    lo, hi = _bounds(low, high)
+    u = torch.rand(b, n, len(lo), generator=generator)  # (B, N, D) in [0, 1)
+    return lo + (hi - lo) * u  # (B, N, D)
+
+
+def expert_negatives(
+    expert_actions: torch.Tensor,
+    batch_size: int,
+    n_neg: int,
+    sigma: float,
+    generator: torch.Generator | None = None,
+    *,
+    low: float | Sequence[float] | torch.Tensor | None = None,
+    high: float | Sequence[float] | torch.Tensor | None = None,
+) -> torch.Tensor:
+    """DA-IBC counter-examples: expert actions drawn with replacement, plus N(0, σ²I) noise.
+
+    Sec. 2.4 of the DA-IBC paper: for each sample i of the batch, N actions are drawn with
+    replacement from ``expert_actions`` (in the paper, and in ``ExpertSampler``, the actions of
+    the current minibatch: its footnote 1) and each is perturbed with Gaussian noise of
+    standard deviation σ in every dimension. The draws are independent of the observation x_i
+    and independent between samples.
+
+    Statistics: each counter-example has the mean of the expert set and per-dimension variance
+    Var(expert set) + σ² (the set's variance with divisor M) when not clipped.
+
+    Clipping: none by default (see the module's docstring for why); with ``low`` and ``high``
+    given, each counter-example is clipped to [low, high] after adding the noise.
+
+    Args:
+        expert_actions: (M, D) expert actions to draw from.
+        batch_size: B.
+        n_neg: N, counter-examples per sample.
+        sigma: σ >= 0, standard deviation of the noise (σ = 0: exact copies of expert actions).
+        generator: a seeded ``torch.Generator`` (None = torch's global one).
+        low, high: optional bounds to clip to (both or neither).
+    Returns:
+        (B, N, D) float32.
+    """
+    check_tensor("expert_actions", expert_actions, ndim=2)
+    m, d = expert_actions.shape
+    if m == 0:
+        raise ValueError("expert_actions must hold at least one action, got shape (0, D)")
+    b = check_int("batch_size", batch_size, minimum=1)
+    n = check_int("n_neg", n_neg, minimum=1)
+    sigma = check_positive("sigma", sigma, allow_zero=True)
+    if (low is None) != (high is None):
+        raise ValueError("low and high must be given together (to clip) or both left None (no clipping)")
+    idx = torch.randint(0, m, (b, n), generator=generator)  # (B, N): with replacement
+    neg = expert_actions.to(torch.float32)[idx]  # (B, N, D)
+    if sigma > 0:
+        neg = neg + sigma * torch.randn(b, n, d, generator=generator)  # + N(0, σ²I)
+    if low is not None:
+        lo, hi = _bounds(low, high)
+        if len(lo) != d:
+            raise ValueError(f"low and high must have length D = {d}, got {len(lo)}")
+        neg = torch.maximum(torch.minimum(neg, hi), lo)
+    return neg  # (B, N, D)
+
+
+# --------------------------------------------------------------------------- samplers
+class NegativeSampler(Protocol):
+    """What the training objective calls once per minibatch."""
+
+    def __call__(self, actions: torch.Tensor, n_neg: int, generator: torch.Generator | None = None) -> torch.Tensor:
+        """``actions`` (B, D), the minibatch's expert actions -> counter-examples (B, N, D)."""
+        ...
+
+
+class UniformSampler:
+    """IBC: counter-examples uniform in [low, high], whatever the minibatch holds."""
+
+    def __init__(self, low: float | Sequence[float] = -1.0, high: float | Sequence[float] = 1.0):
+        self.low, self.high = _bounds(low, high)
+
+    def __call__(self, actions: torch.Tensor, n_neg: int, generator: torch.Generator | None = None) -> torch.Tensor:
+        check_tensor("actions", actions, ndim=2)
+        low, high = self.low, self.high
+        if len(low) == 1 and actions.shape[1] > 1:
+            low, high = low.expand(actions.shape[1]), high.expand(actions.shape[1])
+        if len(low) != actions.shape[1]:
+            raise ValueError(f"actions must have D = {len(low)} columns to match the bounds, got shape {tuple(actions.shape)}")
+        return uniform_negatives(len(actions), n_neg, low, high, generator)
+
+    def __repr__(self) -> str:
+        return f"UniformSampler(low={self.low.tolist()}, high={self.high.tolist()})"
+
+
+class ExpertSampler:
+    """DA-IBC: counter-examples drawn from the minibatch's expert actions plus N(0, σ²I)."""
+
+    def __init__(self, sigma: float, low: float | Sequence[float] | None = None, high: float | Sequence[float] | None = None):
+        self.sigma = check_positive("sigma", sigma, allow_zero=True)
+        if (low is None) != (high is None):
+            raise ValueError("low and high must be given together (to clip) or both left None (no clipping)")
+        self.low, self.high = low, high
+
+    def __call__(self, actions: torch.Tensor, n_neg: int, generator: torch.Generator | None = None) -> torch.Tensor:
+        return expert_negatives(actions, len(actions), n_neg, self.sigma, generator, low=self.low, high=self.high)
+
+    def __repr__(self) -> str:
+        clip = "" if self.low is None else f", low={self.low}, high={self.high}"
+        return f"ExpertSampler(sigma={self.sigma}{clip})"

@@ -1,0 +1,142 @@
+"""The side-road world: Fig. 1 (right) of the steering-EBM paper.
+
+A straight road along the x axis; at ``branch_x`` a side road branches off to the left
+(towards +y) at ``side_angle_deg``. Most experts keep straight (mode 0, probability
+``straight_prob``); the others take the side road (mode 1). Their choice is drawn per
+episode, independently of the start, and nothing in the observation shows it. The paper
+saw unimodal regression models "swerve slightly (the red trajectory) towards the side road
+... minor because side roads are rarely taken in our training data": ``swerve`` measures
+that, as the largest lateral deviation towards the side road of the episodes that stay on
+the main road.
+
+As in the tree world, the policy observes the distance to the branch point alone, and the
+straight experts keep to the centre line (``expert_holds_start_offset=False``).
+
+The car's centre must stay on the drivable area: within ``road_half_width`` of the main
+road's centre line, or of the side road's (beyond the branch point). Leaving it is this
+world's collision.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import torch
+
+from ibc_tutorial.toy.world import Rollouts, ToyConfig, ToyWorld
+from ibc_tutorial.utils import check_positive
+
+
+@dataclass
+class SideRoadConfig(ToyConfig):
+    """The side-road world's settings (metres, degrees); the car's and the expert's are in ``ToyConfig``."""
+
+    branch_x: float = 20.0
+    """x where the side road's centre line leaves the main road's (m)."""
+    side_angle_deg: float = 30.0
+    """Angle between the side road and the main road (degrees), opening to the left (+y)."""
+    road_half_width: float = 2.0
+    """How far the car's centre may be from a road's centre line (m) before it has left the road."""
+    straight_prob: float = 0.8
+    """Probability that an expert keeps straight (mode 0); it takes the side road otherwise (mode 1)."""
+    horizon: int = 64
+    """Steps per episode: the car ends about 12 m past the branch point."""
+    start_lateral_range: float = 0.2
+    """The start's lateral offset y (m) is uniform in [-range, range], close to the centre line."""
+    obs_lateral: bool = False
+    """The policy observes only the distance to the branch point (as in the tree world)."""
+    expert_holds_start_offset: bool = False
+    """The side-road experts steer back to the centre line of the main road (lane keeping)."""
+    corner_length: float = 6.0
+    """Length (m, along x) over which the side-road expert's path bends from the main road into the side road."""
+    swerve_from: float = 5.0
+    """``swerve`` looks at the part of each episode from this far (m) before the branch point on."""
+
+
+class SideRoadWorld(ToyWorld):
+    """A main road and a side road branching left: ``expert_demonstrations``, ``rollout``, ``swerve``.
+
+    Observation (1,): [distance ahead to the branch point along x / 10 m] (with ``obs_lateral=True``
+    also [lateral offset y / 2 m]). Action (1,): steering in [-1, 1], heading = 0.6 rad * steer.
+    Modes: 0 = keeps straight, 1 = takes the side road.
+    """
+
+    anchor_name = "branch"
+
+    def __init__(self, config: SideRoadConfig | None = None):
+        config = SideRoadConfig() if config is None else config
+        super().__init__(config)
+        c = config
+        for name in ("branch_x", "road_half_width", "corner_length", "swerve_from"):
+            check_positive(f"config.{name}", getattr(c, name))
+        if not 0.0 < c.side_angle_deg < 90.0:
+            raise ValueError(f"config.side_angle_deg must be in (0, 90), got {c.side_angle_deg}")
+        if not 0.0 <= c.straight_prob <= 1.0:
+            raise ValueError(f"config.straight_prob must be in [0, 1], got {c.straight_prob}")
+
+    @property
+    def anchor_x(self) -> float:
+        return self.config.branch_x
+
+    @property
+    def side_direction(self) -> torch.Tensor:
+        """(2,) unit vector along the side road."""
+        a = math.radians(self.config.side_angle_deg)
+        return torch.tensor([math.cos(a), math.sin(a)])
+
+    def mode_probs(self) -> torch.Tensor:
+        return torch.tensor([self.config.straight_prob, 1.0 - self.config.straight_prob])
+
+    def side_road_lateral(self, x: torch.Tensor) -> torch.Tensor:
+        """y (m) of the side road's centre line at ``x`` (0 before the branch)."""
+        return math.tan(math.radians(self.config.side_angle_deg)) * (x - self.config.branch_x).clamp_min(0.0)
+
+    def reference_lateral(self, x: torch.Tensor, plan: torch.Tensor) -> torch.Tensor:
+        # side-road expert: a path that bends smoothly (a quadratic over corner_length centred on
+        # the branch point) from the main road's centre line onto the side road's
+        c = self.config
+        k = math.tan(math.radians(c.side_angle_deg))
+        u = (x - c.branch_x + c.corner_length / 2).clamp(0.0, c.corner_length)
+        bend = k * u * u / (2 * c.corner_length) + k * (x - c.branch_x - c.corner_length / 2).clamp_min(0.0)
+        return torch.where(plan[:, 0] == 1, bend, plan[:, 1])
+
+    def on_main_road(self, positions: torch.Tensor) -> torch.Tensor:
+        """(...,) bool: the point ``positions`` (..., 2) is within ``road_half_width`` of the main road's centre line."""
+        return positions[..., 1].abs() <= self.config.road_half_width
+
+    def on_side_road(self, positions: torch.Tensor) -> torch.Tensor:
+        """(...,) bool: the point is within ``road_half_width`` of the side road's centre line, beyond the branch."""
+        rel = positions[..., :2] - torch.tensor([self.config.branch_x, 0.0])
+        u = self.side_direction
+        along = rel[..., 0] * u[0] + rel[..., 1] * u[1]
+        across = -rel[..., 0] * u[1] + rel[..., 1] * u[0]
+        return (along >= 0) & (across.abs() <= self.config.road_half_width)
+
+    def on_road(self, positions: torch.Tensor) -> torch.Tensor:
+        """(...,) bool: the point is on the drivable area (main road or side road)."""
+        return self.on_main_road(positions) | self.on_side_road(positions)
+
+    def contact_fraction(self, p0: torch.Tensor, p1: torch.Tensor) -> torch.Tensor:
+        # leaving the road is checked at the end of each 0.5 m step
+        off = ~self.on_road(p1)
+        return torch.where(off, torch.ones(len(p1)), torch.full((len(p1),), float("inf")))
+
+    def took_side_road(self, rollouts: Rollouts) -> torch.Tensor:
+        """(E,) bool: the episode ended on the side road, off the main road, without leaving the road."""
+        end = rollouts.states[:, -1, :2]
+        return ~rollouts.collided & self.on_side_road(end) & ~self.on_main_road(end)
+
+    def stayed_on_main_road(self, rollouts: Rollouts) -> torch.Tensor:
+        """(E,) bool: the episode ended on the main road without leaving the road."""
+        return ~rollouts.collided & self.on_main_road(rollouts.states[:, -1, :2])
+
+    def swerve(self, rollouts: Rollouts) -> torch.Tensor:
+        """(E,) float: the largest lateral deviation towards the side road (the largest y, at
+        least 0, m) from ``swerve_from`` m before the branch point on, for each episode that
+        stayed on the main road; NaN for the episodes that did not."""
+        s = rollouts.states  # (E, T+1, 3)
+        near = s[:, :, 0] >= self.config.branch_x - self.config.swerve_from  # (E, T+1)
+        y = torch.where(near, s[:, :, 1], torch.full_like(s[:, :, 1], -float("inf")))
+        dev = y.max(dim=1).values.clamp_min(0.0)  # an episode that never got near counts 0
+        return torch.where(self.stayed_on_main_road(rollouts), dev, torch.full_like(dev, float("nan")))

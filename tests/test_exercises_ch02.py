@@ -1,0 +1,126 @@
+"""Checkers of exercises/02_explicit_policies.ipynb: solution -> correct, stub -> not attempted,
+typical mistakes -> a hint naming the mistake, code that raises -> a hint (never an exception)."""
+
+import math
+
+import pytest
+import torch
+
+from ibc_tutorial.exercises import ch02, solutions
+
+
+def stub(*args):
+    raise NotImplementedError
+
+
+# --------------------------------------------------------------------------- Beta NLL
+def _beta_log_f(alpha, beta, actions, eps=1e-4):
+    y = ((actions + 1) / 2).clamp(eps, 1 - eps)
+    return (alpha - 1) * torch.log(y) + (beta - 1) * torch.log(1 - y) - (torch.lgamma(alpha) + torch.lgamma(beta) - torch.lgamma(alpha + beta))
+
+
+def test_beta_solution_and_library_are_correct():
+    assert ch02.check_beta_nll(solutions.ch02_beta_nll).status == "correct"
+    from ibc_tutorial.losses import beta_nll
+
+    assert ch02.check_beta_nll(beta_nll).status == "correct"
+
+
+def test_beta_stub_is_not_attempted():
+    fb = ch02.check_beta_nll(stub)
+    assert fb.status == "not attempted"
+
+
+BETA_MISTAKES = {
+    "sign": (lambda a, b, y: _beta_log_f(a, b, y).sum(1).mean(), "sign"),
+    "mean over dims": (lambda a, b, y: -_beta_log_f(a, b, y).mean(), "sums"),
+    "sum over batch": (lambda a, b, y: -_beta_log_f(a, b, y).sum(), "over the N samples"),
+    "change of variables": (lambda a, b, y: -(_beta_log_f(a, b, y) - math.log(2)).sum(1).mean(), "change-of-variables"),
+    "no normaliser": (
+        lambda a, b, y: -((a - 1) * torch.log((y + 1) / 2) + (b - 1) * torch.log(1 - (y + 1) / 2)).sum(1).mean(),
+        "normalising constant",
+    ),
+    "swapped": (lambda a, b, y: -_beta_log_f(b, a, y).sum(1).mean(), "α belongs to y'"),
+    "no rescale": (
+        lambda a, b, y: -((a - 1) * torch.log(y) + (b - 1) * torch.log(1 - y) - (torch.lgamma(a) + torch.lgamma(b) - torch.lgamma(a + b))).sum(1).mean(),
+        "y' = (y + 1)/2",
+    ),
+    "no clamp": (
+        lambda a, b, y: -((a - 1) * torch.log((y + 1) / 2) + (b - 1) * torch.log(1 - (y + 1) / 2) - (torch.lgamma(a) + torch.lgamma(b) - torch.lgamma(a + b))).sum(1).mean(),
+        "exactly at -1 or +1",
+    ),
+    "per-sample vector": (lambda a, b, y: -_beta_log_f(a, b, y).sum(1), "scalar"),
+    "hard-coded batch": (lambda a, b, y: -_beta_log_f(a, b, y).sum() / 32, "hard-coding"),
+    "detached": (lambda a, b, y: -_beta_log_f(a, b, y).sum(1).mean().detach(), "autograd"),
+}
+
+
+@pytest.mark.parametrize("name", list(BETA_MISTAKES))
+def test_beta_mistakes_get_a_hint_naming_them(name):
+    fn, words = BETA_MISTAKES[name]
+    fb = ch02.check_beta_nll(fn)
+    assert fb.status == "hint", (name, fb)
+    assert words in fb.message, (name, fb.message)
+
+
+def test_beta_code_that_raises_gets_a_hint():
+    def broken(alpha, beta, actions):
+        return alpha @ beta  # shapes do not fit
+
+    fb = ch02.check_beta_nll(broken)
+    assert fb.status == "hint" and "RuntimeError" in fb.message
+
+
+def test_beta_hint_does_not_give_the_answer():
+    fb = ch02.check_beta_nll(BETA_MISTAKES["sign"][0])
+    assert "lgamma" not in fb.message and "clamp(" not in fb.message
+
+
+# --------------------------------------------------------------------------- MDN NLL
+def _log_n(means, stds, y):
+    z = (y[:, None, :] - means) / stds
+    return -0.5 * z**2 - torch.log(stds) - 0.5 * math.log(2 * math.pi)  # (B, K, D)
+
+
+def test_mdn_solution_and_library_are_correct():
+    assert ch02.check_mdn_nll(solutions.ch02_mdn_nll).status == "correct"
+    from ibc_tutorial.losses import mdn_nll
+
+    assert ch02.check_mdn_nll(mdn_nll).status == "correct"
+
+
+def test_mdn_stub_is_not_attempted():
+    assert ch02.check_mdn_nll(stub).status == "not attempted"
+
+
+MDN_MISTAKES = {
+    "sign": (lambda l, m, s, y: torch.logsumexp(torch.log_softmax(l, 1) + _log_n(m, s, y).sum(2), 1).mean(), "sign"),
+    "sum of logs": (lambda l, m, s, y: -(torch.log_softmax(l, 1) + _log_n(m, s, y).sum(2)).sum(1).mean(), "log-sum-exp"),
+    "no softmax": (lambda l, m, s, y: -torch.logsumexp(l + _log_n(m, s, y).sum(2), 1).mean(), "softmax"),
+    "mean over dims": (lambda l, m, s, y: -torch.logsumexp(torch.log_softmax(l, 1) + _log_n(m, s, y).mean(2), 1).mean(), "per-dimension log-densities"),
+    "no log sigma": (
+        lambda l, m, s, y: -torch.logsumexp(torch.log_softmax(l, 1) + (_log_n(m, s, y) + torch.log(s)).sum(2), 1).mean(),
+        "-log σ",
+    ),
+    "naive exp": (
+        lambda l, m, s, y: -torch.log((torch.softmax(l, 1) * _log_n(m, s, y).sum(2).exp()).sum(1)).mean(),
+        "logsumexp",
+    ),
+    "hard-coded K": (lambda l, m, s, y: -torch.logsumexp(torch.log_softmax(l[:, :3], 1) + _log_n(m[:, :3], s[:, :3], y).sum(2), 1).mean(), "hard-coding"),
+}
+
+
+@pytest.mark.parametrize("name", list(MDN_MISTAKES))
+def test_mdn_mistakes_get_a_hint_naming_them(name):
+    fn, words = MDN_MISTAKES[name]
+    fb = ch02.check_mdn_nll(fn)
+    assert fb.status == "hint", (name, fb)
+    assert words in fb.message, (name, fb.message)
+
+
+def test_mdn_code_that_raises_gets_a_hint():
+    def broken(logits, means, stds, actions):
+        raise KeyError("oops")
+
+    fb = ch02.check_mdn_nll(broken)
+    assert fb.status == "hint" and "KeyError" in fb.message

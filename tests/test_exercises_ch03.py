@@ -1,0 +1,121 @@
+"""Checkers of exercises/03_energy_models.ipynb: solution -> correct, stub -> not attempted,
+typical mistakes -> a hint naming the mistake, code that raises -> a hint (never an exception)."""
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from ibc_tutorial.exercises import ch03, solutions
+from ibc_tutorial.losses import info_nce, soft_targets
+from ibc_tutorial.metrics import whiteness
+
+
+def stub(*args, **kwargs):
+    raise NotImplementedError
+
+
+def raises(*args, **kwargs):
+    raise IndexError("list index out of range")
+
+
+# --------------------------------------------------------------------------- InfoNCE
+def test_info_nce_solution_and_library_are_correct():
+    assert ch03.check_info_nce(solutions.ch03_info_nce).status == "correct"
+    assert ch03.check_info_nce(info_nce).status == "correct"
+
+
+def test_info_nce_stub_and_crash():
+    assert ch03.check_info_nce(stub).status == "not attempted"
+    fb = ch03.check_info_nce(raises)
+    assert fb.status == "hint" and "IndexError" in fb.message
+
+
+def _terms(pos, neg):
+    return torch.logsumexp(torch.cat([-pos[:, None], -neg], 1), 1) + pos
+
+
+NCE_MISTAKES = {
+    "sign of energies": (lambda p, n, w=None: (torch.logsumexp(torch.cat([p[:, None], n], 1), 1) - p).mean(), "softmax of −E"),
+    "no positive in denominator": (lambda p, n, w=None: (torch.logsumexp(-n, 1) + p).mean(), "denominator"),
+    "sum over batch": (lambda p, n, w=None: _terms(p, n).sum(), "average"),
+    "unstable": (
+        lambda p, n, w=None: (-torch.log(torch.exp(-p) / (torch.exp(-p) + torch.exp(-n).sum(1)))).mean() if w is None else (w * -torch.log(torch.exp(-p) / (torch.exp(-p) + torch.exp(-n).sum(1)))).mean(),
+        "log-sum-exp",
+    ),
+    "ignores weights": (lambda p, n, w=None: _terms(p, n).mean(), "ignores `weights`"),
+    "weighted average": (lambda p, n, w=None: _terms(p, n).mean() if w is None else (w * _terms(p, n)).sum() / w.sum(), "sum of the weights"),
+    "vector": (lambda p, n, w=None: _terms(p, n), "scalar"),
+    "python float": (lambda p, n, w=None: float(_terms(p, n).mean()), "Python number"),
+    "detached": (lambda p, n, w=None: _terms(p, n).mean().detach() if w is None else (w * _terms(p, n)).mean().detach(), "autograd"),
+}
+
+
+@pytest.mark.parametrize("name", list(NCE_MISTAKES))
+def test_info_nce_mistakes_get_a_hint_naming_them(name):
+    fn, words = NCE_MISTAKES[name]
+    fb = ch03.check_info_nce(fn)
+    assert fb.status == "hint", (name, fb)
+    assert words in fb.message, (name, fb.message)
+
+
+# --------------------------------------------------------------------------- soft targets
+def test_soft_targets_solution_and_library_are_correct():
+    assert ch03.check_soft_targets(solutions.ch03_soft_targets).status == "correct"
+    assert ch03.check_soft_targets(soft_targets).status == "correct"
+
+
+def test_soft_targets_stub_and_crash():
+    assert ch03.check_soft_targets(stub).status == "not attempted"
+    assert ch03.check_soft_targets(raises).status == "hint"
+
+
+def _sq(c, a):
+    return ((c[None] - a[:, None]) ** 2).sum(-1)
+
+
+SOFT_MISTAKES = {
+    "transcription sign": (lambda c, a, t: torch.softmax(_sq(c, a) / t, 1), "farthest"),
+    "distance not squared": (lambda c, a, t: torch.softmax(-_sq(c, a).sqrt() / t, 1), "squared"),
+    "times temperature": (lambda c, a, t: torch.softmax(-_sq(c, a) * t, 1), "divide by T"),
+    "softmax over batch": (lambda c, a, t: torch.softmax(-_sq(c, a) / t, 0), "sum to 1"),
+    "only first dim": (lambda c, a, t: torch.softmax(-((c[None, :, 0] - a[:, None, 0]) ** 2) / t, 1), "2-D"),
+    "wrong shape": (lambda c, a, t: torch.softmax(-_sq(c, a) / t, 1).T, "shape"),
+}
+
+
+@pytest.mark.parametrize("name", list(SOFT_MISTAKES))
+def test_soft_targets_mistakes(name):
+    fn, words = SOFT_MISTAKES[name]
+    fb = ch03.check_soft_targets(fn)
+    assert fb.status == "hint" and words in fb.message, (name, fb)
+
+
+# --------------------------------------------------------------------------- whiteness
+def test_whiteness_solution_and_library_are_correct():
+    assert ch03.check_whiteness(solutions.ch03_whiteness).status == "correct"
+    assert ch03.check_whiteness(whiteness).status == "correct"
+
+
+def test_whiteness_stub_and_crash():
+    assert ch03.check_whiteness(stub).status == "not attempted"
+    assert ch03.check_whiteness(raises).status == "hint"
+
+
+WHITE_MISTAKES = {
+    "no dt": (lambda x, dt: float(np.sqrt(np.mean(np.diff(np.asarray(x)) ** 2))), "time step"),
+    "no sqrt": (lambda x, dt: float(np.mean((np.diff(np.asarray(x)) / dt) ** 2)), "square root"),
+    "divide by T": (lambda x, dt: float(np.sqrt(np.sum((np.diff(np.asarray(x)) / dt) ** 2) / len(x))), "number of changes"),
+    "std of commands": (lambda x, dt: float(np.std(np.asarray(x)) / dt), "changes"),
+    "mean abs": (lambda x, dt: float(np.mean(np.abs(np.diff(np.asarray(x)) / dt))), "squared"),
+    "returns array": (lambda x, dt: np.diff(np.asarray(x)) / dt, "number"),
+}
+
+
+@pytest.mark.parametrize("name", list(WHITE_MISTAKES))
+def test_whiteness_mistakes(name):
+    fn, words = WHITE_MISTAKES[name]
+    fb = ch03.check_whiteness(fn)
+    assert fb.status == "hint" and words in fb.message, (name, fb)
+    assert math.isfinite(len(fb.message))

@@ -1,0 +1,90 @@
+"""Checkers of exercises/04_da_ibc_negatives.ipynb: solution -> correct, stub -> not attempted,
+typical mistakes -> a hint naming the mistake, code that raises -> a hint (never an exception)."""
+
+import math
+
+import pytest
+import torch
+
+from ibc_tutorial.exercises import ch04, solutions
+from ibc_tutorial.metrics import grid_nll
+from ibc_tutorial.negatives import expert_negatives, uniform_negatives
+
+
+def stub(*args, **kwargs):
+    raise NotImplementedError
+
+
+def raises(*args, **kwargs):
+    raise KeyError("oops")
+
+
+# --------------------------------------------------------------------------- the DA-IBC sampler
+def test_sampler_solution_and_library_are_correct():
+    assert ch04.check_expert_negatives(solutions.ch04_expert_negatives).status == "correct"
+    assert ch04.check_expert_negatives(expert_negatives).status == "correct"
+
+
+def test_sampler_stub_and_crash():
+    assert ch04.check_expert_negatives(stub).status == "not attempted"
+    fb = ch04.check_expert_negatives(raises)
+    assert fb.status == "hint" and "KeyError" in fb.message
+
+
+def _draw(a, b, n, g):
+    return a[torch.randint(0, len(a), (b, n), generator=g)]
+
+
+SAMPLER_MISTAKES = {
+    "uniform": (lambda a, b, n, s, g=None: uniform_negatives(b, n, [-1.0] * a.shape[1], [1.0] * a.shape[1], generator=g), "exactly one of the expert actions"),
+    "sigma as variance": (lambda a, b, n, s, g=None: _draw(a, b, n, g) + s**2 * torch.randn(b, n, a.shape[1], generator=g), "standard deviation"),
+    "sqrt sigma": (lambda a, b, n, s, g=None: _draw(a, b, n, g) + math.sqrt(s) * torch.randn(b, n, a.shape[1], generator=g), "standard deviation"),
+    "no noise": (lambda a, b, n, s, g=None: _draw(a, b, n, g), "no noise"),
+    "without replacement": (
+        lambda a, b, n, s, g=None: torch.stack([a[torch.randperm(len(a), generator=g)[:n]] for _ in range(b)]) + s * torch.randn(b, n, a.shape[1], generator=g),
+        "with replacement",
+    ),
+    "same set for every sample": (
+        lambda a, b, n, s, g=None: (a[torch.randint(0, len(a), (n,), generator=g)] + s * torch.randn(n, a.shape[1], generator=g)).expand(b, n, a.shape[1]),
+        "fresh set",
+    ),
+    "only the first actions": (lambda a, b, n, s, g=None: a[torch.randint(0, max(1, len(a) // 2), (b, n), generator=g)] + s * torch.randn(b, n, a.shape[1], generator=g), "equal probability"),
+    "ignores generator": (lambda a, b, n, s, g=None: _draw(a, b, n, None) + s * torch.randn(b, n, a.shape[1]), "generator"),
+    "wrong order": (lambda a, b, n, s, g=None: (_draw(a, b, n, g) + s * torch.randn(b, n, a.shape[1], generator=g)).transpose(0, 1), "shape"),
+    "biased noise": (lambda a, b, n, s, g=None: _draw(a, b, n, g) + s * torch.rand(b, n, a.shape[1], generator=g), "mean 0"),
+}
+
+
+@pytest.mark.parametrize("name", list(SAMPLER_MISTAKES))
+def test_sampler_mistakes(name):
+    fn, words = SAMPLER_MISTAKES[name]
+    fb = ch04.check_expert_negatives(fn)
+    assert fb.status == "hint" and words in fb.message, (name, fb)
+
+
+# --------------------------------------------------------------------------- grid NLL
+def test_grid_nll_solution_and_library_are_correct():
+    assert ch04.check_grid_nll(solutions.ch04_grid_nll).status == "correct"
+    assert ch04.check_grid_nll(grid_nll).status == "correct"
+
+
+def test_grid_nll_stub_and_crash():
+    assert ch04.check_grid_nll(stub).status == "not attempted"
+    assert ch04.check_grid_nll(raises).status == "hint"
+
+
+NLL_MISTAKES = {
+    "no cell area": (lambda p, e, c: p + torch.logsumexp(-e, 1), "cell area"),
+    "cell sign": (lambda p, e, c: p + torch.logsumexp(-e, 1) - math.log(c), "sign"),
+    "mean not sum": (lambda p, e, c: p + torch.logsumexp(-e, 1) - math.log(e.shape[1]) + math.log(c), "sums"),
+    "energy sign": (lambda p, e, c: -p + torch.logsumexp(e, 1) + math.log(c), "sign of the energies"),
+    "unstable": (lambda p, e, c: p + torch.log(torch.exp(-e).sum(1)) + math.log(c), "logsumexp"),
+    "averaged": (lambda p, e, c: (p + torch.logsumexp(-e, 1) + math.log(c)).mean(), "one NLL per sample"),
+}
+
+
+@pytest.mark.parametrize("name", list(NLL_MISTAKES))
+def test_grid_nll_mistakes(name):
+    fn, words = NLL_MISTAKES[name]
+    fb = ch04.check_grid_nll(fn)
+    assert fb.status == "hint" and words in fb.message, (name, fb)

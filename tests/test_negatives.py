@@ -1,0 +1,177 @@
+"""Counter-example samplers: shapes, bounds and statistics against independent references."""
+
+import math
+
+import pytest
+import torch
+from scipy import stats
+
+from ibc_tutorial.negatives import ExpertSampler, UniformSampler, expert_negatives, uniform_negatives
+
+
+def test_uniform_shape_bounds_and_distribution():
+    g = torch.Generator().manual_seed(0)
+    neg = uniform_negatives(64, 100, [-1.0, 0.0], [1.0, 0.5], generator=g)
+    assert neg.shape == (64, 100, 2) and neg.dtype == torch.float32
+    assert (neg[..., 0] >= -1).all() and (neg[..., 0] <= 1).all()
+    assert (neg[..., 1] >= 0).all() and (neg[..., 1] <= 0.5).all()
+    # Kolmogorov-Smirnov against U(low, high), each dimension
+    assert stats.kstest(neg[..., 0].reshape(-1).numpy(), stats.uniform(loc=-1, scale=2).cdf).pvalue > 1e-3
+    assert stats.kstest(neg[..., 1].reshape(-1).numpy(), stats.uniform(loc=0, scale=0.5).cdf).pvalue > 1e-3
+    # the two dimensions are independent
+    assert abs(float(torch.corrcoef(neg.reshape(-1, 2).T)[0, 1])) < 0.02
+
+
+def test_uniform_seeded_and_scalar_bounds():
+    a = uniform_negatives(4, 5, -1.0, 1.0, generator=torch.Generator().manual_seed(3))
+    b = uniform_negatives(4, 5, -1.0, 1.0, generator=torch.Generator().manual_seed(3))
+    assert a.shape == (4, 5, 1) and torch.equal(a, b)
+
+
+def test_expert_mean_and_variance_are_expert_set_plus_sigma_squared():
+    g = torch.Generator().manual_seed(1)
+    expert = torch.tensor([[0.0, 0.4], [0.1, 0.5], [-0.6, 0.3], [0.7, -0.8], [0.0, 0.45]])
+    sigma = 0.2
+    neg = expert_negatives(expert, 400, 500, sigma, generator=g).reshape(-1, 2).double()  # 200,000 draws
+    mu = expert.double().mean(0)
+    var = expert.double().var(0, unbiased=False) + sigma**2  # Var(mixture) = Var(expert set) + σ²
+    n = len(neg)
+    se_mean = (var / n).sqrt()
+    assert ((neg.mean(0) - mu).abs() < 4 * se_mean).all()
+    assert ((neg.var(0) - var).abs() / var < 0.02).all()
+
+
+def test_expert_sigma_zero_draws_with_replacement_from_the_set():
+    g = torch.Generator().manual_seed(2)
+    expert = torch.tensor([[-0.5], [0.25], [0.9]])
+    neg = expert_negatives(expert, 10, 3000, 0.0, generator=g)
+    values, counts = torch.unique(neg, return_counts=True)
+    torch.testing.assert_close(values, expert[:, 0])
+    # chi-square: each expert action drawn with probability 1/M
+    assert stats.chisquare(counts.numpy()).pvalue > 1e-3
+    # with replacement: more draws per row than actions in the set
+    assert neg.shape == (10, 3000, 1)
+
+
+def test_expert_noise_is_gaussian_with_sigma():
+    g = torch.Generator().manual_seed(4)
+    neg = expert_negatives(torch.tensor([[0.3]]), 50, 400, 0.15, generator=g)
+    assert stats.kstest(neg.reshape(-1).numpy(), stats.norm(loc=0.3, scale=0.15).cdf).pvalue > 1e-3
+
+
+def test_expert_rows_are_independent_draws():
+    g = torch.Generator().manual_seed(5)
+    expert = torch.linspace(-1, 1, 50)[:, None]
+    neg = expert_negatives(expert, 8, 20, 0.0, generator=g)
+    assert not all(torch.equal(neg[0], neg[i]) for i in range(1, 8))
+
+
+def test_expert_clipping_optional():
+    g = torch.Generator().manual_seed(6)
+    expert = torch.tensor([[0.95, -1.0]])
+    free = expert_negatives(expert, 20, 200, 0.1, generator=g)
+    assert (free[..., 0] > 1).any() and (free[..., 1] < -1).any()  # default: not clipped
+    clipped = expert_negatives(expert, 20, 200, 0.1, generator=g, low=[-1, -1], high=[1, 1])
+    assert (clipped >= -1).all() and (clipped <= 1).all()
+    assert (clipped[..., 1] == -1).float().mean() > 0.4  # point mass on the bound, as the docs warn
+
+
+def test_samplers_use_the_minibatch():
+    g = torch.Generator().manual_seed(7)
+    actions = torch.tensor([[0.2, 0.1], [0.2, 0.1]])
+    neg = ExpertSampler(0.0)(actions, 6, g)
+    assert neg.shape == (2, 6, 2) and (neg == torch.tensor([0.2, 0.1])).all()
+    u = UniformSampler(-1.0, 1.0)(actions, 6, g)
+    assert u.shape == (2, 6, 2) and (u.abs() <= 1).all()
+    u2 = UniformSampler([-1.0, 0.0], [1.0, 1.0])(actions, 3, g)
+    assert (u2[..., 1] >= 0).all()
+    with pytest.raises(ValueError, match="columns"):
+        UniformSampler([-1.0, 0, 0], [1.0, 1, 1])(actions, 3, g)
+
+
+def test_bad_input():
+    with pytest.raises(ValueError, match="low"):
+        uniform_negatives(2, 3, 1.0, -1.0)
+    with pytest.raises(ValueError, match="n_neg"):
+        uniform_negatives(2, 0, -1.0, 1.0)
+    with pytest.raises(ValueError, match="same length"):
+        uniform_negatives(2, 3, [-1.0, -1.0], [1.0, 1.0, 1.0])
+    with pytest.raises(ValueError, match="sigma"):
+        expert_negatives(torch.zeros(3, 1), 2, 3, -0.1)
+    with pytest.raises(ValueError, match="expert_actions"):
+        expert_negatives(torch.zeros(3), 2, 3, 0.1)
+    with pytest.raises(ValueError, match="expert_actions"):
+        expert_negatives(torch.zeros(0, 2), 2, 3, 0.1)
+    with pytest.raises(ValueError, match="together"):
+        expert_negatives(torch.zeros(3, 1), 2, 3, 0.1, low=-1.0)
+    with pytest.raises(ValueError, match="batch_size"):
+        expert_negatives(torch.zeros(3, 1), 0, 3, 0.1)
+
+
+# --------------------------------------------------------------------------- chapter 04's problem and measures
+def test_approach_problem_density_matches_torch_distributions():
+    from ibc_tutorial.negatives_experiment import ApproachProblem
+
+    problem = ApproachProblem()
+    data = problem.sample(300, torch.Generator().manual_seed(0))
+    assert data["obs"].shape == (300, 4) and data["actions"].shape == (300, 2)
+    shares = torch.bincount(data["situation"], minlength=3).float() / 300
+    assert shares[0] > 0.5 and shares[1] > 0.05 and shares[2] > 0.05
+    modes, valid = problem.modes(data["obs"])
+    s = problem.config.expert_noise
+    for i in range(0, 300, 37):
+        m = modes[i][valid[i]]  # (K, 2)
+        mix = torch.distributions.MixtureSameFamily(
+            torch.distributions.Categorical(torch.ones(len(m))),
+            torch.distributions.Independent(torch.distributions.Normal(m, s), 1),
+        )
+        torch.testing.assert_close(problem.log_density(data["obs"][i : i + 1], data["actions"][i : i + 1])[0], mix.log_prob(data["actions"][i]), atol=1e-4, rtol=1e-5)
+    # junctions have three valid actions, the rest one
+    assert (valid.sum(1) == torch.where(data["situation"] == 1, 3, 1)).all()
+
+
+def test_evaluate_of_the_expert_density_reaches_the_floor():
+    from ibc_tutorial.negatives_experiment import ApproachProblem, ExperimentConfig, evaluate, expert_nll, make_datasets
+
+    problem = ApproachProblem()
+    config = ExperimentConfig(n_heldout=60)
+    _, heldout = make_datasets(problem, config)
+
+    class Oracle(torch.nn.Module):
+        """E(x, y) = -log p(y|x) of the expert itself."""
+
+        def embed(self, obs):
+            return obs
+
+        def energy_from_embedding(self, z, actions):
+            a = actions.expand(len(z), -1, -1) if actions.ndim == 2 else actions
+            n = a.shape[1]
+            return -problem.log_density(z.repeat_interleave(n, 0), a.reshape(-1, 2)).reshape(len(z), n)
+
+    out = evaluate(Oracle(), heldout, problem, config)
+    assert abs(out["nll"] - expert_nll(problem, heldout)) < 0.05 and out["hit"] == 1.0
+
+
+def test_negatives_histogram_and_mode_masses():
+    from ibc_tutorial.negatives_experiment import ApproachProblem, mode_masses, negatives_histogram
+
+    actions = torch.tensor([[0.0, 0.0]]).repeat(10, 1)
+    h = negatives_histogram(ExpertSampler(0.0), actions, 4, batches=2, batch_size=4, bins=10)
+    assert h.shape == (10, 10) and float(h.sum()) == pytest.approx(1.0) and float(h[5, 5]) == pytest.approx(1.0)
+    u = negatives_histogram(UniformSampler(-1.0, 1.0), actions, 100, batches=20, bins=4)
+    assert (u > 0.05).all()  # uniform counter-examples visit every cell
+
+    problem = ApproachProblem()
+
+    class Flat(torch.nn.Module):
+        hidden = 1
+
+        def embed(self, obs):
+            return obs
+
+        def energy_from_embedding(self, z, actions):
+            return torch.zeros(len(z), actions.shape[-2])
+
+    m = mode_masses(Flat(), torch.tensor([[0.0, 1.0, 0.0, 0.5]]), problem, grid_n=41, radius=0.15)
+    # a flat landscape puts on each disc of radius 0.15 about its share of the box: π 0.15² / 4
+    torch.testing.assert_close(m, torch.full((1, 3), math.pi * 0.15**2 / 4), atol=0.004, rtol=0)

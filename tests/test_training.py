@@ -1,0 +1,121 @@
+"""The shared training loop's energy-model objectives (InfoNCE with any sampler, grid variants)."""
+
+import pytest
+import torch
+
+from ibc_tutorial.inference import action_grid, grid_argmin
+from ibc_tutorial.losses import grid_cross_entropy, info_nce, soft_targets, temporal_smoothing
+from ibc_tutorial.negatives import ExpertSampler, UniformSampler
+from ibc_tutorial.policies import EnergyModel, MLPEncoder
+from ibc_tutorial.training import TrainConfig, consecutive_pairs, grid_objective, info_nce_objective, train
+
+
+def bimodal_data(m=512, seed=0):
+    """x in [-1, 1]; y = +0.5 or -0.5 with equal probability when x > 0, else y = 0."""
+    g = torch.Generator().manual_seed(seed)
+    x = torch.rand(m, 1, generator=g) * 2 - 1
+    sign = torch.where(torch.rand(m, generator=g) < 0.5, -1.0, 1.0)
+    y = torch.where(x[:, 0] > 0, 0.5 * sign, torch.zeros(m))[:, None]
+    return {"obs": x, "actions": y}
+
+
+def small_model(seed=0, action_dim=1):
+    torch.manual_seed(seed)
+    return EnergyModel(MLPEncoder(1, embed_dim=32, hidden=32), action_dim, hidden=32)
+
+
+@pytest.mark.parametrize("sampler", [UniformSampler(-1.0, 1.0), ExpertSampler(0.2)])
+def test_info_nce_objective_learns_two_modes(sampler):
+    data = bimodal_data()
+    model = small_model()
+    result = train(model, info_nce_objective(model, sampler, 32), data, TrainConfig(steps=300, batch_size=64, lr=5e-3, log_every=100))
+    assert result.losses[-1] < result.losses[0]
+    grid = action_grid(101)
+    _, e = grid_argmin(model, torch.tensor([[0.6], [-0.6]]), grid, return_energies=True)
+    ys = grid[:, 0]
+    # bimodal where the expert is: both ±0.5 are local minima far below the energy at 0
+    e_pos = e[0]
+    left, right, mid = e_pos[(ys + 0.5).abs().argmin()], e_pos[(ys - 0.5).abs().argmin()], e_pos[ys.abs().argmin()]
+    assert left < mid - 1 and right < mid - 1
+    # unimodal at 0 elsewhere
+    assert abs(float(grid[e[1].argmin(), 0])) < 0.15
+
+
+def test_info_nce_objective_is_the_loss_of_its_parts():
+    data = bimodal_data(16)
+    model = small_model()
+    calls = []
+
+    def sampler(actions, n, gen):
+        calls.append(actions.clone())
+        return torch.linspace(-1, 1, n).reshape(1, n, 1).expand(len(actions), n, 1)
+
+    w = torch.rand(16)
+    batch = {**data, "w": w}
+    got = info_nce_objective(model, sampler, 7, weight_key="w")(batch, torch.Generator())
+    torch.testing.assert_close(calls[0], data["actions"])  # the sampler sees the minibatch's expert actions
+    e_pos = model.energy(data["obs"], data["actions"][:, None, :])[:, 0]
+    e_neg = model.energy(data["obs"], torch.linspace(-1, 1, 7)[:, None])
+    torch.testing.assert_close(got, info_nce(e_pos, e_neg, w))
+
+
+def test_grid_objective_variants_are_the_losses_of_the_paper():
+    model = small_model()
+    grid = action_grid(9)
+    obs, y = torch.randn(5, 1), torch.rand(5, 1) - 0.5
+    obs2, y2 = torch.randn(5, 1), torch.rand(5, 1) - 0.5
+    e = torch.cat([model.energy(obs, y[:, None, :]), model.energy(obs, grid)], 1)  # (B, 1 + G)
+    e2 = torch.cat([model.energy(obs2, y2[:, None, :]), model.energy(obs2, grid)], 1)
+    batch = {"obs": obs, "actions": y, "next_obs": obs2, "next_actions": y2}
+    gen = torch.Generator()
+    # one-hot: eq. 3 = InfoNCE with the grid as counter-examples
+    torch.testing.assert_close(grid_objective(model, grid)(batch, gen), info_nce(e[:, 0], e[:, 1:]))
+    # soft targets (eq. 5) over [ground truth; grid]
+    cand = torch.cat([y[:, None, :], grid.expand(5, -1, -1)], 1)
+    want = grid_cross_entropy(e, soft_targets(cand, y, 0.05))
+    torch.testing.assert_close(grid_objective(model, grid, temperature=0.05)(batch, gen), want)
+    # temporal smoothing (eq. 4): both frames' CE plus α‖e_t − e_{t+1}‖ over the grid columns only
+    ce = 0.5 * (info_nce(e[:, 0], e[:, 1:]) + info_nce(e2[:, 0], e2[:, 1:]))
+    want = ce + temporal_smoothing(e[:, 1:], e2[:, 1:], 0.7)
+    torch.testing.assert_close(grid_objective(model, grid, smoothing=0.7)(batch, gen), want)
+
+
+def test_consecutive_pairs_stay_inside_episodes():
+    data = {"obs": torch.arange(7.0)[:, None], "episode": torch.tensor([0, 0, 0, 1, 1, 2, 2])}
+    pairs = consecutive_pairs(data)
+    assert pairs["obs"][:, 0].tolist() == [0, 1, 3, 5]
+    assert pairs["next_obs"][:, 0].tolist() == [1, 2, 4, 6]
+    assert (pairs["episode"] == pairs["next_episode"]).all()
+    with pytest.raises(ValueError, match="episode"):
+        consecutive_pairs({"obs": torch.zeros(3, 1)})
+
+
+def test_training_is_seeded_and_records_evaluations():
+    data = bimodal_data(128)
+    runs = []
+    for _ in range(2):
+        model = small_model(seed=3)
+        evals = lambda: float(model.energy(torch.zeros(1, 1), torch.zeros(1, 1, 1)))  # noqa: E731
+        res = train(model, info_nce_objective(model, ExpertSampler(0.1), 8), data, TrainConfig(steps=40, batch_size=16, log_every=10), evaluate=evals)
+        runs.append(res)
+    assert runs[0].losses == runs[1].losses and runs[0].evals == runs[1].evals
+    assert len(runs[0].evals) == 4 and runs[0].steps == [10, 20, 30, 40]
+
+
+def test_grid_objective_with_smoothing_trains():
+    data = bimodal_data(200)
+    data["episode"] = torch.arange(200) // 20
+    pairs = consecutive_pairs(data)
+    model = small_model()
+    res = train(model, grid_objective(model, action_grid(32), temperature=0.01, smoothing=1.0), pairs, TrainConfig(steps=60, batch_size=32, log_every=20))
+    assert all(torch.isfinite(torch.tensor(res.losses)))
+
+
+def test_objective_bad_input():
+    model = small_model()
+    with pytest.raises(ValueError, match="n_neg"):
+        info_nce_objective(model, UniformSampler(), 0)
+    with pytest.raises(ValueError, match="temperature"):
+        grid_objective(model, action_grid(5), temperature=0)
+    with pytest.raises(ValueError, match="smoothing"):
+        grid_objective(model, action_grid(5), smoothing=-1)
