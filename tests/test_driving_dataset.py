@@ -1,8 +1,5 @@
 """Demonstrations: the log file, the rendering Dataset, the collector and its command."""
 
-import json
-import zipfile
-
 import numpy as np
 import pytest
 import torch
@@ -103,6 +100,10 @@ def test_dataset_samples(small_log):
     assert bobs["bev"].shape == (16, 5, 64, 64) and bobs["state"].shape == (16, 3) and bact.shape == (16, 2)
     with pytest.raises(IndexError):
         ds[len(ds)]
+    cached = DemoDataset(small_log, bev_size=64, cache=True)
+    idx = [0, 7, 300, len(ds) - 1]
+    assert torch.equal(cached.batch(idx)[0]["bev"], ds.batch(idx)[0]["bev"])
+    assert torch.equal(cached[7][0]["bev"], ds[7][0]["bev"])
     with pytest.raises(ValueError, match="bev_size"):
         DemoDataset(small_log, bev_size=100)
 

@@ -139,20 +139,21 @@ def red_light_setup(env, light_id=0, metres_before=30.0):
 
 def test_running_a_red_light_is_counted_once():
     env = make_env("town02", bev_size=32)
-    line = env.town.stop_lines[0]
     red_light_setup(env, 0)
+    line = env.town.stop_lines[0]
+    e, d = np.array(line.entry), np.array(line.direction)
     counted_at = []
     for t in range(80):
         assert env.sim.lights[0] == RED
         obs, r, term, trunc, info = env.step([0.0, 0.5])
         if info["ran_red_light"]:
             counted_at.append(t)
+            rear = np.array(env.sim.car.rear())
+            assert 0 <= (rear - e) @ d < 1.0  # counted as the rear crossed the line, not the front
         if term:
             break
     assert info["red_light_infractions"] == 1 and len(counted_at) == 1
     assert info["score"] == pytest.approx(0.7 * info["distance_m"])
-    # counted when the rear crossed the line: the car's centre is then half a car past it
-    assert len(counted_at) == 1
 
 
 def test_stopping_at_a_red_light_is_not_an_infraction():

@@ -111,3 +111,43 @@ def test_expert_takes_over_after_another_driver():
     lane = env.town.lanes[expert.current_lane]
     assert lane.distance_to(np.array([[info["x"], info["y"]]]))[0] < 0.3  # back on a lane's centre line
     assert info["red_light_infractions"] == 0
+
+
+def test_replanning_mid_route_goes_on_with_the_next_turn():
+    env = make_env("town01", bev_size=32, routeless=False)
+    env.reset(seed=2)
+    expert = Expert(env)
+    town = env.town
+    lanes = []
+    for t in range(1500):
+        if t == 700:
+            expert._start()  # as when the car is found off its path: plan again from where it is
+        env.step(expert.act())
+        lanes.append(expert.current_lane)
+    turns = [town.lanes[b].turn for a, b in zip(lanes[:-1], lanes[1:])
+             if a != b and a in town.approach_of_lane and town.approaches[town.approach_of_lane[a]].is_junction]
+    assert len(turns) >= 3 and turns == list(env.route.turns[:len(turns)])
+
+
+def test_batched_rollout_matches_single_episodes():
+    from ibc_tutorial.driving.rollout import rollout
+
+    results = rollout("expert", town="town02", episodes=3, steps=400, bev_size=32, seed=5)
+    for r in results:
+        env = make_env("town02", bev_size=32, max_steps=400)
+        distance, infractions, terminated = drive_expert(env, r.seed, 400)
+        assert r.distance_m == pytest.approx(distance) and r.red_light_infractions == infractions
+        assert r.steps == 400 and not r.terminated and r.xy.shape == (401, 2)
+    seen = []
+
+    def straight(obs):
+        seen.append(obs["bev"].shape[0])
+        assert obs["bev"].dtype == np.uint8 and obs["state"].shape == (obs["bev"].shape[0], 3)
+        return np.tile([0.4, 2.0], (len(obs["state"]), 1))  # clipped to [-1, 1]
+
+    results = rollout(straight, town="town02", episodes=4, steps=300, bev_size=32)
+    assert all(r.terminated and r.termination in ("off_road", "building") for r in results)
+    assert seen[0] == 4 and seen[-1] < 4  # finished episodes leave the batch
+    assert all(r.score == pytest.approx(r.distance_m * 0.7 ** r.red_light_infractions) for r in results)
+    with pytest.raises(ValueError, match="policy"):
+        rollout("random")

@@ -154,3 +154,18 @@ def test_executor_runs_a_notebook_in_place(tmp_path):
     assert cell["execution_count"] == 1
     assert "".join(cell["outputs"][0]["text"]) == "1 2\n"
     assert "execution" not in cell["metadata"]
+
+
+def test_atomic_write_gives_the_usual_file_mode(tmp_path):
+    mask = os.umask(0o022)
+    try:
+        p = utils.atomic_write_bytes(tmp_path / "f.txt", b"x")
+    finally:
+        os.umask(mask)
+    assert p.stat().st_mode & 0o777 == 0o644
+
+
+def test_version_imports_no_subcommand_module():
+    code = "import sys; from ibc_tutorial.cli import main\ntry: main(['--version'])\nexcept SystemExit: pass\nprint('pymunk' in sys.modules, 'gymnasium' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip().endswith("False False")

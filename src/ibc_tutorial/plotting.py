@@ -46,6 +46,185 @@ def save(fig, path, *, dpi: int = 120) -> None:
     atomic_write_bytes(path, buf.getvalue())
 
 
+# =========================================================================== chapter 01: the tree
+TREE_SIDE_COLORS = {-1: "C0", 1: "C1", 0: "C3"}
+"""Colours of the tree chapters: passed on the left (blue), on the right (orange), collided (red)."""
+
+
+def _draw_tree(ax, world) -> None:
+    """The tree (green disc) and, dashed, the circle the car's centre must stay out of."""
+    c = world.config
+    ax.add_patch(plt.Circle((c.tree_x, 0.0), c.tree_radius, color="forestgreen", zorder=3))
+    ax.add_patch(plt.Circle((c.tree_x, 0.0), world.clearance, fill=False, ls="--", lw=0.8, color="forestgreen", zorder=3))
+
+
+def plot_tree_scene(world, states, modes, *, title: str = "Expert demonstrations in the tree world", max_episodes: int = 100, ax=None):
+    """Expert trajectories ``states`` (E, T+1, 3) seen from above, coloured by ``modes`` (E,):
+    0 passes on the left (blue), 1 on the right (orange); the tree as a green disc, the dashed
+    circle marks where the car's disc would touch it."""
+    fig, ax = (ax.figure, ax) if ax is not None else plt.subplots(figsize=(9, 3.6))
+    s = states.numpy() if hasattr(states, "numpy") else states
+    m = modes.numpy() if hasattr(modes, "numpy") else modes
+    for e in range(min(len(s), max_episodes)):
+        ax.plot(s[e, :, 0], s[e, :, 1], color="C0" if m[e] == 0 else "C1", lw=0.8, alpha=0.6)
+    _draw_tree(ax, world)
+    ax.plot([], [], color="C0", label=f"passes left ({int((m == 0).sum())})")
+    ax.plot([], [], color="C1", label=f"passes right ({int((m == 1).sum())})")
+    ax.set_xlabel("x (m, direction of travel)")
+    ax.set_ylabel("y (m, left > 0)")
+    ax.set_aspect("equal")
+    ax.set_title(title)
+    ax.legend(loc="lower left", fontsize=8)
+    return fig
+
+
+def plot_actions_by_distance(world, demos, *, predictions: dict | None = None, window: tuple | None = None, title: str = "What the policy sees, and what the experts did", max_points: int = 6000):
+    """Each expert sample as a dot: the observation (distance to the tree, m) against the action
+    (steering), coloured by the expert's side; optional ``predictions`` {name: (distances, actions)}
+    drawn as lines, ``window`` = (low, high) m shaded. The x axis runs towards the tree."""
+    import numpy as np
+
+    fig, ax = plt.subplots(figsize=(9, 3.8))
+    d = world.physical(demos.obs)[:, 0].numpy()
+    a = demos.actions[:, 0].numpy()
+    m = demos.mode.numpy()
+    idx = np.random.default_rng(0).permutation(len(d))[:max_points]
+    for mode, color, name in ((0, "C0", "passes left"), (1, "C1", "passes right")):
+        sel = idx[m[idx] == mode]
+        ax.scatter(d[sel], a[sel], s=3, color=color, alpha=0.35, label=f"expert, {name}", rasterized=True)
+    if window is not None:
+        ax.axvspan(window[0], window[1], color="0.85", zorder=0, label="window of the histogram")
+    for i, (name, (x, y)) in enumerate((predictions or {}).items()):
+        x = x.numpy() if hasattr(x, "numpy") else np.asarray(x)
+        y = y.numpy() if hasattr(y, "numpy") else np.asarray(y)
+        ax.plot(x.reshape(-1), y.reshape(-1), color=["k", "C3", "C2", "C4"][i % 4], lw=2, ls=["-", "--", "-.", ":"][i % 4], label=name)
+    ax.axvline(0.0, color="forestgreen", lw=1.5)
+    ax.text(0.0, 1.02, " tree", color="forestgreen", va="bottom", fontsize=8)
+    ax.set_xlim(d.max() + 0.5, d.min() - 0.5)
+    ax.set_ylim(-1.1, 1.15)
+    ax.set_xlabel("observation: distance ahead to the tree (m)")
+    ax.set_ylabel("steering (−1 right … +1 left)")
+    ax.set_title(title)
+    ax.legend(loc="lower left", fontsize=8, markerscale=3)
+    return fig
+
+
+def plot_action_histogram(actions, modes, *, title: str, bins: int = 40, mode_names=("passes left", "passes right")):
+    """Histogram of the actions ``actions`` (N,) in [-1, 1], stacked by the experts' ``modes`` (N,)."""
+    import numpy as np
+
+    a = actions.numpy() if hasattr(actions, "numpy") else np.asarray(actions)
+    m = modes.numpy() if hasattr(modes, "numpy") else np.asarray(modes)
+    fig, ax = plt.subplots(figsize=(6.4, 3.4))
+    ax.hist([a[m == 0], a[m == 1]], bins=bins, range=(-1, 1), stacked=True, color=["C0", "C1"], label=list(mode_names))
+    ax.axvline(float(a.mean()), color="k", ls="--", lw=1.2, label=f"mean of all ({a.mean():+.2f})")
+    ax.set_xlabel("steering (−1 right … +1 left)")
+    ax.set_ylabel("number of samples")
+    ax.set_title(title)
+    ax.legend(fontsize=8)
+    return fig
+
+
+def plot_constant_losses(constants, losses: dict, *, minimisers: dict | None = None, flat: dict | None = None, title: str = "Loss of predicting one constant action for all the samples"):
+    """Curves ``losses`` {name: (G,)} over the constant prediction ``constants`` (G,); ``minimisers``
+    {name: value} marked with a dot, ``flat`` {name: (low, high)} shaded (an interval of minimisers)."""
+    import numpy as np
+
+    c = constants.numpy() if hasattr(constants, "numpy") else np.asarray(constants)
+    fig, axes = plt.subplots(1, len(losses), figsize=(4.6 * len(losses), 3.4))
+    axes = np.atleast_1d(axes)
+    for i, (ax, (name, loss)) in enumerate(zip(axes, losses.items())):
+        loss = loss.numpy() if hasattr(loss, "numpy") else np.asarray(loss)
+        color = f"C{i + 2}"
+        ax.plot(c, loss, color=color, lw=2)
+        if flat and name in flat:
+            lo, hi = flat[name]
+            ax.axvspan(lo, hi, color=color, alpha=0.15, label=f"minimisers: [{lo:+.2f}, {hi:+.2f}]")
+        if minimisers and name in minimisers:
+            v = float(minimisers[name])
+            ax.plot([v], [np.interp(v, c, loss)], "o", color="k", label=f"minimiser {v:+.2f}")
+        ax.set_xlabel("constant prediction c (steering)")
+        ax.set_ylabel(f"{name} loss")
+        ax.set_title(name)
+        ax.legend(fontsize=8, loc="upper center")
+    fig.suptitle(title)
+    fig.tight_layout()
+    return fig
+
+
+def plot_tree_closed_loop(world, rollouts: dict, *, title: str = "Closed-loop rollouts in the tree world", max_episodes: int = 60):
+    """One panel per policy ({name: Rollouts}): trajectories from above, coloured by how they pass
+    the tree (left blue, right orange, collided red, with a cross where the car stopped)."""
+    import numpy as np
+
+    n = len(rollouts)
+    fig, axes = plt.subplots(n, 1, figsize=(8.5, 2.7 * n), sharex=True, sharey=True)
+    axes = np.atleast_1d(axes)
+    for ax, (name, r) in zip(axes, rollouts.items()):
+        side = world.pass_side(r).numpy()
+        s = r.states.numpy()
+        hit = r.collided.numpy()
+        for e in range(min(len(s), max_episodes)):
+            ax.plot(s[e, :, 0], s[e, :, 1], color=TREE_SIDE_COLORS[int(side[e])], lw=0.8, alpha=0.6)
+            if hit[e]:
+                ax.plot(s[e, -1, 0], s[e, -1, 1], "x", color="C3", ms=4)
+        _draw_tree(ax, world)
+        counts = ", ".join(f"{label} {float(np.mean(side == v)):.0%}" for v, label in ((-1, "left"), (1, "right"), (0, "collided")))
+        ax.set_title(f"{name}: {counts} of {len(side)} episodes", fontsize=10)
+        ax.set_ylabel("y (m, left > 0)")
+        ax.set_aspect("equal")
+    axes[-1].set_xlabel("x (m, direction of travel)")
+    fig.suptitle(title)
+    fig.tight_layout()
+    return fig
+
+
+def _draw_side_road(ax, world, x_end: float) -> None:
+    """The drivable area of the side-road world in grey: the main road and the side road."""
+    import math
+
+    import numpy as np
+    from matplotlib.patches import Polygon
+
+    c = world.config
+    w = c.road_half_width
+    ax.add_patch(plt.Rectangle((-1.0, -w), x_end + 1.0, 2 * w, color="0.88", zorder=0))
+    a = math.radians(c.side_angle_deg)
+    u, nrm = np.array([math.cos(a), math.sin(a)]), np.array([-math.sin(a), math.cos(a)])
+    b = np.array([c.branch_x, 0.0])
+    length = (x_end - c.branch_x) / math.cos(a) + w
+    corners = [b - w * nrm, b + w * nrm, b + w * nrm + length * u, b - w * nrm + length * u]
+    ax.add_patch(Polygon(corners, closed=True, color="0.88", zorder=0))
+
+
+def plot_side_road(world, rollouts: dict, *, title: str = "The side road", max_episodes: int = 60):
+    """One panel per policy ({name: Rollouts}) over the roads: episodes that end on the main road
+    (blue), on the side road (green), off the road (red)."""
+    import numpy as np
+
+    n = len(rollouts)
+    fig, axes = plt.subplots(n, 1, figsize=(8.5, 2.9 * n), sharex=True, sharey=True)
+    axes = np.atleast_1d(axes)
+    for ax, (name, r) in zip(axes, rollouts.items()):
+        s = r.states.numpy()
+        main = world.stayed_on_main_road(r).numpy()
+        side = world.took_side_road(r).numpy()
+        _draw_side_road(ax, world, float(s[:, :, 0].max()) + 1.0)
+        for e in range(min(len(s), max_episodes)):
+            color = "C0" if main[e] else ("C2" if side[e] else "C3")
+            ax.plot(s[e, :, 0], s[e, :, 1], color=color, lw=0.8, alpha=0.6)
+        sw = world.swerve(r).numpy()
+        stay = ~np.isnan(sw)
+        mean = f"{np.nanmean(sw):.2f} m" if stay.any() else "n/a"
+        ax.set_title(f"{name}: main road {main.mean():.0%}, side road {side.mean():.0%}, off road {r.collided.float().mean():.0%}; mean swerve {mean}", fontsize=10)
+        ax.set_ylabel("y (m, left > 0)")
+        ax.set_aspect("equal")
+    axes[-1].set_xlabel("x (m, direction of travel)")
+    fig.suptitle(title)
+    fig.tight_layout()
+    return fig
+
+
 # =========================================================================== chapter 02: explicit policies
 def plot_beta_shapes(params, *, title: str = "Beta densities f(y'; α, β) of eq. 1"):
     """Densities of Beta(α, β) on the rescaled action y' = (y + 1)/2 in (0, 1), one curve per
@@ -178,31 +357,6 @@ def plot_energy_curves(actions, curves: dict, *, title: str, xlabel: str = "stee
     ax.legend(fontsize=8)
     if own:
         fig.tight_layout()
-    return fig
-
-
-def plot_closed_loop(world, rollouts: dict, *, title: str = "Closed loop", max_episodes: int = 60):
-    """Trajectories in the tree world, one panel per policy: passes on the left (blue), on the right
-    (orange), collisions (red); the tree as a green disc."""
-    import numpy as np
-
-    n = len(rollouts)
-    fig, axes = plt.subplots(1, n, figsize=(4.4 * n, 3.2), sharex=True, sharey=True)
-    axes = np.atleast_1d(axes)
-    c = world.config
-    for ax, (label, r) in zip(axes, rollouts.items()):
-        side = world.pass_side(r).numpy()
-        s = r.states.numpy()
-        for e in range(min(len(s), max_episodes)):
-            ax.plot(s[e, :, 0], s[e, :, 1], color={-1: "C0", 1: "C1", 0: "C3"}[int(side[e])], lw=0.8, alpha=0.7)
-        ax.add_patch(plt.Circle((c.tree_x, 0.0), c.tree_radius, color="g"))
-        left, right = float((side == -1).mean()), float((side == 1).mean())
-        ax.set_title(f"{label}\nleft {left:.0%}, right {right:.0%}, collided {float(r.collided.float().mean()):.0%}", fontsize=9)
-        ax.set_xlabel("x (m)")
-        ax.set_aspect("equal")
-    axes[0].set_ylabel("y (m, left > 0)")
-    fig.suptitle(title)
-    fig.tight_layout()
     return fig
 
 

@@ -24,7 +24,7 @@ import numpy as np
 
 from ibc_tutorial.driving.lanes import ARM_LENGTH, DIRECTIONS, LANE_WIDTH, Lane
 from ibc_tutorial.driving.lights import STOP_LINE_LENGTH, STOP_LINE_THICKNESS
-from ibc_tutorial.driving.towns import Town, get_town
+from ibc_tutorial.driving.towns import TOWNS, Town, get_town
 from ibc_tutorial.utils import check_choice
 
 PIXELS_PER_METRE = 5
@@ -263,5 +263,5 @@ class BEVRenderer:
 
 def get_renderer(town_name: str, size: int = FULL_SIZE) -> BEVRenderer:
     """A renderer for ``town_name`` at ``size`` (checked against ``SUPPORTED_SIZES``)."""
-    check_choice("town", town_name, ("town01", "town02"))
+    check_choice("town", town_name, TOWNS)
     return BEVRenderer(get_raster(town_name), check_bev_size(size))

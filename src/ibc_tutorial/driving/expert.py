@@ -136,6 +136,7 @@ class Expert:
         self.car_half = self.sim.car.config.length / 2
         self.max_brake = self.sim.car.config.max_brake
         self._episode = None
+        self._passed = 0
         self._noise_left = 0
         self._noise_value = 0.0
         self.last: dict = {}
@@ -153,14 +154,16 @@ class Expert:
             lane, idx, _ = self.town.localize(x, y, yaw)
         if sim.t == 0:
             self.rng = np.random.default_rng([self.seed, sim.episode_seed])
+            self._passed = 0  # junction choices the car has driven into
         self._turns = list(route.turns) if route is not None else []
-        self._turn_k = 0
+        self._turn_k = self._passed  # re-planning mid-route goes on with the next turn
         pts = self.town.lanes[lane]
         self.xy = pts.points[idx:].copy()
         spacing = pts.length / len(pts.points)
         self.s = np.arange(len(self.xy)) * spacing
         self.lane = np.full(len(self.xy), lane)
         self.turn_wp = np.full(len(self.xy), self.town.lanes[lane].turn != "straight")  # waypoints in turns
+        self.choice_wp = np.full(len(self.xy), -1)  # index of the junction choice that led here, -1 if none
         self.stops: list[tuple[float, int]] = []  # (arc length of the junction entry, light id)
         self._end_lane = lane
         self._add_stop(lane, self.s[0] + (len(self.xy)) * spacing)
@@ -175,32 +178,36 @@ class Expert:
         if ap is not None and ap in self.town.light_of_approach:
             self.stops.append((s_end, self.town.light_of_approach[ap]))
 
-    def _choose(self, lane: int) -> int:
+    def _choose(self, lane: int) -> tuple[int, int]:
+        """The lane after ``lane`` and the index of the junction choice it took (-1: no choice)."""
         ap = self.town.approaches[self.town.approach_of_lane[lane]] if lane in self.town.approach_of_lane else None
         if ap is None or not ap.is_junction:
-            return self.town.next_lane(lane)
+            return self.town.next_lane(lane), -1
         if self._turn_k < len(self._turns):
             turn = self._turns[self._turn_k]
         else:
             turn = sorted(ap.exits)[int(self.rng.integers(len(ap.exits)))]
         self._turn_k += 1
-        return self.town.next_lane(lane, turn)
+        return self.town.next_lane(lane, turn), self._turn_k - 1
 
     def _extend(self) -> None:
         while self.s[-1] - self.s[self.idx] < self.HORIZON_M:
             prev = self.town.lanes[self._end_lane]
             s0 = self.s[-1] + prev.length / len(prev.points)
-            nxt = self.town.lanes[self._choose(self._end_lane)]
+            nxt_id, choice = self._choose(self._end_lane)
+            nxt = self.town.lanes[nxt_id]
             spacing = nxt.length / len(nxt.points)
             self.xy = np.concatenate([self.xy, nxt.points])
             self.s = np.concatenate([self.s, s0 + np.arange(len(nxt.points)) * spacing])
             self.lane = np.concatenate([self.lane, np.full(len(nxt.points), nxt.id)])
             self.turn_wp = np.concatenate([self.turn_wp, np.full(len(nxt.points), nxt.turn != "straight")])
+            self.choice_wp = np.concatenate([self.choice_wp, np.full(len(nxt.points), choice)])
             self._add_stop(nxt.id, s0 + nxt.length)
             self._end_lane = nxt.id
         if self.idx > 100:  # forget the path well behind the car
             cut = self.idx - 20
-            self.xy, self.s, self.lane, self.turn_wp = self.xy[cut:], self.s[cut:], self.lane[cut:], self.turn_wp[cut:]
+            self.xy, self.s, self.lane = self.xy[cut:], self.s[cut:], self.lane[cut:]
+            self.turn_wp, self.choice_wp = self.turn_wp[cut:], self.choice_wp[cut:]
             self.idx -= cut
             self.stops = [st for st in self.stops if st[0] > self.s[0]]
 
@@ -210,6 +217,8 @@ class Expert:
         d2 = (self.xy[lo:hi, 0] - x) ** 2 + (self.xy[lo:hi, 1] - y) ** 2
         k = int(np.argmin(d2))
         self.idx = lo + k
+        if self.choice_wp[self.idx] >= 0:
+            self._passed = max(self._passed, int(self.choice_wp[self.idx]) + 1)
         return math.sqrt(float(d2[k]))
 
     @property

@@ -48,14 +48,20 @@ class Route:
         return out
 
 
+def random_start(town: Town, rng: np.random.Generator) -> tuple[int, float]:
+    """A random (road lane, arc length), uniform over the road lanes' length, at least 3 m after a
+    lane's start and 12 m before its stop line."""
+    lanes = [town.lanes[i] for i in town.road_lanes]
+    usable = np.array([ln.length - 15.0 for ln in lanes])
+    k = int(rng.choice(len(lanes), p=usable / usable.sum()))
+    return lanes[k].id, 3.0 + float(rng.random()) * usable[k]
+
+
 def random_route(town: Town, rng: np.random.Generator, n_turns: int = 64, start: tuple[int, float] | None = None) -> Route:
     """A route with ``n_turns`` random legal turns from a random start (or ``start`` = (lane, s))."""
     check_int("n_turns", n_turns, minimum=0)
     if start is None:
-        lanes = [town.lanes[i] for i in town.road_lanes]
-        usable = np.array([ln.length - 15.0 for ln in lanes])
-        k = int(rng.choice(len(lanes), p=usable / usable.sum()))
-        start = (lanes[k].id, 3.0 + float(rng.random()) * usable[k])
+        start = random_start(town, rng)
     lane = start[0]
     turns: list[str] = []
     while len(turns) < n_turns:

@@ -16,6 +16,7 @@ import pymunk
 from ibc_tutorial.driving.bev import HISTORY_LAGS, get_raster
 from ibc_tutorial.driving.car import BUILDING_COLLISION_TYPE, CAR_COLLISION_TYPE, Car, CarConfig
 from ibc_tutorial.driving.lights import GREEN, LightSchedule, LightTiming, RedLightMonitor
+from ibc_tutorial.driving.routes import random_start
 from ibc_tutorial.driving.towns import get_town
 
 SCORE_PENALTY = 0.7
@@ -59,13 +60,6 @@ class DrivingSim:
         self.collided = True
 
     # ------------------------------------------------------------------ episode
-    def spawn_point(self, rng: np.random.Generator) -> tuple[int, float]:
-        """A random (road lane, arc length) to start on, uniform over the length of the road lanes."""
-        lanes = [self.town.lanes[i] for i in self.town.road_lanes]
-        usable = np.array([ln.length - 15.0 for ln in lanes])  # keep 3 m from the start, 12 m from the stop line
-        k = int(rng.choice(len(lanes), p=usable / usable.sum()))
-        return lanes[k].id, 3.0 + float(rng.random()) * usable[k]
-
     def reset(self, rng: np.random.Generator, lane: int | None = None, s: float | None = None,
               offsets: np.ndarray | None = None, route=None) -> None:
         """Start an episode: random light phases, the car at rest on ``lane`` at arc length ``s``
@@ -77,7 +71,7 @@ class DrivingSim:
         self.episode_seed = int(rng.integers(2**31))  # seeds the routeless expert's choices
         self.offsets = self.schedule.random_offsets(rng) if offsets is None else np.asarray(offsets, dtype=np.int64)
         if lane is None:
-            lane, s = self.spawn_point(rng)
+            lane, s = random_start(self.town, rng)
         ln = self.town.lanes[lane]
         s = float(np.clip(0.0 if s is None else s, 0.0, ln.length))
         (p,), (h,) = ln.sample(np.array([s]))
@@ -134,6 +128,10 @@ class DrivingSim:
     @property
     def score(self) -> float:
         return score(self.distance, self.infractions)
+
+    def lights_at(self, t) -> np.ndarray:
+        """Light states (L,) at step ``t`` of this episode (or (T, L) for T steps)."""
+        return self._table[np.asarray(t) % len(self._table)]
 
     def stop_flags(self, t: int | None = None) -> np.ndarray:
         """(3, L) which heads are not green (red or yellow) at the BEV's three history lags."""

@@ -1,6 +1,22 @@
 # Reference solutions for the exercise notebooks (imported by the tests).
 
 
+# =========================================================================== chapter 01: the tree
+def ch01_best_constant_mse(actions):
+    """The constant c minimising (1/N) Σ (a_i - c)^2: setting the derivative -2/N Σ (a_i - c) to zero gives the mean."""
+    return float(actions.mean())
+
+
+def ch01_hits_tree(car_xy, tree_xy, car_radius, tree_radius):
+    """(B,) bool: the discs overlap when the centres are closer than the sum of the radii."""
+    return (car_xy - tree_xy).norm(dim=1) < car_radius + tree_radius
+
+
+def ch01_swerve(y):
+    """(E,) the largest move towards +y since the first time step (>= 0, as t = 0 counts too)."""
+    return y.max(dim=1).values - y[:, 0]
+
+
 # =========================================================================== chapter 02: explicit policies
 def ch02_beta_nll(alpha, beta, actions):
     """Eq. 1 of the DA-IBC paper: mean over the batch of the summed -log f((y + 1)/2; α, β)."""
@@ -67,3 +83,42 @@ def ch04_grid_nll(pos_energy, grid_energy, cell_volume):
     import torch
 
     return pos_energy + torch.logsumexp(-grid_energy, dim=1) + math.log(cell_volume)
+
+
+# =========================================================================== chapter 07: the car and the town
+def ch07_yaw_rate(speed, steer):
+    """Kinematic bicycle: omega = -v tan(delta_max steer) / L (positive steer turns right, clockwise)."""
+    import math
+
+    return -speed * math.tan(0.6 * steer) / 2.9
+
+
+def ch07_pid_outputs(errors, kp, ki, kd, dt):
+    """u_t = kp e_t + ki sum_k e_k dt + kd (e_t - e_{t-1}) / dt, the derivative 0 at the first step."""
+    out, integral, prev = [], 0.0, None
+    for e in errors:
+        integral += e * dt
+        deriv = 0.0 if prev is None else (e - prev) / dt
+        prev = e
+        out.append(kp * e + ki * integral + kd * deriv)
+    return out
+
+
+def ch07_ran_red_light(rear_before, rear_after, entry, direction, state):
+    """True if the rear crossed the line forwards, within the lane (2 m each side), while red (state 2)."""
+    import numpy as np
+
+    right = np.array([direction[1], -direction[0]])
+    s0 = float((rear_before - entry) @ direction)
+    s1 = float((rear_after - entry) @ direction)
+    lateral = float((rear_after - entry) @ right)
+    return bool(state == 2 and s0 < 0 <= s1 and abs(lateral) <= 2.0)
+
+
+def ch07_world_to_bev(x, y, car_x, car_y, car_yaw):
+    """(row, col) of a world point in the 192 view: 5 px/m, heading up, the car at row 152, column 96."""
+    import math
+
+    ahead = (x - car_x) * math.cos(car_yaw) + (y - car_y) * math.sin(car_yaw)
+    right = (x - car_x) * math.sin(car_yaw) - (y - car_y) * math.cos(car_yaw)
+    return 152 - 5 * ahead, 96 + 5 * right

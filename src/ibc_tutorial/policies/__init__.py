@@ -3,7 +3,7 @@
 from ibc_tutorial.policies.encoders import MLPEncoder, ObservationEncoder
 
 # the energy model (chapters 03-06)
-from ibc_tutorial.policies.energy import EnergyModel, GridArgminPolicy
+from ibc_tutorial.policies.energy import EnergyModel, GridArgminPolicy, GridSamplePolicy
 
 # explicit policies (chapter 02)
 from ibc_tutorial.policies.explicit import BetaPolicy, ClassifierPolicy, ExplicitPolicy, MDNPolicy, RegressionPolicy
@@ -14,6 +14,7 @@ __all__ = [
     # the energy model (chapters 03-06)
     "EnergyModel",
     "GridArgminPolicy",
+    "GridSamplePolicy",
     # explicit policies (chapter 02)
     "ExplicitPolicy",
     "RegressionPolicy",

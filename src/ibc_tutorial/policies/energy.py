@@ -126,3 +126,31 @@ class GridArgminPolicy:
             return grid_argmin(self.model, obs, self.grid)  # (B, D)
         finally:
             self.model.train(was_training)
+
+
+class GridSamplePolicy:
+    """A stochastic implicit policy: obs (B, obs_dim) -> one action per observation drawn from
+    p(y | x) = softmax(−E(x, ·)) over ``grid``, (B, D).
+
+    The DA-IBC paper's inference also ends with a draw, not an argmin (the last line of its
+    Algorithm 1, ŷ ~ Categorical(p̃)); on a fixed grid the draw is exact. Seeded by ``generator``.
+    """
+
+    def __init__(self, model: EnergyModel, grid: torch.Tensor, generator: torch.Generator | None = None):
+        check_tensor("grid", grid, ndim=2)
+        if grid.shape[1] != model.action_dim:
+            raise ValueError(f"grid must have shape (G, {model.action_dim}), got {tuple(grid.shape)}")
+        self.model, self.grid, self.generator = model, grid, generator
+
+    @torch.no_grad()
+    def __call__(self, obs) -> torch.Tensor:
+        from ibc_tutorial.inference import grid_energies
+
+        was_training = self.model.training
+        self.model.eval()
+        try:
+            energies = grid_energies(self.model, self.model.embed(obs), self.grid)  # (B, G)
+        finally:
+            self.model.train(was_training)
+        idx = torch.multinomial(torch.softmax(-energies, dim=1), 1, generator=self.generator)[:, 0]  # (B,)
+        return self.grid[idx]  # (B, D)

@@ -132,11 +132,17 @@ class SideRoadWorld(ToyWorld):
         return ~rollouts.collided & self.on_main_road(rollouts.states[:, -1, :2])
 
     def swerve(self, rollouts: Rollouts) -> torch.Tensor:
-        """(E,) float: the largest lateral deviation towards the side road (the largest y, at
-        least 0, m) from ``swerve_from`` m before the branch point on, for each episode that
-        stayed on the main road; NaN for the episodes that did not."""
+        """(E,) float: how far (m) each episode that stayed on the main road moved towards the side
+        road, from where it was ``swerve_from`` m before the branch point on: the largest y after
+        that point minus y at that point, at least 0. NaN for the episodes that did not stay on
+        the main road.
+
+        Measuring from the episode's own offset there (not from y = 0) separates the swerve from
+        a car that merely drives a little off-centre all along."""
         s = rollouts.states  # (E, T+1, 3)
         near = s[:, :, 0] >= self.config.branch_x - self.config.swerve_from  # (E, T+1)
+        first = near.float().argmax(dim=1)  # first state of the section (0 if it is never reached)
+        y0 = s[torch.arange(len(s)), first, 1]  # (E,)
         y = torch.where(near, s[:, :, 1], torch.full_like(s[:, :, 1], -float("inf")))
-        dev = y.max(dim=1).values.clamp_min(0.0)  # an episode that never got near counts 0
+        dev = (y.max(dim=1).values - y0).clamp_min(0.0)  # an episode that never got there counts 0
         return torch.where(self.stayed_on_main_road(rollouts), dev, torch.full_like(dev, float("nan")))

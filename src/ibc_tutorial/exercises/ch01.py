@@ -1,0 +1,152 @@
+"""Checkers for ``exercises/01_the_tree.ipynb``.
+
+- ``check_best_constant_mse(fn)``: ``fn(actions (N,)) -> float``, the constant c minimising
+  the mean squared error (1/N) Σ (a_i - c)^2 over a set of actions.
+- ``check_hits_tree(fn)``: ``fn(car_xy (B, 2), tree_xy (2,), car_radius, tree_radius) -> (B,) bool``,
+  whether the car's disc overlaps the tree's.
+- ``check_swerve(fn)``: ``fn(y (E, T)) -> (E,)``, how far each episode moved towards the side
+  road (+y) from its first lateral offset: max_t (y_t - y_0), at least 0.
+
+Each compares the reader's function with an independent reference on inputs it draws itself,
+then, when they differ, recognises the usual mistakes and names them without the answer.
+"""
+
+from __future__ import annotations
+
+import torch
+
+from ibc_tutorial.exercises.core import Feedback, correct, hint, run_check
+
+
+def _as_float(out) -> float | None:
+    """The reader's scalar as a float, or None when it is not one number."""
+    if isinstance(out, torch.Tensor):
+        if out.numel() != 1:
+            return None
+        out = out.detach().reshape(())
+    try:
+        return float(out)
+    except (TypeError, ValueError):
+        return None
+
+
+def _bimodal_actions(seed: int, n_left: int, n_right: int) -> torch.Tensor:
+    gen = torch.Generator().manual_seed(seed)
+    left = 0.75 + 0.08 * torch.randn(n_left, generator=gen)
+    right = -0.7 + 0.1 * torch.randn(n_right, generator=gen)
+    return torch.cat([left, right])[torch.randperm(n_left + n_right, generator=gen)].clamp(-1, 1)
+
+
+# --------------------------------------------------------------------------- 1. best constant (MSE)
+def check_best_constant_mse(fn) -> Feedback:
+    """Check ``fn(actions) -> c``, the constant prediction with the smallest mean squared error."""
+
+    def check() -> Feedback:
+        cases = [_bimodal_actions(0, 60, 40), _bimodal_actions(1, 25, 75), torch.tensor([0.2, 0.4, 0.9])]
+        for actions in cases:
+            out = fn(actions.clone())
+            c = _as_float(out)
+            if c is None:
+                shape = tuple(out.shape) if isinstance(out, torch.Tensor) else type(out).__name__
+                return hint(f"return one number (a float or a 0-d tensor) for the whole set of actions, got {shape}.")
+            ref = float(actions.mean())
+            if abs(c - ref) < 1e-4:
+                continue
+            loss = lambda v: float(((actions - v) ** 2).mean())  # noqa: E731
+            if abs(c - float(actions.median())) < 1e-6 or abs(c - float(torch.quantile(actions, 0.5))) < 1e-6:
+                return hint("your constant is a median: it minimises the mean *absolute* error. Which value makes the derivative of the *squared* error zero?")
+            if abs(c - float(actions.sum())) < 1e-4:
+                return hint("your value grows with the number of actions: the best constant should not change if every action were repeated twice.")
+            if abs(c) < 1e-9 and abs(ref) > 1e-3:
+                return hint("your constant does not depend on the actions (it is 0): the loss here is not symmetric around 0.")
+            if any(abs(c - float(a)) < 1e-6 for a in actions):
+                return hint(
+                    f"your constant is one of the actions an expert took, but the loss there ({loss(c):.4f}) is not the smallest: "
+                    "try c a little to either side. The optimum need not be an action anyone took."
+                )
+            if abs(c - ref) < 2e-2:
+                return hint("close, but not exact (a search over a grid?): set the derivative of the loss with respect to c to zero and solve.")
+            return hint(f"for one of the test sets your constant gives a mean squared error of {loss(c):.4f}; a better constant exists. Differentiate the loss with respect to c.")
+        return correct("The mean: it lies between the two modes, where no expert steered.")
+
+    return run_check(check, "best_constant_mse")
+
+
+# --------------------------------------------------------------------------- 2. collision check
+def _hits_cases():
+    gen = torch.Generator().manual_seed(3)
+    tree = torch.tensor([20.0, 0.0])
+    # random points around the tree, plus hand-picked ones near the boundary (distance 2.5)
+    pts = tree + torch.empty(200, 2).uniform_(-5.0, 5.0, generator=gen)
+    special = torch.tensor([[20.0, 2.4], [20.0, 2.6], [17.6, 0.0], [22.6, 0.0], [20.0 + 1.7, 1.7], [20.0 + 1.8, -1.8], [20.0, 0.0], [10.0, 0.0], [21.55, 0.0], [20.0, -1.05]])
+    return torch.cat([pts, special]), tree, 1.0, 1.5
+
+
+def check_hits_tree(fn) -> Feedback:
+    """Check ``fn(car_xy, tree_xy, car_radius, tree_radius) -> (B,) bool`` (discs overlap)."""
+
+    def check() -> Feedback:
+        xy, tree, rc, rt = _hits_cases()
+        out = fn(xy.clone(), tree.clone(), rc, rt)
+        if not isinstance(out, torch.Tensor):
+            return hint(f"return a torch.Tensor of booleans, one per car position, got {type(out).__name__}.")
+        if out.shape != (len(xy),):
+            return hint(f"return one answer per car position: shape ({len(xy)},) for {len(xy)} positions, got {tuple(out.shape)}.")
+        got = out.bool() if out.dtype == torch.bool else out != 0
+        dist = (xy - tree).norm(dim=1)
+        ref = dist < rc + rt
+        if torch.equal(got, ref):
+            return correct("Two discs overlap when their centres are closer than the sum of their radii.")
+        if torch.equal(got, dist < rt) or torch.equal(got, dist <= rt):
+            return hint("a car whose centre stays outside the tree's disc can still touch it: the car has a size too.")
+        if torch.equal(got, dist < rc) or torch.equal(got, dist <= rc):
+            return hint("the tree has a size too, not only the car.")
+        if torch.equal(got, dist < 2 * (rc + rt)) or torch.equal(got, dist < 2 * rt + 2 * rc):
+            return hint("you flag collisions too far from the tree: are you using diameters where radii belong?")
+        if torch.equal(got, dist**2 < rc + rt) or torch.equal(got, dist < (rc + rt) ** 2):
+            return hint("compare like with like: a squared distance with a squared length, or a distance with a length.")
+        if torch.equal(got, (xy[:, 0] - tree[0]).abs() < rc + rt) or torch.equal(got, (xy[:, 1] - tree[1]).abs() < rc + rt):
+            return hint("the distance between the centres depends on both coordinates, x and y.")
+        if torch.equal(got, ~ref):
+            return hint("your answer is the opposite: True should mean the discs overlap.")
+        wrong = int((got != ref).sum())
+        return hint(f"{wrong} of {len(xy)} positions get the wrong answer; for instance a car at {xy[(got != ref).nonzero()[0, 0]].tolist()} (tree at {tree.tolist()}, radii {rc} and {rt}).")
+
+    return run_check(check, "hits_tree")
+
+
+# --------------------------------------------------------------------------- 3. swerve
+def _swerve_cases() -> torch.Tensor:
+    gen = torch.Generator().manual_seed(5)
+    t = torch.linspace(0, 1, 30)
+    start = torch.empty(6, 1).uniform_(-0.3, 0.3, generator=gen)
+    bump = torch.tensor([[0.8], [0.0], [-0.5], [0.3], [1.2], [0.05]]) * torch.sin(torch.pi * t)[None, :]
+    drift = torch.tensor([[0.0], [0.2], [0.0], [-0.4], [0.0], [0.0]]) * t[None, :]
+    return start + bump + drift + 0.01 * torch.randn(6, 30, generator=gen)  # (E=6, T=30)
+
+
+def check_swerve(fn) -> Feedback:
+    """Check ``fn(y) -> (E,)``: max over t of (y_t - y_0) for each episode (row)."""
+
+    def check() -> Feedback:
+        y = _swerve_cases()
+        out = fn(y.clone())
+        if not isinstance(out, torch.Tensor):
+            return hint(f"return a torch.Tensor with one swerve per episode, got {type(out).__name__}.")
+        ref = y.max(dim=1).values - y[:, 0]  # >= 0: t = 0 is one of the t
+        if out.shape != ref.shape:
+            if out.shape == (y.shape[1],):
+                return hint(f"return one number per episode (rows, {y.shape[0]} of them), not one per time step: which dimension do you reduce over?")
+            return hint(f"return one number per episode: shape ({y.shape[0]},), got {tuple(out.shape)}.")
+        out = out.detach().to(ref.dtype)
+        if torch.allclose(out, ref, atol=1e-5):
+            return correct("The largest move towards the side road, measured from where the car was.")
+        if torch.allclose(out, y.max(dim=1).values.clamp_min(0.0), atol=1e-5) or torch.allclose(out, y.max(dim=1).values, atol=1e-5):
+            return hint("measure from where each car was at the start (its first offset), not from the centre line: a car driving a little off-centre all along has not swerved.")
+        if torch.allclose(out, (y - y[:, :1]).abs().max(dim=1).values, atol=1e-5):
+            return hint("only moves towards the side road (to the left, y increasing) count as a swerve towards it.")
+        if torch.allclose(out, (y[:, -1] - y[:, 0]).clamp_min(0.0), atol=1e-5):
+            return hint("the swerve is the *largest* deviation during the episode, not where the car ends up.")
+        return hint("for some episodes your value differs from the largest move towards the side road (y increasing) since the first time step.")
+
+    return run_check(check, "swerve")

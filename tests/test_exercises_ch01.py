@@ -1,0 +1,121 @@
+"""Checkers of exercises/01_the_tree.ipynb: solution -> correct, stub -> not attempted,
+typical mistakes -> a hint naming the mistake, code that raises -> a hint (never an exception)."""
+
+import pytest
+import torch
+
+from ibc_tutorial.exercises import ch01, solutions
+from ibc_tutorial.toy import TreeWorld
+
+
+def stub(*args):
+    raise NotImplementedError
+
+
+CHECKERS = {
+    "best_constant_mse": (ch01.check_best_constant_mse, solutions.ch01_best_constant_mse),
+    "hits_tree": (ch01.check_hits_tree, solutions.ch01_hits_tree),
+    "swerve": (ch01.check_swerve, solutions.ch01_swerve),
+}
+
+
+@pytest.mark.parametrize("name", list(CHECKERS))
+def test_solution_is_correct_and_stub_not_attempted(name):
+    check, solution = CHECKERS[name]
+    assert check(solution).status == "correct"
+    assert check(stub).status == "not attempted"
+
+
+@pytest.mark.parametrize("name", list(CHECKERS))
+def test_code_that_raises_gets_a_hint(name):
+    check, _ = CHECKERS[name]
+
+    def broken(*args):
+        return args[0].nonexistent_method()
+
+    fb = check(broken)
+    assert fb.status == "hint" and "AttributeError" in fb.message
+
+
+def test_library_agrees_with_the_solutions():
+    """The chapter's world uses the same definitions the exercises teach."""
+    w = TreeWorld()
+    pts = torch.tensor([[20.0, 2.4], [20.0, 2.6], [0.0, 0.0], [18.0, -1.0]])
+    tree = torch.tensor([w.config.tree_x, 0.0])
+    assert torch.equal(w.collides(pts), solutions.ch01_hits_tree(pts, tree, w.config.car_radius, w.config.tree_radius))
+
+
+# --------------------------------------------------------------------------- best constant
+@pytest.mark.parametrize(
+    "wrong, words",
+    [
+        (lambda a: float(a.median()), "absolute"),
+        (lambda a: float(a.sum()), "number of actions"),
+        (lambda a: 0.0, "does not depend"),
+        (lambda a: float(a[0]), "one of the actions"),
+        (lambda a: float(torch.linspace(-1, 1, 101)[((a[None, :] - torch.linspace(-1, 1, 101)[:, None]) ** 2).mean(1).argmin()]), "grid"),
+        (lambda a: a, "one number"),
+        (lambda a: float(a.mean()) + 0.3, "better constant"),
+    ],
+)
+def test_best_constant_mistakes(wrong, words):
+    fb = ch01.check_best_constant_mse(wrong)
+    assert fb.status == "hint" and words in fb.message, fb.message
+    assert "mean" not in fb.message.lower().replace("mean squared", "").replace("mean *absolute*", "")  # the answer is not given
+
+
+def test_best_constant_accepts_a_tensor():
+    assert ch01.check_best_constant_mse(lambda a: a.mean()).status == "correct"
+
+
+# --------------------------------------------------------------------------- collision check
+@pytest.mark.parametrize(
+    "wrong, words",
+    [
+        (lambda xy, t, rc, rt: (xy - t).norm(dim=1) < rt, "the car has a size"),
+        (lambda xy, t, rc, rt: (xy - t).norm(dim=1) < rc, "tree has a size"),
+        (lambda xy, t, rc, rt: (xy - t).norm(dim=1) < 2 * (rc + rt), "diameters"),
+        (lambda xy, t, rc, rt: ((xy - t) ** 2).sum(1) < rc + rt, "like with like"),
+        (lambda xy, t, rc, rt: (xy[:, 0] - t[0]).abs() < rc + rt, "both coordinates"),
+        (lambda xy, t, rc, rt: (xy - t).norm(dim=1) >= rc + rt, "opposite"),
+        (lambda xy, t, rc, rt: bool(((xy - t).norm(dim=1) < rc + rt).any()), "Tensor"),
+        (lambda xy, t, rc, rt: ((xy - t).norm(dim=1) < rc + rt)[:, None], "one answer per car position"),
+    ],
+)
+def test_hits_tree_mistakes(wrong, words):
+    fb = ch01.check_hits_tree(wrong)
+    assert fb.status == "hint" and words in fb.message, fb.message
+    assert "sum of" not in fb.message
+
+
+def test_hits_tree_accepts_float_flags():
+    assert ch01.check_hits_tree(lambda xy, t, rc, rt: ((xy - t).norm(dim=1) < rc + rt).float()).status == "correct"
+
+
+# --------------------------------------------------------------------------- swerve
+@pytest.mark.parametrize(
+    "wrong, words",
+    [
+        (lambda y: y.min(dim=1).values - y[:, 0], "differs"),
+        (lambda y: y.max(dim=1).values.clamp_min(0.0), "from where each car was"),
+        (lambda y: (y - y[:, :1]).abs().max(dim=1).values, "towards the side road"),
+        (lambda y: (y[:, -1] - y[:, 0]).clamp_min(0.0), "largest"),
+        (lambda y: (y.max(dim=0).values - y[0]).clamp_min(0.0), "which dimension"),
+        (lambda y: 0.5, "torch.Tensor"),
+    ],
+)
+def test_swerve_mistakes(wrong, words):
+    fb = ch01.check_swerve(wrong)
+    assert fb.status == "hint" and words in fb.message, fb.message
+
+
+def test_swerve_matches_the_library_measure():
+    """The exercise's swerve is the side-road world's, on the part of each episode it looks at."""
+    from ibc_tutorial.toy import SideRoadWorld
+
+    w = SideRoadWorld()
+    ro = w.rollout(lambda obs: 0.1 * torch.ones(len(obs), 1) * (obs < 0.5), 5, seed=0)
+    near = ro.states[0, :, 0] >= w.config.branch_x - w.config.swerve_from
+    first = int(near.float().argmax())
+    y = ro.states[:, first:, 1]  # every episode reaches the section at the same step here (straight until then)
+    assert torch.allclose(w.swerve(ro), solutions.ch01_swerve(y))
