@@ -111,3 +111,16 @@ def test_reproducible_and_checked():
         SideRoadWorld(SideRoadConfig(side_angle_deg=95.0))
     with pytest.raises(ValueError, match="straight_prob"):
         SideRoadWorld(SideRoadConfig(straight_prob=-0.1))
+
+
+def test_side_road_figure_has_titles_and_labels():
+    import matplotlib.pyplot as plt
+
+    from ibc_tutorial import plotting
+
+    w = SideRoadWorld()
+    ro, _ = w.expert_rollouts(5, seed=0)
+    fig = plotting.plot_side_road(w, {"experts": ro, "off road": w.rollout(constant(0.5), 3, seed=0)})
+    assert fig._suptitle is not None and all(ax.get_title() and ax.get_ylabel() for ax in fig.axes)
+    assert "swerve" in fig.axes[0].get_title()
+    plt.close(fig)

@@ -230,3 +230,28 @@ def test_initial_states_argument():
     assert not ro.collided.any() and w.pass_side(ro).tolist() == [-1, 1]
     with pytest.raises(ValueError, match="initial_states"):
         w.rollout(zero_policy, 3, seed=0, initial_states=start)
+
+
+# --------------------------------------------------------------------------- chapter 01's figures
+def test_chapter_01_figures_have_titles_and_labels():
+    import matplotlib.pyplot as plt
+
+    from ibc_tutorial import plotting
+
+    w = TreeWorld()
+    demos = w.expert_demonstrations(6, seed=0)
+    ro = w.rollout(zero_policy, 4, seed=0)
+    a = demos.actions[:, 0]
+    grid = torch.linspace(-1, 1, 11)
+    figs = [
+        plotting.plot_tree_scene(w, demos.states, demos.episode_mode),
+        plotting.plot_actions_by_distance(w, demos, window=(7.0, 9.0), predictions={"zero": (torch.tensor([0.0, 10.0]), torch.zeros(2))}),
+        plotting.plot_action_histogram(a, demos.mode, title="actions"),
+        plotting.plot_constant_losses(grid, {"MSE": grid**2, "MAE": grid.abs()}, minimisers={"MSE": 0.0}, flat={"MAE": (-0.1, 0.1)}),
+        plotting.plot_tree_closed_loop(w, {"zero": ro, "again": ro}),
+    ]
+    for fig in figs:
+        axes = [ax for ax in fig.axes if ax.get_visible()]
+        assert fig._suptitle is not None or all(ax.get_title() for ax in axes)
+        assert all(ax.get_ylabel() for ax in axes) and any(ax.get_xlabel() for ax in axes)
+        plt.close(fig)

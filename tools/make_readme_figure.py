@@ -29,7 +29,7 @@ from ibc_tutorial.training import TrainConfig, train  # noqa: E402
 OUT = ROOT / "book" / "figures" / "the_tree.png"
 
 
-def fit_regression(demos, loss_kind: str, seed: int = 0, steps: int = 1500) -> RegressionPolicy:
+def fit_regression(demos, loss_kind: str, seed: int = 0, steps: int = 600) -> RegressionPolicy:
     """As in chapter 01: a RegressionPolicy (MLP 2 x 64, tanh head) trained by Adam with the MSE or MAE."""
     torch.manual_seed(seed)
     policy = RegressionPolicy.for_vectors(demos.obs.shape[1], 1, hidden=64, layers=2, loss_kind=loss_kind)

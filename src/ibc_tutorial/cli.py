@@ -16,6 +16,9 @@ from ibc_tutorial import __version__
 # name -> (module path, function that adds arguments to a sub-parser, function that runs it)
 SUBCOMMANDS: dict[str, tuple[str, str, str, str]] = {
     "collect": ("ibc_tutorial.driving.collect", "add_arguments", "run", "drive the expert and store demonstrations"),
+    "train": ("ibc_tutorial.agent_training", "add_arguments", "run", "train a BC, IBC or DA-IBC driving agent"),
+    "evaluate": ("ibc_tutorial.evaluation", "add_arguments", "run", "drive a trained agent in closed loop and score it"),
+    "replicate": ("ibc_tutorial.replicate", "add_arguments", "run", "collect, train, evaluate: every result of chapters 08-09"),
 }
 
 

@@ -158,7 +158,7 @@ def plot_tree_closed_loop(world, rollouts: dict, *, title: str = "Closed-loop ro
     import numpy as np
 
     n = len(rollouts)
-    fig, axes = plt.subplots(n, 1, figsize=(8.5, 2.7 * n), sharex=True, sharey=True)
+    fig, axes = plt.subplots(n, 1, figsize=(8.5, 2.2 * n), sharex=True, sharey=True)
     axes = np.atleast_1d(axes)
     for ax, (name, r) in zip(axes, rollouts.items()):
         side = world.pass_side(r).numpy()
@@ -203,7 +203,7 @@ def plot_side_road(world, rollouts: dict, *, title: str = "The side road", max_e
     import numpy as np
 
     n = len(rollouts)
-    fig, axes = plt.subplots(n, 1, figsize=(8.5, 2.9 * n), sharex=True, sharey=True)
+    fig, axes = plt.subplots(n, 1, figsize=(8.5, 2.8 * n), sharex=True, sharey=True)
     axes = np.atleast_1d(axes)
     for ax, (name, r) in zip(axes, rollouts.items()):
         s = r.states.numpy()
@@ -294,7 +294,7 @@ def plot_action_distributions(policies, obs, data_actions, *, dim: int = 0, wher
 
 
 # =========================================================================== chapter 03: energy models and InfoNCE
-def plot_energy_landscape(distances, actions, energies, *, expert=None, title: str = "The energy landscape", xlabel: str = "distance to the tree (m)", ylabel: str = "steering (-1 right ... +1 left)", ax=None):
+def plot_energy_landscape(distances, actions, energies, *, expert=None, path=None, title: str = "The energy landscape", xlabel: str = "distance to the tree (m)", ylabel: str = "steering (-1 right ... +1 left)", ax=None):
     """E(x, y) with the observation along x and the action along y, shifted per observation so
     that its minimum over actions is 0 (dark = low energy = likely action).
 
@@ -303,6 +303,9 @@ def plot_energy_landscape(distances, actions, energies, *, expert=None, title: s
         actions: (G,) the action of each row.
         energies: (n, G) energies.
         expert: optional (x, y) arrays of expert samples to overlay as dots.
+        path: optional (n,) action per column to draw as a red line (e.g. the argmin).
+
+    The x axis runs from the largest distance (left) to the smallest, in the car's direction of travel.
     """
     import numpy as np
 
@@ -318,7 +321,11 @@ def plot_energy_landscape(distances, actions, energies, *, expert=None, title: s
     fig.colorbar(mesh, ax=ax, label="E − min over actions (nats)")
     if expert is not None:
         ax.scatter(np.asarray(expert[0]), np.asarray(expert[1]), s=2, color="w", alpha=0.35, label="expert samples")
-        ax.legend(loc="lower left", fontsize=8, markerscale=4)
+    if path is not None:
+        ax.plot(x, np.asarray(path, dtype=float), color="red", lw=1.5, label="argmin over actions")
+    if expert is not None or path is not None:
+        ax.legend(loc="lower left", fontsize=8, markerscale=4, facecolor="0.55")
+    ax.set_xlim(x.max(), x.min())  # far on the left: the car drives from left to right
     ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)
     ax.set_title(title)

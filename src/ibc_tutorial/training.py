@@ -5,6 +5,16 @@ minibatches drawn from a dict of equally long tensors. The loop knows nothing ab
 kind of policy: explicit policies pass their negative log-likelihood, energy models pass
 InfoNCE with a counter-example sampler. Minibatch indices are drawn uniformly, or with
 given probabilities (the DA-IBC paper's way of applying the KDE weights of its eq. 5).
+
+Loss builders for energy models (chapters 03-05):
+
+- ``info_nce_objective(model, sampler, n_neg, weight_key=None)``: InfoNCE (eqs. 2-3, eq. 5 with
+  weights) with counter-examples from any sampler of ``ibc_tutorial.negatives``;
+- ``grid_objective(model, grid, temperature=None, smoothing=0.0)``: the steering-EBM paper's
+  cross-entropy over a fixed grid (its eq. 3), with soft targets (eq. 5) and temporal
+  smoothing (eq. 4) on pairs of consecutive frames from ``consecutive_pairs``.
+
+``train(..., evaluate=fn)`` also records a held-out measure at every log point (for curves).
 """
 
 from __future__ import annotations

@@ -122,3 +122,50 @@ def ch07_world_to_bev(x, y, car_x, car_y, car_yaw):
     ahead = (x - car_x) * math.cos(car_yaw) + (y - car_y) * math.sin(car_yaw)
     right = (x - car_x) * math.sin(car_yaw) - (y - car_y) * math.cos(car_yaw)
     return 152 - 5 * ahead, 96 + 5 * right
+
+
+# =========================================================================== chapter 05: KDE weighting
+def ch05_kde_1d(x, data, h):
+    """Eq. 4 of the DA-IBC paper: ĝ(x) = 1/(N h) Σ_j K((x − x_j)/h) with the Gaussian kernel, for every x."""
+    import math
+
+    import torch
+
+    u = (x[:, None] - data[None, :]) / h  # (Q, N)
+    k = torch.exp(-0.5 * u**2) / math.sqrt(2 * math.pi)  # K(u)
+    return k.sum(dim=1) / (len(data) * h)  # (Q,)
+
+
+def ch05_inverse_weights(actions, h):
+    """w_i ∝ 1/ĝ(y_i) (eq. 5), normalised to sum to 1, with ĝ the product-kernel KDE over the actions themselves."""
+    import math
+
+    import torch
+
+    d = actions.shape[1]
+    u = (actions[:, None, :] - actions[None, :, :]) / h  # (M, M, D)
+    k = torch.exp(-0.5 * (u**2).sum(-1)) / (2 * math.pi) ** (d / 2)  # Π_d K(u_d)
+    g = k.sum(dim=1) / (len(actions) * h**d)  # (M,) ĝ(y_i)
+    w = 1.0 / g
+    return w / w.sum()
+
+
+# =========================================================================== chapter 06: DFO inference
+def ch06_dfo_step(samples, energies, sigma, low, high, generator):
+    """Lines 5 and 7-10 of Algorithm 1: softmax of −E, resample N with replacement, add N(0, σ), clip."""
+    import torch
+
+    p = torch.softmax(-energies, dim=0)  # line 5: p̃_i
+    idx = torch.multinomial(p, len(samples), replacement=True, generator=generator)  # lines 7-8
+    new = samples[idx] + sigma * torch.randn(samples.shape, generator=generator)  # line 9
+    return new.clamp(low, high)  # line 10
+
+
+def ch06_select_action(samples, energies, select, generator):
+    """Line 14 of Algorithm 1 ("sample": ŷ ~ Categorical({ỹ_i}, {p̃_i})) or the original IBC's "argmax"."""
+    import torch
+
+    p = torch.softmax(-energies, dim=0)
+    if select == "argmax":
+        return samples[int(p.argmax())]
+    return samples[int(torch.multinomial(p, 1, generator=generator))]

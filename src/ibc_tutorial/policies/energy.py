@@ -17,6 +17,9 @@ So scoring N candidates costs one encoder pass plus, per candidate, one small ma
 W_a·y and the head's hidden layers. ``embed`` and ``energy_from_embedding`` expose the two
 halves separately, so an optimiser (grid argmin, DFO, Langevin) encodes x once and then
 scores as many candidate sets against z as it likes.
+
+Policies for closed-loop rollouts: ``GridArgminPolicy`` (argmin over a fixed grid) and
+``GridSamplePolicy`` (a draw from softmax(−E) over the grid).
 """
 
 from __future__ import annotations

@@ -5,7 +5,9 @@
 - ``Demonstrations``, ``Rollouts``, ``check_policy_actions`` and the shared closed loop (``world.py``).
 - the car's kinematics and the collision geometry (``car.py``).
 
-A policy is any callable ``policy(obs (B, 3) float32) -> actions (B, 1)`` in [-1, 1].
+A policy is any callable ``policy(obs (B, obs_dim) float32) -> actions (B, 1)`` in [-1, 1];
+in both worlds the observation is the distance ahead to the landmark / 10 m (obs_dim = 1),
+optionally with the lateral offset (``obs_lateral=True``, obs_dim = 2).
 """
 
 from ibc_tutorial.toy.side_road import SideRoadConfig, SideRoadWorld

@@ -6,8 +6,8 @@ A straight road along the x axis; at ``branch_x`` a side road branches off to th
 episode, independently of the start, and nothing in the observation shows it. The paper
 saw unimodal regression models "swerve slightly (the red trajectory) towards the side road
 ... minor because side roads are rarely taken in our training data": ``swerve`` measures
-that, as the largest lateral deviation towards the side road of the episodes that stay on
-the main road.
+that, as the largest move towards the side road (from 5 m before the branch point on) of
+the episodes that stay on the main road.
 
 As in the tree world, the policy observes the distance to the branch point alone, and the
 straight experts keep to the centre line (``expert_holds_start_offset=False``).

@@ -7,11 +7,15 @@ A *policy* is any callable ``policy(obs) -> actions`` with ``obs`` a float32 ten
 per step on all B episodes at once. A policy that returns NaN, the wrong shape or a value
 outside [-1, 1] gets a ``ValueError`` saying what was expected: nothing is clipped silently.
 
-The expert (both worlds) is a pure-pursuit controller: it looks ``lookahead`` metres ahead
-along x, aims its heading at the point of its reference path there, and steers in
-proportion to the heading error. The reference path depends on the expert's *mode*, drawn
-once per episode, independently of the start state: this is what puts two modes of action
-into the data for one and the same observation.
+The expert (both worlds) is a pure-pursuit controller: it looks ``expert_lookahead`` metres
+ahead along x and steers the car's heading at the point of its reference path there (the
+expert sees the whole state, the policy only its observation). The reference path depends on
+the expert's *mode*, drawn once per episode, independently of the start state: this is what
+puts two modes of action into the data for one and the same observation.
+
+Units: metres, radians, seconds. ``x`` runs along the road in the direction of travel, ``y``
+to the left. The same ``seed`` gives the same start states to ``rollout``,
+``expert_rollouts`` and ``expert_demonstrations``.
 """
 
 from __future__ import annotations

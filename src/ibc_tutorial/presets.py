@@ -1,0 +1,205 @@
+"""Named settings of the driving experiments: ``paper``, ``laptop`` and ``tiny``.
+
+A ``Preset`` holds everything ``ibc-tutorial train``, ``evaluate`` and ``replicate`` need:
+the network's size, the training settings of the DA-IBC paper's sec. 4.2, the inference
+(Algorithm 1) settings, and the evaluation protocol of its Fig. 4.
+
+**The three methods, as the DA-IBC paper defines them** (its secs. 2.4, 2.4.1, 2.5, 4.3, 5):
+
+- ``bc``: the Beta policy of eq. 1 (its sec. 3.2 and [Antonelo et al. 2024]), acting with the
+  Beta's mean. Minibatches drawn with the inverse-KDE probabilities ("For BC, the loss
+  function is weighted analogously", sec. 2.5).
+- ``ibc``: "conventional IBC" [Florence et al. 2022]: InfoNCE (eq. 2) with counter-examples
+  drawn uniformly from the action box, ỹ ~ U(y_min, y_max) (sec. 2.4), and the original DFO:
+  initial samples uniform over the box, final action the lowest-energy sample (argmax of p̃).
+  The paper's conclusion names exactly two changes that make DA-IBC out of IBC (the DFO
+  initialisation and the counter-examples), so everything else, the KDE-weighted
+  minibatches included (sec. 2.5: "to weigh the training samples in the BC and IBC losses"),
+  is shared with DA-IBC.
+- ``da-ibc``: InfoNCE with counter-examples copied from the minibatch's expert actions plus
+  N(0, σ²I) (sec. 2.4 and its footnote 1), KDE-weighted minibatches (eq. 5 applied by
+  sampling), and Algorithm 1: initial samples drawn from the expert actions with inverse-KDE
+  weights (the text of sec. 2.4.1; chapter 06 explains why not the printed w ∝ KDE) and the
+  final action *sampled*, ŷ ~ Categorical(p̃) (line 14).
+
+The paper gives no σ for the counter-example noise; ``neg_sigma`` = 0.1 is the value chapter
+04 studied.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, fields, replace
+
+from ibc_tutorial.utils import check_choice, check_int, check_positive
+
+METHODS = ("bc", "ibc", "da-ibc")
+"""The three agents of the DA-IBC paper's sec. 4: Beta BC, conventional IBC and DA-IBC."""
+
+
+@dataclass(frozen=True)
+class Preset:
+    """One complete set of settings for training, evaluating and replicating."""
+
+    name: str
+    """The preset's name."""
+    # ---- data (the paper's sec. 4.1)
+    routes: int = 10
+    """Expert routes collected in town01 (the paper: 10, about 21,000 samples)."""
+    collect_seed: int = 0
+    """Seed of the collected routes."""
+    min_minutes: float = 2.5
+    """Shortest route in minutes (the paper: 2.5)."""
+    max_minutes: float = 4.5
+    """Longest route in minutes (mean 3.5, the paper's)."""
+    # ---- network (the paper's Fig. 2)
+    bev_size: int = 192
+    """Side of the bird's-eye view in pixels (the paper: 192)."""
+    cnn_channels: tuple = (32, 64, 128, 256)
+    """Output channels of the CNN's stride-2 convolutions."""
+    embed_dim: int = 256
+    """Size of the BEV embedding and of the state embedding (the paper: 256 each)."""
+    head_hidden: int = 256
+    """Width of the heads' hidden layers (the energy head's fused layer included)."""
+    head_layers: int = 2
+    """Hidden layers of the energy head (the first is the factorised fused layer)."""
+    # ---- training (the paper's sec. 4.2)
+    lr: float = 1e-5
+    """Adam step size (the paper: 1e-5)."""
+    epochs: int = 400
+    """Training epochs, each ceil(M / batch_size) minibatches (the paper: up to 400)."""
+    batch_size: int = 128
+    """Minibatch size (the paper: 128)."""
+    n_neg: int = 1024
+    """Counter-examples per sample, N_neg (the paper: 1024)."""
+    neg_sigma: float = 0.1
+    """σ of the DA-IBC counter-examples' noise N(0, σ²I) (not given in the paper; chapter 04's value)."""
+    kde_bandwidth: float = 0.2
+    """KDE bandwidth h for the minibatch weights and the DFO initialisation (the paper: 0.2)."""
+    # ---- inference (Algorithm 1, the paper's sec. 4.2)
+    dfo_samples: int = 16384
+    """N_samples of Algorithm 1 (the paper: 16,384)."""
+    dfo_iters: int = 5
+    """N_iters of Algorithm 1 (the paper: 5)."""
+    dfo_sigma_init: float = 0.5
+    """σ_init of Algorithm 1 (the paper: 0.5)."""
+    dfo_shrink: float = 0.5
+    """K, the shrink factor of Algorithm 1 (the paper: 0.5)."""
+    # ---- evaluation (the paper's Fig. 4)
+    eval_every: int = 10
+    """Closed-loop evaluation in town02 every this many epochs (the paper: 10)."""
+    eval_episodes: int = 10
+    """Episodes of each evaluation during training (the paper: 10)."""
+    eval_steps: int = 3000
+    """Steps of each episode during training (the paper: 3000 = 300 s)."""
+    final_episodes: int = 10
+    """Episodes of the final evaluation of each agent (the paper's table: 10)."""
+    final_steps: int = 3000
+    """Steps of each final episode (the paper: 3000)."""
+    seeds: tuple = (0, 1, 2)
+    """Training seeds: one agent per seed and method (the paper: three agents per method)."""
+    routeless_episodes: int = 3
+    """Free-driving episodes per agent for the Fig. 5 analogue (BC and DA-IBC)."""
+    routeless_steps: int = 3000
+    """Steps of each free-driving episode."""
+
+    def __post_init__(self):
+        check_int("routes", self.routes, minimum=1)
+        check_int("bev_size", self.bev_size, minimum=8)
+        for f in ("embed_dim", "head_hidden", "head_layers", "epochs", "batch_size", "n_neg", "dfo_samples",
+                  "dfo_iters", "eval_every", "eval_episodes", "eval_steps", "final_episodes", "final_steps",
+                  "routeless_episodes", "routeless_steps"):
+            check_int(f, getattr(self, f), minimum=1)
+        for f in ("lr", "kde_bandwidth", "min_minutes", "max_minutes"):
+            check_positive(f, getattr(self, f))
+        for f in ("neg_sigma", "dfo_sigma_init", "dfo_shrink"):
+            check_positive(f, getattr(self, f), allow_zero=True)
+        if not self.cnn_channels or any(int(c) < 1 for c in self.cnn_channels):
+            raise ValueError(f"cnn_channels must be positive integers, got {self.cnn_channels!r}")
+        if not self.seeds:
+            raise ValueError("seeds must name at least one seed")
+
+    def to_dict(self) -> dict:
+        """JSON- and checkpoint-friendly form (tuples become lists)."""
+        d = asdict(self)
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in d.items()}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "Preset":
+        """Inverse of ``to_dict``; unknown keys are refused."""
+        names = {f.name for f in fields(cls)}
+        unknown = set(d) - names
+        if unknown:
+            raise ValueError(f"unknown preset fields {sorted(unknown)}")
+        return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
+
+    def with_(self, **changes) -> "Preset":
+        """A copy with some fields changed."""
+        return replace(self, **changes)
+
+
+PAPER = Preset(name="paper")
+"""The DA-IBC paper's settings (sec. 4.2). Days of compute on a CPU; given for reference."""
+
+LAPTOP = Preset(
+    name="laptop",
+    bev_size=64,  # 9x fewer pixels than 192; the same 5 channels and field of view (OR-pooled)
+    cnn_channels=(16, 32, 32, 64),  # a small CNN: 64 -> 4 x 4 x 64 after four stride-2 convolutions
+    embed_dim=256,  # as the paper: 256-d BEV and 256-d state embeddings
+    head_hidden=128,  # the energy head runs N_neg times per sample and N_samples times per decision
+    head_layers=2,
+    lr=1e-3,  # 100x the paper's 1e-5, for 8 epochs instead of up to 400
+    epochs=8,
+    batch_size=128,  # as the paper
+    n_neg=128,  # 1/8 of the paper's 1024
+    dfo_samples=512,  # 1/32 of the paper's 16,384
+    dfo_iters=3,  # the paper: 5
+    eval_every=2,  # the paper: every 10 of up to 400 epochs; here every 2 of 8
+    eval_episodes=4,  # during training only (the paper: 10); the final table uses final_episodes
+    eval_steps=600,  # 60 s episodes during training (the paper: 300 s)
+    final_episodes=10,  # as the paper
+    final_steps=3000,  # as the paper: 300 s
+    routeless_episodes=2,
+    routeless_steps=3000,
+)
+"""What a 2-core CPU can replicate in under an hour (``ibc-tutorial replicate --preset laptop``)."""
+
+TINY = Preset(
+    name="tiny",
+    routes=1,
+    min_minutes=0.15,
+    max_minutes=0.2,
+    bev_size=32,
+    cnn_channels=(4, 8),
+    embed_dim=16,
+    head_hidden=16,
+    head_layers=2,
+    lr=1e-3,
+    epochs=2,
+    batch_size=32,
+    n_neg=8,
+    dfo_samples=32,
+    dfo_iters=2,
+    eval_every=1,
+    eval_episodes=2,
+    eval_steps=10,
+    final_episodes=2,
+    final_steps=15,
+    seeds=(0,),
+    routeless_episodes=1,
+    routeless_steps=20,
+)
+"""A seconds-long preset for the tests and the chapters' live demonstrations."""
+
+PRESETS = {p.name: p for p in (PAPER, LAPTOP, TINY)}
+"""All named presets."""
+
+
+def get_preset(name: str) -> Preset:
+    """The preset called ``name`` ("paper", "laptop" or "tiny")."""
+    return PRESETS[check_choice("preset", name, tuple(PRESETS))]
+
+
+def differences(a: Preset, b: Preset) -> dict[str, tuple]:
+    """Fields whose values differ: ``{field: (a's value, b's value)}`` (the name excluded)."""
+    da, db = a.to_dict(), b.to_dict()
+    return {k: (da[k], db[k]) for k in da if k != "name" and da[k] != db[k]}

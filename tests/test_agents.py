@@ -1,0 +1,103 @@
+"""The Fig. 2 network of the DA-IBC paper and the agents built on it (ibc_tutorial.agents)."""
+
+import numpy as np
+import pytest
+import torch
+
+from ibc_tutorial.agents import Agent, BEVStateEncoder, build_network, to_tensor_obs
+from ibc_tutorial.policies import BetaPolicy, EnergyModel, ObservationEncoder
+from ibc_tutorial.presets import LAPTOP, PAPER, PRESETS, TINY, Preset, differences, get_preset
+
+
+def _obs(b, size, seed=0):
+    g = torch.Generator().manual_seed(seed)
+    return {"bev": torch.randint(0, 2, (b, 5, size, size), generator=g, dtype=torch.uint8),
+            "state": torch.rand(b, 3, generator=g) * torch.tensor([15.0, 2.0, 2.0]) - torch.tensor([0.0, 1.0, 1.0])}
+
+
+def test_encoder_is_an_observation_encoder_with_two_256d_branches():
+    enc = BEVStateEncoder(bev_size=64, channels=(8, 16), embed_dim=256)
+    assert isinstance(enc, ObservationEncoder)
+    z = enc(_obs(3, 64))
+    assert z.shape == (3, 512) and enc.embed_dim == 512 and enc.batch_size(_obs(3, 64)) == 3
+    # the second half depends on the state only, the first on the BEV only
+    o1, o2 = _obs(3, 64, 0), _obs(3, 64, 1)
+    mixed = {"bev": o1["bev"], "state": o2["state"]}
+    assert torch.allclose(enc(mixed)[:, :256], enc(o1)[:, :256])
+    assert torch.allclose(enc(mixed)[:, 256:], enc(o2)[:, 256:])
+
+
+def test_encoder_rejects_bad_observations():
+    enc = BEVStateEncoder(bev_size=32, channels=(4,), embed_dim=8)
+    with pytest.raises(ValueError, match="obs must be a dict"):
+        enc(torch.zeros(2, 5, 32, 32))
+    with pytest.raises(ValueError, match=r"obs\['bev'\]"):
+        enc(_obs(2, 64))
+    with pytest.raises(ValueError, match=r"obs\['state'\]"):
+        enc({"bev": _obs(2, 32)["bev"], "state": torch.zeros(3, 3)})
+
+
+def test_build_network_heads():
+    assert isinstance(build_network("bc", TINY), BetaPolicy)
+    for m in ("ibc", "da-ibc"):
+        net = build_network(m, TINY)
+        assert isinstance(net, EnergyModel) and net.hidden == TINY.head_hidden
+        e = net.energy(_obs(2, TINY.bev_size), torch.rand(7, 2) * 2 - 1)
+        assert e.shape == (2, 7)
+    with pytest.raises(ValueError, match="method"):
+        build_network("gail", TINY)
+
+
+def test_agents_act_in_the_box_and_reproducibly():
+    actions = torch.rand(50, 2) * 2 - 1
+    obs = _obs(4, TINY.bev_size)
+    for m in ("bc", "ibc", "da-ibc"):
+        torch.manual_seed(0)
+        agent = Agent(m, build_network(m, TINY), TINY, actions)
+        a1 = agent.act(obs, torch.Generator().manual_seed(3))
+        a2 = agent.act({k: v.numpy() for k, v in obs.items()}, torch.Generator().manual_seed(3))
+        assert a1.shape == (4, 2) and (a1.abs() <= 1).all()
+        assert torch.equal(a1, a2)
+
+
+def test_ibc_and_da_ibc_run_algorithm_1_as_the_paper_defines_them():
+    actions = torch.rand(50, 2) * 2 - 1
+    ibc = Agent("ibc", build_network("ibc", TINY), TINY, actions)
+    da = Agent("da-ibc", build_network("da-ibc", TINY), TINY, actions)
+    assert ibc.dfo_settings["init"] == "uniform" and ibc.dfo_settings["select"] == "argmax"
+    assert da.dfo_settings["init"] == "inverse-kde" and da.dfo_settings["select"] == "sample"
+    # DA-IBC's initial weights are w ∝ 1 / ĝ (eq. 4 with h = 0.2), computed independently here
+    d = ((actions[:, None, :] - actions[None, :, :]) / TINY.kde_bandwidth).pow(2).sum(-1)
+    g = torch.exp(-0.5 * d).mean(1)
+    w = (1 / g) / (1 / g).sum()
+    assert torch.allclose(da.init_weights, w, rtol=1e-4)
+
+
+def test_energy_grid_matches_the_energy():
+    agent = Agent("da-ibc", build_network("da-ibc", TINY), TINY, torch.rand(20, 2) * 2 - 1)
+    obs = _obs(1, TINY.bev_size)
+    steer, accel, e = agent.energy_grid(obs, 5)
+    assert e.shape == (5, 5)
+    ref = agent.network.energy(obs, torch.tensor([[steer[1], accel[3]]]))  # row = acceleration, column = steer
+    assert abs(float(ref[0, 0].detach()) - e[3, 1]) < 1e-5
+    with pytest.raises(ValueError, match="energy agent"):
+        Agent("bc", build_network("bc", TINY), TINY, torch.zeros(3, 2)).energy_grid(obs)
+
+
+def test_presets():
+    assert set(PRESETS) == {"paper", "laptop", "tiny"}
+    assert (PAPER.lr, PAPER.epochs, PAPER.batch_size, PAPER.n_neg) == (1e-5, 400, 128, 1024)
+    assert (PAPER.dfo_samples, PAPER.dfo_iters, PAPER.dfo_sigma_init, PAPER.dfo_shrink) == (16384, 5, 0.5, 0.5)
+    assert (PAPER.kde_bandwidth, PAPER.bev_size, PAPER.embed_dim) == (0.2, 192, 256)
+    assert LAPTOP.bev_size == 64 and "bev_size" in differences(PAPER, LAPTOP)
+    assert Preset.from_dict(LAPTOP.to_dict()) == LAPTOP
+    assert get_preset("tiny") is TINY
+    with pytest.raises(ValueError, match="preset"):
+        get_preset("huge")
+    with pytest.raises(ValueError, match="epochs"):
+        TINY.with_(epochs=0)
+
+
+def test_to_tensor_obs_from_numpy():
+    o = to_tensor_obs({"bev": np.zeros((2, 5, 8, 8), np.uint8), "state": np.zeros((2, 3), np.float64)})
+    assert o["bev"].dtype == torch.uint8 and o["state"].dtype == torch.float32

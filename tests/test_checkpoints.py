@@ -1,0 +1,83 @@
+"""Agent checkpoints: round trip, weights_only loading, refusal of foreign files (ibc_tutorial.checkpoints)."""
+
+import hashlib
+
+import pytest
+import torch
+
+from ibc_tutorial import __version__
+from ibc_tutorial.agents import build_network
+from ibc_tutorial.checkpoints import FORMAT, file_sha256, load_agent, load_checkpoint, save_checkpoint
+from ibc_tutorial.presets import TINY
+
+
+@pytest.fixture
+def saved(tmp_path):
+    torch.manual_seed(0)
+    net = build_network("da-ibc", TINY)
+    actions = torch.rand(30, 2) * 2 - 1
+    path = save_checkpoint(tmp_path / "a.pt", method="da-ibc", preset=TINY, network=net, data_sha256="ab" * 32,
+                           epoch=3, expert_actions=actions, init_weights=torch.full((30,), 1 / 30))
+    return path, net, actions
+
+
+def test_round_trip(saved):
+    path, net, actions = saved
+    raw = torch.load(path, weights_only=True)  # plain data only
+    assert raw["format"] == FORMAT and raw["package_version"] == __version__ and raw["epoch"] == 3
+    assert raw["data_sha256"] == "ab" * 32 and raw["preset"]["name"] == "tiny"
+    agent, ckpt = load_agent(path)
+    for k, v in net.state_dict().items():
+        assert torch.equal(agent.network.state_dict()[k], v)
+    assert torch.equal(agent.expert_actions, actions)
+    obs = {"bev": torch.randint(0, 2, (2, 5, 32, 32), dtype=torch.uint8), "state": torch.rand(2, 3)}
+    assert torch.allclose(agent.network.energy(obs, actions[:5]), net.energy(obs, actions[:5]))
+
+
+def _rewrite(path, **changes):
+    ckpt = torch.load(path, weights_only=True)
+    ckpt.update(changes)
+    torch.save(ckpt, path)
+
+
+def test_refuses_foreign_files(tmp_path, saved):
+    path, _, _ = saved
+    other = tmp_path / "other.pt"
+    torch.save({"weights": torch.zeros(3)}, other)
+    with pytest.raises(ValueError, match="not an ibc-tutorial agent checkpoint"):
+        load_checkpoint(other)
+    (tmp_path / "junk.pt").write_bytes(b"not a torch file")
+    with pytest.raises(ValueError, match="not a readable agent checkpoint"):
+        load_checkpoint(tmp_path / "junk.pt")
+    with pytest.raises(ValueError, match="no checkpoint"):
+        load_checkpoint(tmp_path / "missing.pt")
+
+
+def test_refuses_other_versions(saved):
+    path, _, _ = saved
+    _rewrite(path, package_version="9.9.0")
+    with pytest.raises(ValueError, match="written by ibc_tutorial 9.9.0"):
+        load_checkpoint(path)
+    _rewrite(path, package_version=__version__, format_version=99)
+    with pytest.raises(ValueError, match="format version 99"):
+        load_checkpoint(path)
+
+
+def test_refuses_other_architectures(saved):
+    path, _, _ = saved
+    with pytest.raises(ValueError, match="another architecture"):
+        load_checkpoint(path, preset=TINY.with_(embed_dim=32))
+    with pytest.raises(ValueError, match="method 'da-ibc', expected 'bc'"):
+        load_checkpoint(path, method="bc")
+    load_checkpoint(path, method="da-ibc", preset=TINY.with_(epochs=9))  # training length is not architecture
+    ckpt = torch.load(path, weights_only=True)
+    ckpt["model"]["obs_proj.weight"] = torch.zeros(3, 3)
+    torch.save(ckpt, path)
+    with pytest.raises(ValueError, match="weights do not fit"):
+        load_agent(path)
+
+
+def test_file_sha256(tmp_path):
+    p = tmp_path / "x.bin"
+    p.write_bytes(b"abc" * 1000)
+    assert file_sha256(p) == hashlib.sha256(b"abc" * 1000).hexdigest()

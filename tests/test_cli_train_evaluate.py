@@ -1,0 +1,73 @@
+"""``ibc-tutorial train`` and ``evaluate`` on a tiny live-collected dataset (seconds each)."""
+
+import json
+
+import pytest
+import torch
+
+from ibc_tutorial import cli
+from ibc_tutorial.agent_training import read_metrics
+from ibc_tutorial.checkpoints import file_sha256, load_checkpoint
+from ibc_tutorial.driving.collect import CollectConfig, collect
+from ibc_tutorial.driving.sim import score
+from ibc_tutorial.presets import TINY
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory):
+    path = tmp_path_factory.mktemp("demo") / "town01.npz"
+    collect(CollectConfig(routes=1, seed=0, min_minutes=0.15, max_minutes=0.2), show_progress=False).save(path)
+    return path
+
+
+@pytest.mark.parametrize("method", ["bc", "ibc", "da-ibc"])
+def test_train_then_evaluate(method, data, tmp_path, capsys):
+    out = tmp_path / method
+    assert cli.main(["train", "--method", method, "--data", str(data), "--preset", "tiny", "--seed", "0", "--out", str(out)]) == 0
+    metrics = read_metrics(out)
+    assert [m["epoch"] for m in metrics] == list(range(1, TINY.epochs + 1))  # eval_every = 1
+    for m in metrics:
+        assert m["method"] == method and m["eval"]["episodes"] == TINY.eval_episodes and len(m["episodes"]) == TINY.eval_episodes
+    ckpt = load_checkpoint(out / "final.pt", method=method, preset=TINY)
+    assert ckpt["data_sha256"] == file_sha256(data) and ckpt["epoch"] == TINY.epochs
+    report = tmp_path / "eval.json"
+    assert cli.main(["evaluate", "--checkpoint", str(out / "final.pt"), "--episodes", "3", "--steps", "12",
+                     "--out", str(report)]) == 0
+    printed = capsys.readouterr().out
+    assert "mean score" in printed
+    ev = json.loads(report.read_text())
+    assert len(ev["episodes"]) == 3 and ev["method"] == method
+    for r in ev["episodes"]:
+        assert r["steps"] <= 12
+        assert r["score"] == pytest.approx(score(r["distance_m"], r["red_light_infractions"]), abs=0.01)
+
+
+def test_resume_continues_exactly(data, tmp_path):
+    whole, parts = tmp_path / "whole", tmp_path / "parts"
+    base = ["train", "--method", "da-ibc", "--data", str(data), "--preset", "tiny", "--seed", "1"]
+    assert cli.main(base + ["--out", str(whole)]) == 0
+    assert cli.main(base + ["--out", str(parts), "--epochs", "1"]) == 0  # "interrupted" after epoch 1
+    assert cli.main(base + ["--out", str(parts)]) == 0  # resumes from last.pt
+    a = torch.load(whole / "final.pt", weights_only=True)["model"]
+    b = torch.load(parts / "final.pt", weights_only=True)["model"]
+    assert all(torch.equal(a[k], b[k]) for k in a)
+    assert [m["loss"] for m in read_metrics(whole)] == [m["loss"] for m in read_metrics(parts)]
+
+
+def test_resume_refuses_another_data_file(data, tmp_path):
+    out = tmp_path / "run"
+    base = ["train", "--method", "bc", "--preset", "tiny", "--seed", "0", "--out", str(out)]
+    assert cli.main(base + ["--data", str(data), "--epochs", "1"]) == 0
+    other = tmp_path / "other.npz"
+    collect(CollectConfig(routes=1, seed=5, min_minutes=0.15, max_minutes=0.2), show_progress=False).save(other)
+    with pytest.raises(SystemExit, match="another data file"):
+        cli.main(base + ["--data", str(other)])
+
+
+def test_bad_arguments(data, tmp_path):
+    with pytest.raises(SystemExit, match="preset"):
+        cli.main(["train", "--method", "bc", "--data", str(data), "--preset", "huge", "--out", str(tmp_path)])
+    with pytest.raises(SystemExit, match="no demonstration file"):
+        cli.main(["train", "--method", "bc", "--data", str(tmp_path / "none.npz"), "--preset", "tiny", "--out", str(tmp_path)])
+    with pytest.raises(SystemExit, match="no checkpoint"):
+        cli.main(["evaluate", "--checkpoint", str(tmp_path / "none.pt")])

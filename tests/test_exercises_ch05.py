@@ -1,0 +1,91 @@
+"""Checkers of exercises/05_kde_weighting.ipynb: solution -> correct, stub -> not attempted,
+typical mistakes -> a hint naming the mistake, code that raises -> a hint (never an exception)."""
+
+import math
+
+import pytest
+import torch
+
+from ibc_tutorial import kde
+from ibc_tutorial.exercises import ch05, solutions
+
+
+def stub(*args, **kwargs):
+    raise NotImplementedError
+
+
+def raises(*args, **kwargs):
+    raise KeyError("h")
+
+
+def test_kde_1d_solution_and_library_are_correct():
+    assert ch05.check_kde_1d(solutions.ch05_kde_1d).status == "correct"
+    assert ch05.check_kde_1d(lambda x, data, h: kde.kde_density(x[:, None], data[:, None], h)).status == "correct"
+
+
+def test_kde_1d_stub_and_crash():
+    assert ch05.check_kde_1d(stub).status == "not attempted"
+    fb = ch05.check_kde_1d(raises)
+    assert fb.status == "hint" and "KeyError" in fb.message
+
+
+def _k(x, data, h, half=0.5, const=True):
+    u = (x[:, None] - data[None, :]) / h
+    k = torch.exp(-half * u**2)
+    return k / math.sqrt(2 * math.pi) if const else k
+
+
+KDE_MISTAKES = {
+    "no 1/h": (lambda x, d, h: _k(x, d, h).sum(1) / len(d), "1/h is missing"),
+    "no 1/N": (lambda x, d, h: _k(x, d, h).sum(1) / h, "number of data points"),
+    "no kernel constant": (lambda x, d, h: _k(x, d, h, const=False).sum(1) / (len(d) * h), "constant in front"),
+    "exponent without 1/2": (lambda x, d, h: _k(x, d, h, half=1.0).sum(1) / (len(d) * h), "exponent"),
+    "h squared": (lambda x, d, h: _k(x, d, h * h).sum(1) / (len(d) * h * h), "not h²"),
+    "hard-coded h": (lambda x, d, h: solutions.ch05_kde_1d(x, d, 0.2), "hard-coding"),
+    "wrong shape": (lambda x, d, h: solutions.ch05_kde_1d(x, d, h)[:, None], "shape"),
+    "numpy": (lambda x, d, h: solutions.ch05_kde_1d(x, d, h).numpy(), "torch.Tensor"),
+}
+
+
+@pytest.mark.parametrize("name", list(KDE_MISTAKES))
+def test_kde_1d_mistakes_get_a_hint_naming_them(name):
+    fn, words = KDE_MISTAKES[name]
+    fb = ch05.check_kde_1d(fn)
+    assert fb.status == "hint", (name, fb)
+    assert words in fb.message, (name, fb.message)
+
+
+def test_kde_1d_hint_does_not_give_the_answer():
+    fb = ch05.check_kde_1d(KDE_MISTAKES["no kernel constant"][0])
+    assert "sqrt" not in fb.message and "2π" not in fb.message
+
+
+def test_inverse_weights_solution_and_library_are_correct():
+    assert ch05.check_inverse_weights(solutions.ch05_inverse_weights).status == "correct"
+    assert ch05.check_inverse_weights(lambda a, h: kde.inverse_density_weights(a, h)).status == "correct"
+
+
+def test_inverse_weights_stub_and_crash():
+    assert ch05.check_inverse_weights(stub).status == "not attempted"
+    assert ch05.check_inverse_weights(raises).status == "hint"
+
+
+def _g(a, h):
+    return kde.kde_density(a, a, h).double()
+
+
+WEIGHT_MISTAKES = {
+    "not normalised": (lambda a, h: 1 / _g(a, h), "sum to 1"),
+    "proportional to density": (lambda a, h: _g(a, h) / _g(a, h).sum(), "*rare* actions"),
+    "uniform": (lambda a, h: torch.full((len(a),), 1 / len(a)), "rare actions should get larger weights"),
+    "first dimension only": (lambda a, h: (1 / _g(a[:, :1], h)) / (1 / _g(a[:, :1], h)).sum(), "D dimensions"),
+    "hard-coded h": (lambda a, h: kde.inverse_density_weights(a, 0.2), "use the bandwidth"),
+}
+
+
+@pytest.mark.parametrize("name", list(WEIGHT_MISTAKES))
+def test_inverse_weights_mistakes_get_a_hint_naming_them(name):
+    fn, words = WEIGHT_MISTAKES[name]
+    fb = ch05.check_inverse_weights(fn)
+    assert fb.status == "hint", (name, fb)
+    assert words in fb.message, (name, fb.message)

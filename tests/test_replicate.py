@@ -1,0 +1,38 @@
+"""``ibc-tutorial replicate`` wired end to end on the tiny preset."""
+
+import json
+
+from ibc_tutorial import cli
+from ibc_tutorial.presets import METHODS, TINY
+from ibc_tutorial.replicate import collect_results, machine, run_dir
+
+
+def test_replicate_tiny(tmp_path):
+    out = tmp_path / "rep"
+    assert cli.main(["replicate", "--preset", "tiny", "--out", str(out)]) == 0
+    res = json.loads((out / "results.json").read_text())
+    assert res["complete"] and res["preset"]["name"] == "tiny"
+    assert set(res["table"]) == set(METHODS)
+    for m in METHODS:
+        t = res["table"][m]
+        assert t["episodes"] == TINY.final_episodes * len(TINY.seeds) and t["agents"] == len(TINY.seeds)
+        assert res["curves"][m]["0"]["epoch"] == list(range(1, TINY.epochs + 1))
+    assert set(res["free_driving"]) == {"bc", "da-ibc"}
+    assert 0.0 <= res["free_driving"]["bc"]["coverage_all"] <= 1.0
+    assert (out / "free_driving.npz").exists() and (out / "landscapes.npz").exists()
+    # only the first seed's BC and DA-IBC checkpoints are kept; no optimiser states
+    assert (run_dir(out, "bc", 0) / "final.pt").exists() and (run_dir(out, "da-ibc", 0) / "final.pt").exists()
+    assert not (run_dir(out, "ibc", 0) / "final.pt").exists() and not list(out.glob("runs/*/*/last.pt"))
+    prov = json.loads((out / "provenance.json").read_text())
+    assert prov["complete"] and prov["runs_done"] == prov["runs_planned"] and prov["machine"]["nproc"] >= 1
+    assert "replicate --preset tiny" in prov["command"] and "wall time" in (out / "PROVENANCE.md").read_text()
+    # running again resumes: nothing is retrained, the results stay the same
+    before = {m: (run_dir(out, m, 0) / "final_eval.json").read_text() for m in METHODS}
+    assert cli.main(["replicate", "--preset", "tiny", "--out", str(out)]) == 0
+    assert before == {m: (run_dir(out, m, 0) / "final_eval.json").read_text() for m in METHODS}
+    assert collect_results(out, TINY)["table"] == res["table"]
+
+
+def test_machine_description():
+    m = machine()
+    assert m["nproc"] >= 1 and m["torch_threads"] >= 1
