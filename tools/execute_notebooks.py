@@ -46,7 +46,7 @@ def execute(path: Path, timeout: int) -> float:
         kernel_name="python3",
         resources={"metadata": {"path": str(path.parent)}},
         record_timing=False,
-        store_widget_state=False,
+        store_widget_state=True,  # needed for Output widgets; the state is stripped below
     )
     t0 = time.perf_counter()
     client.execute()

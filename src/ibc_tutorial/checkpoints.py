@@ -48,7 +48,11 @@ def architecture(method: str, preset: Preset) -> dict:
     arch = {"network": "BetaPolicy" if method == "bc" else "EnergyModel", "encoder": "BEVStateEncoder",
             "bev_size": preset.bev_size, "cnn_channels": list(preset.cnn_channels), "embed_dim": preset.embed_dim,
             "action_dim": 2}
-    if method != "bc":
+    if method == "bc":
+        from ibc_tutorial.agents import BC_MIN_CONCENTRATION
+
+        arch.update(min_concentration=BC_MIN_CONCENTRATION)
+    else:
         arch.update(head_hidden=preset.head_hidden, head_layers=preset.head_layers)
     return arch
 

@@ -1,8 +1,12 @@
 """Inference for energy models: the action an implicit policy takes is argmin_y E(x, y).
 
 - ``grid_argmin``: exhaustive search over a grid of candidate actions (1-D or 2-D actions).
-- ``dfo``: derivative-free optimisation, Algorithm 1 of the DA-IBC paper (chapter 06).
-- ``langevin``: gradient-based MCMC of the original IBC paper (chapter 06).
+- ``dfo``: derivative-free optimisation, Algorithm 1 of the DA-IBC paper (chapter 06), for one
+  observation; ``dfo_batch`` for B observations at once (closed loop), ``dfo_trace`` keeping every
+  iteration's population, ``dfo_policy`` wrapping an energy model for rollouts,
+  ``dfo_init_weights``/``initial_samples`` for its initialisation (line 2).
+- ``langevin``: gradient-based MCMC of the original IBC paper (chapter 06), with ``langevin_batch``,
+  ``langevin_trace`` and its step-size schedule ``polynomial_schedule``.
 """
 
 from __future__ import annotations
@@ -422,9 +426,16 @@ def dfo_policy(model, expert_actions: torch.Tensor, *, generator: torch.Generato
         dfo_kwargs["init_weights"] = dfo_init_weights(expert_actions, init, dfo_kwargs.get("bandwidth", 0.2))
 
     def policy(obs: torch.Tensor) -> torch.Tensor:
-        with torch.no_grad():
-            z = model.embed(obs)  # (B, embed) once per observation
-            return dfo_batch(lambda a: model.energy_from_embedding(z, a), expert_actions, len(obs), generator=generator, **dfo_kwargs)
+        was_training = getattr(model, "training", False)
+        if was_training:
+            model.eval()
+        try:
+            with torch.no_grad():
+                z = model.embed(obs)  # (B, embed) once per observation
+                return dfo_batch(lambda a: model.energy_from_embedding(z, a), expert_actions, len(z), generator=generator, **dfo_kwargs)
+        finally:
+            if was_training:
+                model.train()
 
     return policy
 

@@ -293,6 +293,73 @@ def plot_action_distributions(policies, obs, data_actions, *, dim: int = 0, wher
     return fig
 
 
+def plot_density_fits(data_actions, values, curves: dict, *, title: str, bins: int = 40):
+    """Histogram (density) of ``data_actions`` (N,) in [-1, 1] with density curves ``curves``
+    {label: (G,)} evaluated at ``values`` (G,) drawn over it."""
+    import numpy as np
+
+    data = np.asarray(data_actions, dtype=float).reshape(-1)
+    v = values.numpy() if hasattr(values, "numpy") else np.asarray(values)
+    fig, ax = plt.subplots(figsize=(6.8, 3.6))
+    ax.hist(data, bins=bins, range=(-1, 1), density=True, color="0.75", label=f"expert actions (n = {len(data)})")
+    top = 0.0
+    for i, (label, dens) in enumerate(curves.items()):
+        d = dens.numpy() if hasattr(dens, "numpy") else np.asarray(dens)
+        ax.plot(v, d, color=f"C{i}", lw=2, label=label)
+        top = max(top, float(np.quantile(d, 0.98)))
+    heights, _ = np.histogram(data, bins=bins, range=(-1, 1), density=True)
+    ax.set_ylim(0, 1.15 * max(top, float(heights.max())))
+    ax.set_xlim(-1, 1)
+    ax.set_xlabel("steering action y (-1 right, +1 left)")
+    ax.set_ylabel("density (per unit action)")
+    ax.set_title(title)
+    ax.legend(fontsize=8, loc="upper center")
+    return fig
+
+
+def plot_rollout_grid(world, rollouts: dict, *, title: str, ncols: int = 2, max_episodes: int = 40):
+    """Closed-loop trajectories of several policies ({name: Rollouts}) over the scene, one panel
+    each, in a grid. Tree world: coloured by the side passed (left blue, right orange, collided
+    red with a cross). Side-road world: ended on the main road (blue), on the side road (green),
+    off the road (red with a cross)."""
+    import numpy as np
+
+    tree = hasattr(world, "pass_side")
+    n = len(rollouts)
+    nrows = -(-n // ncols)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(5.6 * ncols, 2.5 * nrows), sharex=True, sharey=True, squeeze=False)
+    x_end = max(float(r.states[:, :, 0].max()) for r in rollouts.values()) + 1.0
+    for ax, (name, r) in zip(axes.flat, rollouts.items()):
+        s = r.states.numpy()
+        hit = r.collided.numpy()
+        if tree:
+            side = world.pass_side(r).numpy()
+            colors = [TREE_SIDE_COLORS[int(v)] for v in side]
+            summary = f"collided {hit.mean():.0%}, left {np.mean(side == -1):.0%}, right {np.mean(side == 1):.0%}"
+            _draw_tree(ax, world)
+        else:
+            main = world.stayed_on_main_road(r).numpy()
+            took = world.took_side_road(r).numpy()
+            colors = ["C0" if m else ("C2" if t else "C3") for m, t in zip(main, took)]
+            summary = f"main {main.mean():.0%}, side road {took.mean():.0%}, off road {hit.mean():.0%}"
+            _draw_side_road(ax, world, x_end)
+        for e in range(min(len(s), max_episodes)):
+            ax.plot(s[e, :, 0], s[e, :, 1], color=colors[e], lw=0.8, alpha=0.6)
+            if hit[e]:
+                ax.plot(s[e, -1, 0], s[e, -1, 1], "x", color="C3", ms=4)
+        ax.set_title(f"{name}: {summary}", fontsize=9)
+        ax.set_aspect("equal")
+    for ax in axes.flat[n:]:
+        ax.axis("off")
+    for ax in axes[:, 0]:
+        ax.set_ylabel("y (m, left > 0)")
+    for ax in axes[-1]:
+        ax.set_xlabel("x (m, direction of travel)")
+    fig.suptitle(title)
+    fig.tight_layout()
+    return fig
+
+
 # =========================================================================== chapter 03: energy models and InfoNCE
 def plot_energy_landscape(distances, actions, energies, *, expert=None, path=None, title: str = "The energy landscape", xlabel: str = "distance to the tree (m)", ylabel: str = "steering (-1 right ... +1 left)", ax=None):
     """E(x, y) with the observation along x and the action along y, shifted per observation so
@@ -743,6 +810,13 @@ def plot_lines(x, series: dict, *, xlabel: str, ylabel: str, title: str, logx: b
         ax.plot(xs, np.asarray(v, dtype=float), marker="o" if markers else None, ms=4, color=f"C{i}", label=label)
     if logx:
         ax.set_xscale("log")
+        if not isinstance(x, dict):  # label the x values themselves, not the decades
+            from matplotlib.ticker import NullFormatter
+
+            xs = np.asarray(x, dtype=float)
+            ax.set_xticks(xs)
+            ax.set_xticklabels([f"{v:g}" for v in xs])
+            ax.xaxis.set_minor_formatter(NullFormatter())
     if logy:
         ax.set_yscale("log")
     ax.set_xlabel(xlabel)
@@ -782,7 +856,7 @@ def plot_tree_rollouts(world, rollouts: dict, *, max_episodes: int = 60):
     import numpy as np
 
     n = len(rollouts)
-    fig, axes = plt.subplots(1, n, figsize=(4.6 * n, 3.4), sharex=True, sharey=True)
+    fig, axes = plt.subplots(n, 1, figsize=(9.0, 2.1 * n + 0.6), sharex=True, sharey=True)
     axes = np.atleast_1d(axes)
     c = world.config
     for ax, (label, r) in zip(axes, rollouts.items()):
@@ -793,10 +867,10 @@ def plot_tree_rollouts(world, rollouts: dict, *, max_episodes: int = 60):
             ax.plot(s[e, :, 0], s[e, :, 1], color=color, lw=0.8, alpha=0.7)
         ax.add_patch(plt.Circle((c.tree_x, 0.0), c.tree_radius, color="g"))
         left, right, hit = int((side == -1).sum()), int((side == 1).sum()), int((side == 0).sum())
-        ax.set_title(f"{label}\nleft {left}, right {right}, collided/other {hit} of {len(side)}", fontsize=9)
-        ax.set_xlabel("x (m)")
+        ax.set_title(f"{label}: left {left}, right {right}, collided or neither {hit} (of {len(side)})", fontsize=9)
         ax.set_aspect("equal")
-    axes[0].set_ylabel("y (m, left > 0)")
+        ax.set_ylabel("y (m, left > 0)")
+    axes[-1].set_xlabel("x (m)")
     fig.suptitle("Closed-loop rollouts of the energy model with DFO inference")
     fig.tight_layout()
     return fig
@@ -1068,5 +1142,138 @@ def plot_bev_samples(bevs, actions, states, *, title: str = "Samples of the Data
         ax.set_xticks([])
         ax.set_yticks([])
     fig.suptitle(title)
+    fig.tight_layout()
+    return fig
+
+
+# =========================================================================== chapters 08-09: training the agents, the replication
+METHOD_COLORS = {"bc": "C0", "ibc": "C2", "da-ibc": "C3", "expert": "k"}
+METHOD_LABELS = {"bc": "BC (Beta)", "ibc": "IBC", "da-ibc": "DA-IBC", "expert": "expert"}
+
+
+def plot_agent_architecture(bev_size: int = 64, channels=(16, 32, 32, 64), embed_dim: int = 256, head_hidden: int = 128):
+    """The DA-IBC paper's Fig. 2 as boxes and arrows: BEV CNN and state MLP, concatenated, then the
+    Beta head (BC) or the energy head with its factorised first layer (IBC, DA-IBC)."""
+    from matplotlib.patches import FancyBboxPatch
+
+    fig, ax = plt.subplots(figsize=(11, 4.6))
+    ax.set_xlim(0, 11)
+    ax.set_ylim(0, 5)
+    ax.axis("off")
+
+    def box(x, y, w, h, text, color):
+        ax.add_patch(FancyBboxPatch((x, y), w, h, boxstyle="round,pad=0.05", fc=color, ec="k", lw=1))
+        ax.text(x + w / 2, y + h / 2, text, ha="center", va="center", fontsize=8.5)
+
+    def arrow(x0, y0, x1, y1):
+        ax.annotate("", xy=(x1, y1), xytext=(x0, y0), arrowprops=dict(arrowstyle="->", lw=1.2))
+
+    side, convs = bev_size, []
+    for c in channels:
+        side = (side + 1) // 2
+        convs.append(f"{c}x{side}x{side}")
+    box(0.1, 3.2, 1.6, 1.2, f"BEV\n5 x {bev_size} x {bev_size}\n(road, lanes,\nred lights t-16, -9, -1)", "#dde8f5")
+    box(2.1, 3.2, 2.0, 1.2, "CNN: 3x3 stride-2 convs\n" + " -> ".join(convs[:2]) + "\n-> " + " -> ".join(convs[2:]), "#c6dbef")
+    box(4.5, 3.3, 1.3, 1.0, f"linear\n-> {embed_dim}", "#c6dbef")
+    box(0.1, 1.3, 1.6, 1.0, "state (3)\nspeed, previous\nsteer, acceleration", "#e5f5e0")
+    box(2.1, 1.3, 3.7, 1.0, f"MLP: 3 -> {embed_dim} -> {embed_dim}", "#c7e9c0")
+    box(6.2, 2.2, 1.2, 1.2, f"z\nconcat\n{2 * embed_dim}", "#fdd0a2")
+    box(7.9, 3.5, 2.9, 1.0, "BC: linear -> (α, β) per action\nBeta(α, β) on [-1, 1]  (eq. 1)", "#fcbba1")
+    box(7.9, 0.6, 2.9, 2.4, f"IBC / DA-IBC energy head:\nW_z z + b  (once per x)\n+ W_a y  (per candidate y)\nReLU -> {head_hidden} -> ReLU\n-> E(x, y)  (scalar)", "#fcbba1")
+    box(6.2, 0.3, 1.2, 0.9, "action y\n(steer, acc)", "#f0f0f0")
+    arrow(1.7, 3.8, 2.1, 3.8)
+    arrow(4.1, 3.8, 4.5, 3.8)
+    arrow(1.7, 1.8, 2.1, 1.8)
+    arrow(5.8, 3.8, 6.5, 3.4)
+    arrow(5.8, 1.8, 6.5, 2.2)
+    arrow(7.4, 3.0, 7.9, 3.9)
+    arrow(7.4, 2.6, 7.9, 2.2)
+    arrow(7.4, 0.75, 7.9, 1.2)
+    ax.set_title("The agents' network (the DA-IBC paper's Fig. 2, at the laptop preset's sizes)")
+    return fig
+
+
+def plot_training_curves(curves: dict, *, key: str = "score", ylabel: str = "town02 score (m x 0.7^infractions)",
+                         title: str = "Score in town02 during training (mean ± std over seeds)", ax=None):
+    """Score (or another key of ``curves[method][seed]``) against epoch: mean and ±1 std over seeds per method."""
+    import numpy as np
+
+    own = ax is None
+    if own:
+        fig, ax = plt.subplots(figsize=(7.5, 4.2))
+    for method, per_seed in curves.items():
+        if not per_seed:
+            continue
+        epochs = sorted(set.intersection(*(set(c["epoch"]) for c in per_seed.values())))
+        vals = np.array([[c[key][c["epoch"].index(e)] for e in epochs] for c in per_seed.values()])  # (seeds, E)
+        m, s = vals.mean(0), vals.std(0)
+        color = METHOD_COLORS.get(method)
+        ax.plot(epochs, m, "o-", color=color, label=f"{METHOD_LABELS.get(method, method)} ({len(vals)} seeds)")
+        ax.fill_between(epochs, m - s, m + s, color=color, alpha=0.2)
+    ax.set_xlabel("epoch")
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
+    ax.legend()
+    ax.grid(alpha=0.3)
+    return ax.figure
+
+
+def plot_loss_curves(curves: dict, *, title: str = "Training loss"):
+    """One panel per method: loss per logged point (``curves[method] = (x, losses)``)."""
+    fig, axes = plt.subplots(1, len(curves), figsize=(4.0 * len(curves), 3.3), squeeze=False)
+    for ax, (method, (x, loss)) in zip(axes[0], curves.items()):
+        ax.plot(x, loss, "o-", color=METHOD_COLORS.get(method))
+        ax.set_xlabel("epoch")
+        ax.set_ylabel("Beta NLL (eq. 1)" if method == "bc" else "InfoNCE (eq. 2)")
+        ax.set_title(METHOD_LABELS.get(method, method))
+        ax.grid(alpha=0.3)
+    fig.suptitle(title)
+    fig.tight_layout()
+    return fig
+
+
+def plot_trajectories(town, trajectories: dict, *, titles: dict | None = None, suptitle: str = "Free driving in town02"):
+    """One map per entry of ``trajectories`` ({name: [xy (T, 2), ...]}), each episode a line, starts as dots."""
+    import numpy as np
+
+    n = len(trajectories)
+    fig, axes = plt.subplots(1, n, figsize=(6.0 * n, 5.4), squeeze=False)
+    for ax, (name, tracks) in zip(axes[0], trajectories.items()):
+        plot_town(town, ax=ax, title=(titles or {}).get(name, name), markers=False)
+        for k, xy in enumerate(tracks):
+            xy = np.asarray(xy)
+            ax.plot(xy[:, 0], xy[:, 1], color=f"C{(3 * k + 1) % 10}", lw=1.8, alpha=0.85, label=f"episode {k}")
+            ax.plot(xy[0, 0], xy[0, 1], "o", color=f"C{(3 * k + 1) % 10}", ms=7, mec="k")
+            ax.plot(xy[-1, 0], xy[-1, 1], "X", color=f"C{(3 * k + 1) % 10}", ms=8, mec="k")
+        ax.legend(fontsize=8, loc="upper right")
+    fig.suptitle(suptitle + " (dot: start, cross: end)")
+    fig.tight_layout()
+    return fig
+
+
+def plot_energy_landscapes(panels: list, steer, accel, *, suptitle: str = "Energy landscapes of DA-IBC"):
+    """Per panel (title, E (A, S) over accel x steer, points (K, 2), bev (5, S, S) or None): the BEV and E with the points."""
+    import numpy as np
+
+    from ibc_tutorial.driving.render import bev_to_rgb, draw_ego
+
+    fig, axes = plt.subplots(len(panels), 2, figsize=(9.5, 4.1 * len(panels)), squeeze=False,
+                             gridspec_kw={"width_ratios": [1, 1.5]})
+    for (ax_b, ax_e), (title, e, points, bev) in zip(axes, panels):
+        if bev is not None:
+            ax_b.imshow(draw_ego(bev_to_rgb(np.asarray(bev))), interpolation="nearest")
+        ax_b.set_xticks([])
+        ax_b.set_yticks([])
+        ax_b.set_title("what the agent sees")
+        e = np.asarray(e)
+        cs = ax_e.contourf(steer, accel, e - e.min(), levels=20, cmap="viridis")
+        fig.colorbar(cs, ax=ax_e, label="E(x, y) - min E")
+        p = np.asarray(points)
+        ax_e.scatter(p[:, 0], p[:, 1], c="red", s=28, edgecolors="white", linewidths=0.8, label=f"{len(p)} DFO inferences")
+        ax_e.set_xlabel("steering y_1 (+ right)")
+        ax_e.set_ylabel("acceleration y_2 (- brake)")
+        ax_e.set_title(title)
+        ax_e.legend(loc="lower right", fontsize=8)
+    fig.suptitle(suptitle)
     fig.tight_layout()
     return fig

@@ -7,7 +7,7 @@ the network's size, the training settings of the DA-IBC paper's sec. 4.2, the in
 **The three methods, as the DA-IBC paper defines them** (its secs. 2.4, 2.4.1, 2.5, 4.3, 5):
 
 - ``bc``: the Beta policy of eq. 1 (its sec. 3.2 and [Antonelo et al. 2024]), acting with the
-  Beta's mean. Minibatches drawn with the inverse-KDE probabilities ("For BC, the loss
+  Beta's mean (α, β > 0: see ``agents.BC_MIN_CONCENTRATION`` for why not α, β >= 1). Minibatches drawn with the inverse-KDE probabilities ("For BC, the loss
   function is weighted analogously", sec. 2.5).
 - ``ibc``: "conventional IBC" [Florence et al. 2022]: InfoNCE (eq. 2) with counter-examples
   drawn uniformly from the action box, ỹ ~ U(y_min, y_max) (sec. 2.4), and the original DFO:
@@ -147,13 +147,13 @@ LAPTOP = Preset(
     embed_dim=256,  # as the paper: 256-d BEV and 256-d state embeddings
     head_hidden=128,  # the energy head runs N_neg times per sample and N_samples times per decision
     head_layers=2,
-    lr=1e-3,  # 100x the paper's 1e-5, for 8 epochs instead of up to 400
-    epochs=8,
+    lr=1e-3,  # 100x the paper's 1e-5, for 6 epochs instead of up to 400
+    epochs=6,
     batch_size=128,  # as the paper
     n_neg=128,  # 1/8 of the paper's 1024
     dfo_samples=512,  # 1/32 of the paper's 16,384
     dfo_iters=3,  # the paper: 5
-    eval_every=2,  # the paper: every 10 of up to 400 epochs; here every 2 of 8
+    eval_every=2,  # the paper: every 10 of up to 400 epochs; here every 2 of 6
     eval_episodes=4,  # during training only (the paper: 10); the final table uses final_episodes
     eval_steps=600,  # 60 s episodes during training (the paper: 300 s)
     final_episodes=10,  # as the paper

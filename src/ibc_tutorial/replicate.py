@@ -385,3 +385,20 @@ def run(args: argparse.Namespace) -> int:
     command = "ibc-tutorial " + " ".join(sys.argv[1:]) if sys.argv and "replicate" in sys.argv else ""
     replicate(preset, args.out, command=command, keep_checkpoints=args.keep_checkpoints, workers=workers)
     return 0
+
+
+def load_results(out) -> dict:
+    """What the chapters read from a replication folder: ``results.json`` and ``provenance.json`` as
+    dicts, ``free_driving.npz`` and ``landscapes.npz`` as dicts of arrays (empty if absent)."""
+    out = Path(out)
+    if not (out / RESULTS).exists():
+        raise ValueError(f"no {RESULTS} in {out}: run 'ibc-tutorial replicate --out {out}' first")
+    res = {"results": json.loads((out / RESULTS).read_text()),
+           "provenance": json.loads((out / "provenance.json").read_text()) if (out / "provenance.json").exists() else {}}
+    for key, name in (("free_driving", FREE_DRIVING), ("landscapes", LANDSCAPES)):
+        if (out / name).exists():
+            with np.load(out / name) as z:
+                res[key] = {k: z[k] for k in z.files}
+        else:
+            res[key] = {}
+    return res

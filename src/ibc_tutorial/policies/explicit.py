@@ -139,15 +139,17 @@ class BetaPolicy(ExplicitPolicy):
 
     ``forward(obs)`` returns ``(alpha, beta)``, each (B, D). The head's outputs u pass through
     ``min_concentration + softplus(u)``. The default ``min_concentration = 1`` keeps α, β ≥ 1,
-    the usual choice for Beta policies (Chou et al. 2017; Petrazzini and Antonelo 2021, whom the
-    DA-IBC paper follows): the density is then bounded and single-peaked, so "mode" exists and
-    the loss cannot be driven down by piling density onto the bounds. A U-shape (α, β < 1) needs
-    ``min_concentration`` near 0; chapter 02 shows such shapes directly from (α, β) and shows
-    that the best free Beta for the tree data has α, β > 1 anyway.
+    the choice of the Beta policy of Chou et al. (2017, "Improving stochastic policy gradients in
+    continuous control with deep reinforcement learning using the Beta distribution"): the density
+    is then bounded and single-peaked, so "mode" exists and the loss cannot be driven down by
+    piling density onto the bounds. ``min_concentration = 0`` lets the head become U-shaped
+    (α, β < 1: density piled at both bounds); chapter 02 fits such a free Beta to the tree data
+    and shows that it still puts no peak at the experts' two actions.
 
-    Acting: "mean" (α / (α + β), rescaled), "mode" ((α − 1)/(α + β − 2); with α, β ≥ 1 and one
-    of them equal to 1 this is the bound on that side; when α = β = 1 the density is flat and
-    the mean is used) or "sample" (a draw, via two Gamma draws so that ``generator`` seeds it).
+    Acting: "mean" (α / (α + β), rescaled); "mode", the peak of the density: (α − 1)/(α + β − 2)
+    when α, β > 1, otherwise the bound on the side of the smaller concentration (where the
+    density is largest; the mean when α = β ≤ 1, e.g. the flat α = β = 1); or "sample" (a
+    draw, via two Gamma draws so that ``generator`` seeds it).
     """
 
     modes = ("mean", "mode", "sample")
