@@ -151,3 +151,30 @@ def test_multimodal_policies_find_both_modes_and_regression_averages():
     train(beta, lambda b, g: beta.loss(b["obs"], b["actions"]), data, cfg)
     xs = torch.tensor([[0.5]])
     assert abs(float(beta.act(xs, mode="mean")) - 0.15) < 0.1
+
+
+def test_chapter_02_figures_build():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from ibc_tutorial import plotting
+    from ibc_tutorial.toy import SideRoadWorld, TreeWorld
+
+    fig = plotting.plot_beta_shapes([(0.5, 0.5), (2, 5)])
+    assert "Beta" in fig.axes[0].get_title() and len(fig.axes[0].lines) == 2
+    plotting.plt.close(fig)
+    torch.manual_seed(0)
+    policies = {name: make(1) for name, make in POLICIES.items()}
+    for p in policies.values():
+        p.encoder = MLPEncoder(1, embed_dim=16)  # observations of size 1, like the toy worlds'
+    fig = plotting.plot_action_distributions(policies, torch.zeros(1, 1), torch.rand(50) * 2 - 1, where="here")
+    assert [ax.get_title() for ax in fig.axes] == list(policies)
+    plotting.plt.close(fig)
+    fig = plotting.plot_density_fits(torch.rand(50) * 2 - 1, torch.linspace(-1, 1, 11), {"flat": torch.full((11,), 0.5)}, title="t")
+    assert fig.axes[0].get_xlabel().startswith("steering")
+    plotting.plt.close(fig)
+    for world in (TreeWorld(), SideRoadWorld()):
+        r = world.rollout(lambda obs: torch.zeros(len(obs), 1), 3, seed=0)
+        fig = plotting.plot_rollout_grid(world, {"a": r, "b": r, "c": r}, title="grid")
+        assert fig.axes[0].get_title().startswith("a:") and not fig.axes[3].axison  # the empty fourth panel is hidden
+        plotting.plt.close(fig)

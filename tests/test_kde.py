@@ -130,3 +130,21 @@ def test_sample_indices_is_the_draw_training_makes():
         sample_indices(probs, 0)
     with pytest.raises(ValueError, match="weighting"):
         sampling_probs(torch.zeros(3, 1), weighting="kde")
+
+
+def test_training_draws_the_minibatches_sample_indices_describes():
+    """``train(..., sample_probs=sampling_probs(...))`` draws its first minibatch exactly as ``sample_indices`` does."""
+    from ibc_tutorial.training import TrainConfig, train
+
+    actions = torch.cat([torch.zeros(90, 1), torch.ones(10, 1)])
+    probs = sampling_probs(actions, bandwidth=0.2)
+    seen = []
+    w = torch.nn.Parameter(torch.zeros(1))
+
+    def loss_fn(batch, generator):
+        seen.append(batch["index"].clone())
+        return ((w - 1) ** 2).sum()
+
+    data = {"index": torch.arange(100), "actions": actions}
+    train(torch.nn.ParameterList([w]), loss_fn, data, TrainConfig(steps=1, batch_size=32, seed=7, progress=False), sample_probs=probs)
+    assert torch.equal(seen[0], sample_indices(probs, 32, generator=torch.Generator().manual_seed(7)))

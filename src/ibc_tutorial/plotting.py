@@ -327,7 +327,7 @@ def plot_rollout_grid(world, rollouts: dict, *, title: str, ncols: int = 2, max_
     tree = hasattr(world, "pass_side")
     n = len(rollouts)
     nrows = -(-n // ncols)
-    fig, axes = plt.subplots(nrows, ncols, figsize=(5.6 * ncols, 2.5 * nrows), sharex=True, sharey=True, squeeze=False)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(5.6 * ncols, 2.0 * nrows + 0.4), sharex=True, sharey=True, squeeze=False)
     x_end = max(float(r.states[:, :, 0].max()) for r in rollouts.values()) + 1.0
     for ax, (name, r) in zip(axes.flat, rollouts.items()):
         s = r.states.numpy()

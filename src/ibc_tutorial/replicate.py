@@ -47,6 +47,8 @@ LANDSCAPES = "landscapes.npz"
 """Energy grids, observations and DFO inferences (Fig. 6 analogue)."""
 JUNCTION_DISTANCE = 8.0
 """The junction observation is taken where the car is closest to this distance (m) before the entry."""
+JUNCTION_RANGE = (4.0, 15.0)
+"""Distances (m) before the entry at which a junction observation is taken (a green light preferred)."""
 RED_DISTANCE = (2.0, 15.0)
 """A red-light observation: on an approach whose light is red, this far (m) from the entry."""
 
@@ -124,10 +126,12 @@ def write_provenance(out, preset: Preset, started: str, wall_s: float, done: lis
                      command: str, complete: bool) -> None:
     """``provenance.json`` and ``PROVENANCE.md``: how, where and when the results were made."""
     out = Path(out)
+    old = json.loads((out / "provenance.json").read_text()) if (out / "provenance.json").exists() else {}
+    notes = list(old.get("notes", []))  # kept across resumed invocations
     prov = {"command": command, "commit": git_commit(), "package_version": __version__, "started": started,
             "finished": _now() if complete else None, "updated": _now(), "wall_seconds": round(wall_s, 1),
             "complete": complete, "runs_done": done, "runs_planned": planned, "machine": machine(),
-            "preset": preset.to_dict()}
+            "preset": preset.to_dict(), "notes": notes}
     atomic_write_bytes(out / "provenance.json", json.dumps(prov, indent=1).encode())
     m = prov["machine"]
     lines = [
@@ -142,6 +146,8 @@ def write_provenance(out, preset: Preset, started: str, wall_s: float, done: lis
         "", "Differences of this preset from the paper's settings (field: paper -> this preset):", "",
     ]
     lines += [f"- `{k}`: {a} -> {b}" for k, (a, b) in differences(PAPER, preset).items()]
+    if notes:
+        lines += ["", "Notes:", ""] + [f"- {n}" for n in notes]
     atomic_write_bytes(out / "PROVENANCE.md", ("\n".join(lines) + "\n").encode())
 
 
@@ -179,27 +185,43 @@ def free_driving(out, preset: Preset, agents: dict, log=print) -> dict:
 
 
 def _pick_junction(rec_list) -> tuple | None:
-    """(recording, step, approach, turns) of the junction observation: an approach taken with different
-    exits if there is one (left and right preferred), else the most visited one."""
+    """(recording, step, approach, turns) of the junction observation: among the approaches where the
+    car met a green light 4-15 m before the entry (all approaches if none), one taken with different
+    exits if there is one (left and right preferred), else the most visited one; the moment is the
+    one 4-15 m before the entry closest to 8 m, with a green light if there is one."""
     from ibc_tutorial.evaluation import exits_per_approach, junction_visits
 
-    best = None
-    for rec in rec_list:
-        visits = junction_visits("town02", rec["lane"])
-        for ap, d in exits_per_approach(visits).items():
-            rank = (("left" in d["turns"]) and ("right" in d["turns"]), len(d["turns"]), d["visits"])
-            if best is None or rank > best[0]:
-                v = next(v for v in visits if v["approach"] == ap)
-                best = (rank, rec, v, d)
-    if best is None:
+    all_visits = [(rec, v) for rec in rec_list for v in junction_visits("town02", rec["lane"])]
+    if not all_visits:
         return None
-    _, rec, v, d = best
-    k = v["step"]
-    lane = rec["lane"][k]
-    ks = [j for j in range(k, -1, -1) if rec["lane"][j] == lane]  # the stretch on the approach lane
-    ks = ks[: next((n for n in range(1, len(ks)) if ks[n] != ks[n - 1] - 1), len(ks))]
-    step = min(ks, key=lambda j: (bool(rec["red_ahead"][j]), abs(rec["entry_dist"][j] - JUNCTION_DISTANCE)))  # green first
-    return rec, step, v["approach"], d
+    summary = exits_per_approach([v for _, v in all_visits])
+
+    def green_in_range(a) -> bool:  # a moment 4-15 m before the entry with a green light, on some visit
+        for rec, v in all_visits:
+            if v["approach"] != a:
+                continue
+            j, lane = v["step"], rec["lane"][v["step"]]
+            while j >= 0 and rec["lane"][j] == lane:
+                if JUNCTION_RANGE[0] <= rec["entry_dist"][j] <= JUNCTION_RANGE[1] and not rec["red_ahead"][j]:
+                    return True
+                j -= 1
+        return False
+
+    # a moving decision first (green light), then different exits (left and right best), then visits
+    ap = max(summary, key=lambda a: (green_in_range(a), ("left" in summary[a]["turns"]) and ("right" in summary[a]["turns"]),
+                                     len(summary[a]["turns"]), summary[a]["visits"], -a))
+    candidates = []  # (out of range, red, |distance - 8 m|, order, step, rec)
+    for order, (rec, v) in enumerate(x for x in all_visits if x[1]["approach"] == ap):
+        k = v["step"]
+        lane = rec["lane"][k]
+        j = k
+        while j >= 0 and rec["lane"][j] == lane:  # back along the stretch on the approach lane
+            d = float(rec["entry_dist"][j])
+            out = not JUNCTION_RANGE[0] <= d <= JUNCTION_RANGE[1]
+            candidates.append((out, bool(rec["red_ahead"][j]), abs(d - JUNCTION_DISTANCE), order, j, rec))
+            j -= 1
+    *_, step, rec = min(candidates, key=lambda c: c[:5])
+    return rec, step, ap, summary[ap]
 
 
 def _pick_red(rec_list) -> tuple | None:
