@@ -243,7 +243,7 @@ def plot_beta_shapes(params, *, title: str = "Beta densities f(y'; α, β) of eq
     ax.set_xlabel("rescaled action y' = (y + 1)/2 (y: steering, -1 = full right, +1 = full left)")
     ax.set_ylabel("density f(y'; α, β) (per unit y')")
     ax.set_title(title)
-    ax.legend(fontsize=8, ncol=2)
+    ax.legend(fontsize=8, loc="center left", bbox_to_anchor=(1.01, 0.5), title="dashed: U-shapes", title_fontsize=8)
     return fig
 
 
