@@ -327,7 +327,7 @@ def plot_rollout_grid(world, rollouts: dict, *, title: str, ncols: int = 2, max_
     tree = hasattr(world, "pass_side")
     n = len(rollouts)
     nrows = -(-n // ncols)
-    fig, axes = plt.subplots(nrows, ncols, figsize=(5.6 * ncols, 2.0 * nrows + 0.4), sharex=True, sharey=True, squeeze=False)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(5.6 * ncols, 2.0 * nrows + 0.4), sharex=True, sharey=True, squeeze=False, layout="compressed")
     x_end = max(float(r.states[:, :, 0].max()) for r in rollouts.values()) + 1.0
     for ax, (name, r) in zip(axes.flat, rollouts.items()):
         s = r.states.numpy()
@@ -349,14 +349,17 @@ def plot_rollout_grid(world, rollouts: dict, *, title: str, ncols: int = 2, max_
                 ax.plot(s[e, -1, 0], s[e, -1, 1], "x", color="C3", ms=4)
         ax.set_title(f"{name}: {summary}", fontsize=9)
         ax.set_aspect("equal")
-    for ax in axes.flat[n:]:
-        ax.axis("off")
+    for k in range(n, nrows * ncols):  # empty panels: hide them, label the axis of the panel above
+        axes.flat[k].axis("off")
+        if k - ncols >= 0:
+            axes.flat[k - ncols].xaxis.set_tick_params(labelbottom=True)
+            axes.flat[k - ncols].set_xlabel("x (m, direction of travel)")
     for ax in axes[:, 0]:
         ax.set_ylabel("y (m, left > 0)")
     for ax in axes[-1]:
-        ax.set_xlabel("x (m, direction of travel)")
+        if ax.axison:
+            ax.set_xlabel("x (m, direction of travel)")
     fig.suptitle(title)
-    fig.tight_layout()
     return fig
 
 
