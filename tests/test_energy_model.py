@@ -189,3 +189,19 @@ def test_grid_sample_policy_draws_from_softmax_of_minus_energy():
     assert a.shape == (7000, 1)
     counts = torch.stack([(a[:, 0] == v).sum() for v in grid[:, 0]]).numpy()
     assert stats.chisquare(counts, [4000.0, 2000.0, 1000.0]).pvalue > 1e-3
+
+
+def test_inference_form_matches_training_form():
+    """Under no_grad the first layer runs fused (baddbmm, in-place ReLU); energies must agree."""
+    import torch
+    from ibc_tutorial.policies import EnergyModel, MLPEncoder
+
+    torch.manual_seed(0)
+    model = EnergyModel(MLPEncoder(3, embed_dim=16, hidden=16), action_dim=2, hidden=32, layers=3)
+    obs, per_obs, shared = torch.randn(4, 3), torch.rand(4, 50, 2) * 2 - 1, torch.rand(50, 2) * 2 - 1
+    for actions in (per_obs, shared):
+        with_grad = model.energy(obs, actions)
+        with torch.no_grad():
+            fused = model.energy(obs, actions)
+        assert with_grad.requires_grad and not fused.requires_grad
+        torch.testing.assert_close(fused, with_grad.detach(), rtol=1e-5, atol=1e-5)
