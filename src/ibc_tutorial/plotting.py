@@ -744,8 +744,9 @@ def plot_dfo_iterations(trace, grid, energy, *, iterations=None, bins: int = 60,
     x = np.asarray(grid, dtype=float)
     e = np.asarray(energy, dtype=float)
     for ax, it in zip(axes, its):
-        _draw_dfo_iteration(ax, trace, it, x, e, bins)
+        energy_ax = _draw_dfo_iteration(ax, trace, it, x, e, bins)
     axes[0].set_ylabel("share of samples per bin")
+    energy_ax.set_ylabel("energy E(x, y) (red)", color="C3")
     fig.suptitle(title)
     fig.tight_layout()
     return fig
