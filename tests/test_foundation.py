@@ -169,3 +169,16 @@ def test_version_imports_no_subcommand_module():
     code = "import sys; from ibc_tutorial.cli import main\ntry: main(['--version'])\nexcept SystemExit: pass\nprint('pymunk' in sys.modules, 'gymnasium' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip().endswith("False False")
+
+
+def test_likelihood_objective_is_the_policys_loss_and_rejects_non_policies():
+    from ibc_tutorial.policies import RegressionPolicy
+    from ibc_tutorial.training import likelihood_objective
+
+    torch.manual_seed(0)
+    policy = RegressionPolicy.for_vectors(2, 1)
+    batch = {"obs": torch.randn(8, 2), "actions": torch.rand(8, 1) * 2 - 1}
+    loss = likelihood_objective(policy)(batch, torch.Generator())
+    assert torch.equal(loss, policy.loss(batch["obs"], batch["actions"]))
+    with pytest.raises(ValueError, match="loss"):
+        likelihood_objective(torch.nn.Linear(2, 1))

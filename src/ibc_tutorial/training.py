@@ -142,6 +142,21 @@ from ibc_tutorial.utils import check_positive  # noqa: E402
 LossFn = Callable[[dict[str, torch.Tensor], torch.Generator], torch.Tensor]
 
 
+def likelihood_objective(policy: torch.nn.Module, *, obs_key: str = "obs", action_key: str = "actions") -> LossFn:
+    """The loss of an explicit policy (regression, Beta, classifier, MDN) as ``train`` wants it.
+
+    Returns ``loss_fn(batch, generator) = policy.loss(batch[obs_key], batch[action_key])``: the
+    policy's own negative log-likelihood (or regression loss); the generator is not needed.
+    """
+    if not callable(getattr(policy, "loss", None)):
+        raise ValueError(f"policy must have a loss(obs, actions) method, got {type(policy).__name__}")
+
+    def loss_fn(batch: dict[str, torch.Tensor], generator: torch.Generator) -> torch.Tensor:
+        return policy.loss(batch[obs_key], batch[action_key])
+
+    return loss_fn
+
+
 def info_nce_objective(
     model: torch.nn.Module,
     sampler: Callable[[torch.Tensor, int, torch.Generator], torch.Tensor],
