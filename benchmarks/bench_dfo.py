@@ -7,7 +7,7 @@
 
 The energy model is the paper's size (sec. 3.3 and Fig. 2): a 256-wide observation embedding
 and an action head of two hidden layers of 256 units on a 2-D action (steering, acceleration).
-One decision = one call of ``inference.dfo_batch`` for one observation: the observation is
+One decision = one call of ``optimizers.dfo.dfo(..., n_obs=1)`` for one observation: the observation is
 embedded once, then N_iters x N_samples candidates are scored by the head.
 
 Two heads with the same weights, timed in the same run:
@@ -37,7 +37,7 @@ import time
 
 import torch
 
-from ibc_tutorial.inference import dfo_batch, dfo_init_weights
+from ibc_tutorial.optimizers.dfo import DFOConfig, dfo, initial_weights
 from ibc_tutorial.policies import EnergyModel, MLPEncoder
 
 
@@ -93,14 +93,14 @@ def encoder_flops(encoder: MLPEncoder) -> int:
     return sum(2 * m.in_features * m.out_features + m.out_features for m in encoder.net if isinstance(m, torch.nn.Linear))
 
 
-def time_decisions(energy_fn, experts, weights, args, n: int) -> list[float]:
+def time_decisions(energy_fn, experts, weights, config: DFOConfig, n: int) -> list[float]:
     """Seconds per decision of ``n`` DFO decisions (one observation each)."""
     gen = torch.Generator().manual_seed(0)
     times = []
     with torch.no_grad():
         for _ in range(n):
             t0 = time.perf_counter()
-            dfo_batch(energy_fn(), experts, 1, n_samples=args.samples, n_iters=args.iters, init_weights=weights, generator=gen)
+            dfo(energy_fn(), experts, config, n_obs=1, init_weights=weights, generator=gen)
             times.append(time.perf_counter() - t0)
     return times
 
@@ -128,7 +128,8 @@ def main(argv=None) -> int:
     gen = torch.Generator().manual_seed(1)
     obs = torch.randn(1, args.obs_dim, generator=gen)
     experts = (torch.randn(args.experts, 2, generator=gen) * 0.3).clamp(-1, 1)  # (M, 2)
-    weights = dfo_init_weights(experts, "inverse-kde")  # once, as a closed loop would
+    config = DFOConfig(n_samples=args.samples, n_iters=args.iters)  # the paper's init: inverse-kde
+    weights = initial_weights(experts, config)  # once, as a closed loop would
 
     with torch.no_grad():
         z = model.embed(obs)  # (1, E)
@@ -167,8 +168,8 @@ def main(argv=None) -> int:
     enc = encoder_flops(encoder)
     results = {}
     for name, make in heads.items():
-        time_decisions(make, experts, weights, args, args.warmup)
-        times = time_decisions(make, experts, weights, args, args.decisions)
+        time_decisions(make, experts, weights, config, args.warmup)
+        times = time_decisions(make, experts, weights, config, args.decisions)
         med = statistics.median(times)
         results[name] = med
         line = f"{name:>42}: {1 / med:7.2f} decisions/s  ({med * 1e3:7.1f} ms per decision, best {min(times) * 1e3:.1f} ms)"

@@ -1,12 +1,14 @@
-"""The Fig. 2 network of the DA-IBC paper and the agents built on it (ibc_tutorial.agents)."""
+"""The Fig. 2 network of the DA-IBC paper and the agents built on it (ibc_tutorial.experiments.agents.agent, .presets)."""
+
+import dataclasses
 
 import numpy as np
 import pytest
 import torch
 
-from ibc_tutorial.agents import Agent, BEVStateEncoder, build_network, to_tensor_obs
-from ibc_tutorial.policies import BetaPolicy, EnergyModel, ObservationEncoder
-from ibc_tutorial.presets import LAPTOP, PAPER, PRESETS, TINY, Preset, differences, get_preset
+from ibc_tutorial.experiments.agents.agent import Agent, architecture, build_network, network_from_architecture, to_tensor_obs
+from ibc_tutorial.experiments.agents.presets import LAPTOP, PAPER, PRESETS, TINY, Preset, differences, get_preset
+from ibc_tutorial.policies import BEVStateEncoder, BetaPolicy, EnergyModel, ObservationEncoder
 
 
 def _obs(b, size, seed=0):
@@ -64,8 +66,10 @@ def test_ibc_and_da_ibc_run_algorithm_1_as_the_paper_defines_them():
     actions = torch.rand(50, 2) * 2 - 1
     ibc = Agent("ibc", build_network("ibc", TINY), TINY, actions)
     da = Agent("da-ibc", build_network("da-ibc", TINY), TINY, actions)
-    assert ibc.dfo_settings["init"] == "uniform" and ibc.dfo_settings["select"] == "argmax"
-    assert da.dfo_settings["init"] == "inverse-kde" and da.dfo_settings["select"] == "sample"
+    assert ibc.dfo_config.init == "uniform" and ibc.dfo_config.select == "argmax"
+    assert da.dfo_config.init == "inverse-kde" and da.dfo_config.select == "sample"
+    assert (da.dfo_config.n_samples, da.dfo_config.n_iters) == (TINY.dfo_samples, TINY.dfo_iters)
+    assert Agent("bc", build_network("bc", TINY), TINY, actions).dfo_config is None
     # DA-IBC's initial weights are w ∝ 1 / ĝ (eq. 4 with h = 0.2), computed independently here
     d = ((actions[:, None, :] - actions[None, :, :]) / TINY.kde_bandwidth).pow(2).sum(-1)
     g = torch.exp(-0.5 * d).mean(1)
@@ -95,9 +99,23 @@ def test_presets():
     with pytest.raises(ValueError, match="preset"):
         get_preset("huge")
     with pytest.raises(ValueError, match="epochs"):
-        TINY.with_(epochs=0)
+        dataclasses.replace(TINY, epochs=0)
 
 
 def test_to_tensor_obs_from_numpy():
     o = to_tensor_obs({"bev": np.zeros((2, 5, 8, 8), np.uint8), "state": np.zeros((2, 3), np.float64)})
     assert o["bev"].dtype == torch.uint8 and o["state"].dtype == torch.float32
+
+
+def test_the_network_is_built_from_its_architecture():
+    for m in ("bc", "ibc", "da-ibc"):
+        arch = architecture(m, LAPTOP)
+        torch.manual_seed(0)
+        a = build_network(m, LAPTOP)
+        torch.manual_seed(0)
+        b = network_from_architecture(arch)
+        assert type(a) is type(b) and all(torch.equal(x, y) for x, y in zip(a.state_dict().values(), b.state_dict().values()))
+        assert arch["network"] == type(a).__name__ and arch["encoder"] == type(a.encoder).__name__
+        assert list(a.encoder.channels) == arch["cnn_channels"] and a.encoder.bev_size == arch["bev_size"]
+    with pytest.raises(ValueError, match="arch"):
+        network_from_architecture({"network": "MDNPolicy", "encoder": "BEVStateEncoder"})

@@ -6,11 +6,12 @@ import pytest
 import torch
 
 from ibc_tutorial import cli
-from ibc_tutorial.agent_training import read_metrics
-from ibc_tutorial.checkpoints import file_sha256, load_checkpoint
 from ibc_tutorial.driving.collect import CollectConfig, collect
+from ibc_tutorial.driving.dataset import DemoLog
 from ibc_tutorial.driving.sim import score
-from ibc_tutorial.presets import TINY
+from ibc_tutorial.experiments.agents.checkpoints import load_checkpoint
+from ibc_tutorial.experiments.agents.presets import TINY
+from ibc_tutorial.experiments.agents.train import read_metrics
 
 
 @pytest.fixture(scope="module")
@@ -29,7 +30,7 @@ def test_train_then_evaluate(method, data, tmp_path, capsys):
     for m in metrics:
         assert m["method"] == method and m["eval"]["episodes"] == TINY.eval_episodes and len(m["episodes"]) == TINY.eval_episodes
     ckpt = load_checkpoint(out / "final.pt", method=method, preset=TINY)
-    assert ckpt["data_sha256"] == file_sha256(data) and ckpt["epoch"] == TINY.epochs
+    assert ckpt["data_sha256"] == DemoLog.load(data).checksum() and ckpt["epoch"] == TINY.epochs
     report = tmp_path / "eval.json"
     assert cli.main(["evaluate", "--checkpoint", str(out / "final.pt"), "--episodes", "3", "--steps", "12",
                      "--out", str(report)]) == 0
@@ -52,6 +53,17 @@ def test_resume_continues_exactly(data, tmp_path):
     b = torch.load(parts / "final.pt", weights_only=True)["model"]
     assert all(torch.equal(a[k], b[k]) for k in a)
     assert [m["loss"] for m in read_metrics(whole)] == [m["loss"] for m in read_metrics(parts)]
+
+
+def test_resume_accepts_the_same_demonstrations_collected_again(data, tmp_path):
+    """The run records the demonstrations' content, not the file's bytes (which hold the time it was written)."""
+    out = tmp_path / "run"
+    base = ["train", "--method", "bc", "--preset", "tiny", "--seed", "0", "--out", str(out)]
+    assert cli.main(base + ["--data", str(data), "--epochs", "1"]) == 0
+    again = tmp_path / "again.npz"
+    collect(CollectConfig(routes=1, seed=0, min_minutes=0.15, max_minutes=0.2), show_progress=False).save(again)
+    assert cli.main(base + ["--data", str(again)]) == 0
+    assert [m["epoch"] for m in read_metrics(out)] == list(range(1, TINY.epochs + 1))
 
 
 def test_resume_refuses_another_data_file(data, tmp_path):

@@ -1,12 +1,16 @@
-"""DFO, Algorithm 1 of the DA-IBC paper, on analytic energies with known modes."""
+"""DFO, Algorithm 1 of the DA-IBC paper, on analytic energies with known modes (``optimizers.dfo``)."""
 
+import dataclasses
 import math
 
+import matplotlib.pyplot as plt
 import pytest
 import torch
 
-from ibc_tutorial.inference import dfo, dfo_batch, dfo_init_weights, dfo_policy, dfo_trace, initial_samples
-from ibc_tutorial.kde import kde_density
+from ibc_tutorial.kde import inverse_density_weights, kde_density
+from ibc_tutorial.optimizers import ActionOptimizer
+from ibc_tutorial.optimizers.dfo import DFOConfig, DFOOptimizer, dfo, dfo_policy, dfo_trace, initial_samples, initial_weights
+from ibc_tutorial.widgets import _dfo_iteration_figure, dfo_stepper
 
 TAU = 0.01  # valley width: E = (y − c)² / TAU
 
@@ -30,11 +34,15 @@ def symmetric_experts(n=200, seed=0):
 SMALL = dict(n_samples=512)
 
 
+def cfg(**kw):
+    return DFOConfig(**{**SMALL, **kw})
+
+
 @pytest.mark.parametrize("init", ["uniform", "kde", "inverse-kde"])
 def test_equal_valleys_both_reached_with_sample(init):
     g = torch.Generator().manual_seed(0)
     experts = symmetric_experts()
-    actions = torch.stack([dfo(two_valleys(), experts, init=init, generator=g, **SMALL) for _ in range(200)])  # (200, 1)
+    actions = torch.stack([dfo(two_valleys(), experts, cfg(init=init), generator=g) for _ in range(200)])  # (200, 1)
     right = (actions[:, 0] > 0).float().mean()
     assert 0.35 < float(right) < 0.65
     # and every answer lies in a valley (closer to a floor than to the ridge at 0)
@@ -46,7 +54,7 @@ def test_unequal_valleys_argmax_lands_on_the_deeper_floor(init):
     g = torch.Generator().manual_seed(1)
     experts = symmetric_experts()
     for _ in range(30):
-        a = dfo(two_valleys(offset=1.0), experts, init=init, select="argmax", generator=g, **SMALL)
+        a = dfo(two_valleys(offset=1.0), experts, cfg(init=init, select="argmax"), generator=g)
         assert abs(float(a[0]) + 0.5) < 0.03
 
 
@@ -56,7 +64,7 @@ def test_sample_follows_the_sharpened_distribution_on_unequal_valleys():
     experts = symmetric_experts()
     share = {}
     for k in (1, 5):
-        acts = torch.stack([dfo(two_valleys(offset=0.3), experts, init="uniform", n_iters=k, generator=g, **SMALL) for _ in range(300)])
+        acts = torch.stack([dfo(two_valleys(offset=0.3), experts, cfg(init="uniform", n_iters=k), generator=g) for _ in range(300)])
         share[k] = float((acts[:, 0] > 0).float().mean())
     # equal widths: p(shallow) = e^{-k·0.3} / (1 + e^{-k·0.3}); k = 1: 0.43, k = 5: 0.18
     assert abs(share[1] - 1 / (1 + math.exp(0.3))) < 0.08
@@ -68,24 +76,24 @@ def test_results_inside_bounds_even_when_the_minimum_is_outside():
     energy = lambda y: 50 * ((y - 2.0) ** 2).sum(-1)
     experts = torch.tensor([[0.9], [0.5], [-0.9]])
     g = torch.Generator().manual_seed(3)
-    tr = dfo_trace(energy, experts, low=-1.0, high=1.0, init="uniform", select="argmax", generator=g, **SMALL)
+    tr = dfo_trace(energy, experts, cfg(low=-1.0, high=1.0, init="uniform", select="argmax"), generator=g)
     for s in tr.samples:
         assert s.min() >= -1.0 and s.max() <= 1.0
     assert (tr.samples[-1] == 1.0).float().mean() > 0.2  # clamped onto the bound, not redrawn
     assert float(tr.action[0]) == 1.0
     # per-dimension bounds in 2-D
     e2 = lambda y: ((y - torch.tensor([5.0, -5.0])) ** 2).sum(-1)
-    a = dfo(e2, torch.zeros(4, 2), low=[-1.0, -0.5], high=[1.0, 0.5], select="argmax", generator=g, **SMALL)
+    a = dfo(e2, torch.zeros(4, 2), cfg(low=[-1.0, -0.5], high=[1.0, 0.5], select="argmax"), generator=g)
     assert torch.allclose(a, torch.tensor([1.0, -0.5]))
 
 
 def test_reproducible_with_a_generator_and_trace_matches_dfo():
     experts = symmetric_experts()
-    kw = dict(n_samples=256, init="uniform")
-    a1 = dfo(two_valleys(), experts, generator=torch.Generator().manual_seed(7), **kw)
-    a2 = dfo(two_valleys(), experts, generator=torch.Generator().manual_seed(7), **kw)
-    tr = dfo_trace(two_valleys(), experts, generator=torch.Generator().manual_seed(7), **kw)
-    assert torch.equal(a1, a2) and torch.equal(a1, tr.action)
+    c = DFOConfig(n_samples=256, init="uniform")
+    a1 = dfo(two_valleys(), experts, c, generator=torch.Generator().manual_seed(7))
+    a2 = dfo(two_valleys(), experts, c, generator=torch.Generator().manual_seed(7))
+    tr = dfo_trace(two_valleys(), experts, c, generator=torch.Generator().manual_seed(7))
+    assert torch.equal(a1, a2) and torch.equal(a1, tr.action) and tr.config == c
     assert len(tr.samples) == 5 and tr.energy_evaluations == 256 * 5
     assert tr.sigmas[:4] == [0.5, 0.25, 0.125, 0.0625] and math.isnan(tr.sigmas[4])
     for p, e in zip(tr.probs, tr.energies):
@@ -97,13 +105,14 @@ def test_reproducible_with_a_generator_and_trace_matches_dfo():
 
 def test_single_is_batched_with_b_equal_1_and_rows_are_independent():
     experts = symmetric_experts()
-    a = dfo(two_valleys(), experts, n_samples=128, generator=torch.Generator().manual_seed(9))
-    b = dfo_batch(lambda y: two_valleys()(y[0])[None], experts, 1, n_samples=128, generator=torch.Generator().manual_seed(9))
-    assert torch.equal(a, b[0])
+    c = DFOConfig(n_samples=128)
+    a = dfo(two_valleys(), experts, c, generator=torch.Generator().manual_seed(9))
+    b = dfo(lambda y: two_valleys()(y[0])[None], experts, c, n_obs=1, generator=torch.Generator().manual_seed(9))
+    assert a.shape == (1,) and b.shape == (1, 1) and torch.equal(a, b[0])
     # B = 3 observations, each with its own single valley at c_b
     centres = torch.tensor([-0.6, 0.1, 0.7])
     energy = lambda y: (y[..., 0] - centres[:, None]) ** 2 / TAU  # (B, N, 1) -> (B, N)
-    acts = dfo_batch(energy, experts, 3, n_samples=512, select="argmax", generator=torch.Generator().manual_seed(0))
+    acts = dfo(energy, experts, cfg(select="argmax"), n_obs=3, generator=torch.Generator().manual_seed(0))
     assert acts.shape == (3, 1)
     torch.testing.assert_close(acts[:, 0], centres, atol=0.02, rtol=0)
 
@@ -113,53 +122,101 @@ def test_initialisations_follow_their_weights():
     experts = torch.cat([torch.randn(900, 1, generator=g) * 0.05, 0.7 + torch.randn(100, 1, generator=g) * 0.05])
     gk = kde_density(experts, experts).double()
     for init, w in (("kde", gk / gk.sum()), ("inverse-kde", (1 / gk) / (1 / gk).sum())):
-        torch.testing.assert_close(dfo_init_weights(experts, init).double(), w, rtol=1e-5, atol=0)
-        y = initial_samples(experts, 2, 20000, init=init, generator=g)  # (2, N, 1)
+        torch.testing.assert_close(initial_weights(experts, DFOConfig(init=init)).double(), w, rtol=1e-5, atol=0)
+        y = initial_samples(experts, 2, DFOConfig(n_samples=20000, init=init), generator=g)  # (2, N, 1)
         assert y.shape == (2, 20000, 1)
         rare = float((y > 0.35).float().mean())
         assert abs(rare - float(w[900:].sum())) < 0.02
-    assert dfo_init_weights(experts, "uniform") is None
-    u = initial_samples(experts, 1, 20000, init="uniform", low=-1.0, high=1.0, generator=g)
+    assert initial_weights(experts, DFOConfig(init="uniform")) is None
+    # the text's weights are the KDE module's inverse-density weights, the one place 1/ĝ is computed
+    assert torch.equal(initial_weights(experts, DFOConfig(init="inverse-kde")), inverse_density_weights(experts))
+    u = initial_samples(experts, 1, DFOConfig(n_samples=20000, init="uniform", low=-1.0, high=1.0), generator=g)
     assert abs(float(u.mean())) < 0.03 and u.min() >= -1 and u.max() <= 1
     # the text's weights spread the samples over the clusters; the algorithm's concentrate them
-    y_inv = initial_samples(experts, 1, 20000, init="inverse-kde", generator=g)
-    y_kde = initial_samples(experts, 1, 20000, init="kde", generator=g)
+    y_inv = initial_samples(experts, 1, DFOConfig(n_samples=20000, init="inverse-kde"), generator=g)
+    y_kde = initial_samples(experts, 1, DFOConfig(n_samples=20000, init="kde"), generator=g)
     assert (y_inv > 0.35).float().mean() > 0.3 > 0.1 > (y_kde > 0.35).float().mean()
 
 
 def test_bad_arguments_get_clear_errors():
     experts = symmetric_experts()
     e = two_valleys()
+    c = DFOConfig(n_samples=8)
+    # the settings are validated once, when the config is built
     with pytest.raises(ValueError, match="n_samples"):
-        dfo(e, experts, n_samples=0)
+        DFOConfig(n_samples=0)
     with pytest.raises(ValueError, match="low must be < high"):
-        dfo(e, experts, low=1.0, high=1.0)
+        DFOConfig(low=1.0, high=1.0)
     with pytest.raises(ValueError, match="low must be < high"):
-        dfo(e, experts, low=0.5, high=-0.5)
-    with pytest.raises(ValueError, match="action dimension"):
-        dfo(e, experts, low=[-1.0, -1.0], high=[1.0, 1.0])  # D = 1 actions, D = 2 bounds
-    with pytest.raises(ValueError, match="energy_fn must map actions"):
-        dfo(lambda y: y.sum(-1)[:, None], experts, n_samples=8)  # (N, 1) instead of (N,)
-    with pytest.raises(ValueError, match="energy_fn must map actions"):
-        dfo(lambda y: torch.zeros(3), experts, n_samples=8)
-    with pytest.raises(ValueError, match="NaN"):
-        dfo(lambda y: torch.full((len(y),), float("nan")), experts, n_samples=8)
+        DFOConfig(low=0.5, high=-0.5)
+    with pytest.raises(ValueError, match="low must be < high"):
+        DFOConfig(low=[-1.0, 0.5], high=[1.0, 0.0])
+    with pytest.raises(ValueError, match="low"):
+        DFOConfig(low=float("nan"))
     with pytest.raises(ValueError, match="n_iters"):
-        dfo(e, experts, n_iters=0)
+        DFOConfig(n_iters=0)
     with pytest.raises(ValueError, match="init"):
-        dfo(e, experts, init="kde-inverse")
+        DFOConfig(init="kde-inverse")
     with pytest.raises(ValueError, match="select"):
-        dfo(e, experts, select="max")
+        DFOConfig(select="max")
+    with pytest.raises(ValueError, match="sigma_init"):
+        DFOConfig(sigma_init=-0.1)
+    with pytest.raises(ValueError, match="bandwidth"):
+        DFOConfig(bandwidth=0.0)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        c.n_samples = 4
+    assert DFOConfig(low=[-1, -0.5], high=(1, 0.5)).low == (-1.0, -0.5)  # sequences stored as tuples of floats
+    # what depends on the actions is checked when DFO runs
+    with pytest.raises(ValueError, match="action dimension"):
+        dfo(e, experts, DFOConfig(low=[-1.0, -1.0], high=[1.0, 1.0]))  # D = 1 actions, D = 2 bounds
+    with pytest.raises(ValueError, match="config must be a DFOConfig"):
+        dfo(e, experts, dict(n_samples=8))
+    with pytest.raises(ValueError, match="energy_fn must map actions"):
+        dfo(lambda y: y.sum(-1)[:, None], experts, c)  # (N, 1) instead of (N,)
+    with pytest.raises(ValueError, match="energy_fn must map actions"):
+        dfo(lambda y: torch.zeros(3), experts, c)
+    with pytest.raises(ValueError, match="NaN"):
+        dfo(lambda y: torch.full((len(y),), float("nan")), experts, c)
     with pytest.raises(ValueError, match="expert_actions must have 2 dimensions"):
         dfo(e, torch.zeros(5))
+    with pytest.raises(ValueError, match="expert_actions must hold at least one"):
+        dfo(e, torch.zeros(0, 1), c)
     with pytest.raises(ValueError, match="inside"):
         dfo(e, torch.tensor([[1.5]]))
     with pytest.raises(ValueError, match="init_weights"):
         dfo(e, experts, init_weights=torch.ones(3))
-    with pytest.raises(ValueError, match="sigma_init"):
-        dfo(e, experts, sigma_init=-0.1)
+    with pytest.raises(ValueError, match="n_obs"):
+        dfo(e, experts, c, n_obs=0)
     with pytest.raises(ValueError, match="one energy per candidate"):
-        dfo_batch(lambda y: torch.zeros(2, 5), experts, 3, n_samples=8)
+        dfo(lambda y: torch.zeros(2, 5), experts, c, n_obs=3)
+
+
+def test_single_and_batched_forms_agree_row_by_row():
+    """Row 0 of B observations at once is what the single form gives for observation 0 with the same draws.
+
+    With the uniform start and one argmax iteration, the only draw is the (B, N, D) uniform
+    population, whose first N rows are the single form's (1, N, D) population.
+    """
+    experts = symmetric_experts()
+    c = DFOConfig(n_samples=256, n_iters=1, init="uniform", select="argmax")
+    centres = torch.tensor([-0.6, 0.1, 0.7])
+    batched = lambda y: (y[..., 0] - centres[:, None]) ** 2 / TAU  # (B, N, 1) -> (B, N)
+    single = lambda y: (y[:, 0] - centres[0]) ** 2 / TAU  # (N, 1) -> (N,), observation 0
+    acts = dfo(batched, experts, c, n_obs=3, generator=torch.Generator().manual_seed(4))  # (3, 1)
+    one = dfo(single, experts, c, generator=torch.Generator().manual_seed(4))  # (1,)
+    assert acts.shape == (3, 1) and one.shape == (1,)
+    assert torch.equal(one, acts[0])
+    torch.testing.assert_close(acts[:, 0], centres, atol=0.05, rtol=0)  # every row in its own valley (256 uniform samples)
+
+
+@pytest.mark.parametrize("init", ["uniform", "kde", "inverse-kde"])
+@pytest.mark.parametrize("select", ["sample", "argmax"])
+def test_trace_action_equals_dfo_with_equal_seeds(init, select):
+    experts = symmetric_experts()
+    c = DFOConfig(n_samples=200, n_iters=4, init=init, select=select)
+    a = dfo(two_valleys(0.2), experts, c, generator=torch.Generator().manual_seed(11))
+    tr = dfo_trace(two_valleys(0.2), experts, c, generator=torch.Generator().manual_seed(11))
+    assert torch.equal(a, tr.action) and len(tr.samples) == 4
 
 
 class _QuadraticModel(torch.nn.Module):
@@ -174,8 +231,44 @@ class _QuadraticModel(torch.nn.Module):
 
 def test_dfo_policy_acts_on_a_batch_of_observations():
     experts = torch.linspace(-0.9, 0.9, 50)[:, None]
-    policy = dfo_policy(_QuadraticModel(), experts, n_samples=512, select="argmax", generator=torch.Generator().manual_seed(0))
+    policy = dfo_policy(_QuadraticModel(), experts, cfg(select="argmax"), generator=torch.Generator().manual_seed(0))
     obs = torch.tensor([[-0.3], [0.0], [0.8]])
     acts = policy(obs)
     assert acts.shape == (3, 1)
     torch.testing.assert_close(acts, obs, atol=0.02, rtol=0)
+
+
+class _DictObsModel(_QuadraticModel):
+    """Observations as a dict of tensors (as the driving environment gives): B is the embedding's length."""
+
+    def embed(self, obs):
+        return obs["target"] + 0.0 * obs["speed"]  # (B, 1)
+
+
+def test_dfo_policy_and_optimizer_take_dict_observations():
+    experts = torch.linspace(-0.9, 0.9, 50)[:, None]
+    obs = {"target": torch.tensor([[-0.3], [0.0], [0.8]]), "speed": torch.zeros(3, 1)}  # len(obs) == 2 keys, B = 3
+    model = _DictObsModel().train()
+    policy = dfo_policy(model, experts, cfg(select="argmax"), generator=torch.Generator().manual_seed(0))
+    acts = policy(obs)
+    assert acts.shape == (3, 1) and model.training  # eval mode only during the decision
+    torch.testing.assert_close(acts, obs["target"], atol=0.02, rtol=0)
+    opt = DFOOptimizer(experts, cfg(select="argmax"))
+    assert isinstance(opt, ActionOptimizer)
+    torch.testing.assert_close(opt.infer(model, obs, generator=torch.Generator().manual_seed(0)), acts)
+
+
+@pytest.mark.parametrize("select", ["sample", "argmax"])
+def test_dfo_stepper_titles_the_last_iteration_by_the_choice_made(select):
+    grid = torch.linspace(-1, 1, 101)[:, None]
+    experts = symmetric_experts()
+    c = DFOConfig(n_samples=200, n_iters=3, select=select)
+    widget = dfo_stepper(two_valleys(), grid, experts, c)
+    assert widget.children[-1].value[:4] == b"\x89PNG"
+    trace = dfo_trace(two_valleys(), experts, c, generator=torch.Generator().manual_seed(0))
+    fig = _dfo_iteration_figure(trace, 3, grid[:, 0].numpy(), two_valleys()(grid).numpy(), 30)
+    ax, energy_ax = fig.axes
+    assert ("drawn from p̃" in ax.get_title()) == (select == "sample")
+    assert ("argmax" in ax.get_title()) == (select == "argmax")
+    assert energy_ax.get_ylabel() == "energy E(x, y) (nats, red)" and ax.get_xlabel() and ax.get_ylabel()
+    plt.close(fig)

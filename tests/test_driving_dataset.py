@@ -71,6 +71,14 @@ def test_damaged_and_foreign_files_are_refused(small_log, tmp_path):
         DemoLog.load(tmp_path / "missing.npz")
 
 
+def test_identical_collections_have_one_checksum(small_log, tmp_path):
+    """The demonstrations' hash covers their content: no wall time in the log, whatever the file's bytes."""
+    again = collect(CollectConfig(town="town02", routes=3, seed=1, min_minutes=0.5, max_minutes=1.0), show_progress=False)
+    assert again.meta == small_log.meta and "seconds" not in again.meta
+    assert again.checksum() == small_log.checksum()
+    assert DemoLog.load(again.save(tmp_path / "again.npz")).checksum() == small_log.checksum()
+
+
 def test_log_validates_its_arrays(small_log):
     with pytest.raises(ValueError, match="action"):
         DemoLog("town02", **{**_arrays(small_log), "action": np.zeros((3, 2))})

@@ -4,7 +4,7 @@ import pytest
 import torch
 from torch import nn
 
-from ibc_tutorial.inference import action_grid, grid_argmin
+from ibc_tutorial.optimizers.grid import action_grid, grid_argmin, grid_energies
 from ibc_tutorial.policies import EnergyModel, GridArgminPolicy, MLPEncoder
 from ibc_tutorial.policies.encoders import ObservationEncoder
 
@@ -146,8 +146,6 @@ def test_grid_argmin_policy_has_no_grad_and_restores_mode():
 
 
 def test_grid_energies_in_blocks_equal_one_pass():
-    from ibc_tutorial.inference import grid_energies
-
     model = make_model(action_dim=2)
     z = model.embed(torch.randn(37, 3))
     grid = action_grid(9, 2)

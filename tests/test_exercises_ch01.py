@@ -78,6 +78,8 @@ def test_best_constant_accepts_a_tensor():
         (lambda xy, t, rc, rt: ((xy - t) ** 2).sum(1) < rc + rt, "like with like"),
         (lambda xy, t, rc, rt: (xy[:, 0] - t[0]).abs() < rc + rt, "both coordinates"),
         (lambda xy, t, rc, rt: (xy - t).norm(dim=1) >= rc + rt, "opposite"),
+        (lambda xy, t, rc, rt: (xy - t).norm(dim=1) <= rc + rt, "only touch"),
+        (lambda xy, t, rc, rt: ((xy - t) ** 2).sum(1) <= (rc + rt) ** 2, "only touch"),
         (lambda xy, t, rc, rt: bool(((xy - t).norm(dim=1) < rc + rt).any()), "Tensor"),
         (lambda xy, t, rc, rt: ((xy - t).norm(dim=1) < rc + rt)[:, None], "one answer per car position"),
     ],
@@ -92,15 +94,31 @@ def test_hits_tree_accepts_float_flags():
     assert ch01.check_hits_tree(lambda xy, t, rc, rt: ((xy - t).norm(dim=1) < rc + rt).float()).status == "correct"
 
 
+def test_hits_tree_accepts_squared_distances():
+    assert ch01.check_hits_tree(lambda xy, t, rc, rt: ((xy - t) ** 2).sum(1) < (rc + rt) ** 2).status == "correct"
+
+
+def test_touching_is_no_collision_in_the_checker_nor_the_library():
+    """The checker tests positions exactly r_car + r_tree from the tree, where the discs only touch."""
+    xy, tree, rc, rt = ch01._hits_cases()
+    touching = (xy - tree).norm(dim=1) == rc + rt
+    assert touching.sum() >= 4
+    w = TreeWorld()
+    assert not w.collides(xy[touching]).any()
+    assert not solutions.ch01_hits_tree(xy[touching], tree, rc, rt).any()
+
+
 # --------------------------------------------------------------------------- swerve
 @pytest.mark.parametrize(
     "wrong, words",
     [
-        (lambda y: y.min(dim=1).values - y[:, 0], "differs"),
-        (lambda y: y.max(dim=1).values.clamp_min(0.0), "from where each car was"),
+        (lambda y: y[:, 0] - y.max(dim=1).values, "differs"),
+        (lambda y: y.max(dim=1).values - y[:, 0], "to the right"),  # towards +y: the left
+        (lambda y: y.min(dim=1).values - y[:, 0], "sign"),
+        (lambda y: (-y.min(dim=1).values).clamp_min(0.0), "from where each car was"),
         (lambda y: (y - y[:, :1]).abs().max(dim=1).values, "towards the side road"),
-        (lambda y: (y[:, -1] - y[:, 0]).clamp_min(0.0), "largest"),
-        (lambda y: (y.max(dim=0).values - y[0]).clamp_min(0.0), "which dimension"),
+        (lambda y: (y[:, 0] - y[:, -1]).clamp_min(0.0), "largest"),
+        (lambda y: (y[0] - y.min(dim=0).values).clamp_min(0.0), "which dimension"),
         (lambda y: 0.5, "torch.Tensor"),
     ],
 )

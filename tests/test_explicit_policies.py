@@ -46,6 +46,25 @@ def test_sampling_is_seeded(name):
     torch.testing.assert_close(a1, a2)
 
 
+def test_beta_samples_follow_the_beta_and_leave_the_global_rng_alone():
+    """``torch.distributions.Beta`` draws under a forked global RNG seeded from the generator."""
+    from scipy import stats
+
+    policy = BetaPolicy.for_vectors(3, 1, hidden=16)
+    with torch.no_grad():  # one fixed Beta(2, 5) for every observation
+        policy.head.weight.zero_()
+        inv_softplus = lambda v: torch.log(torch.expm1(torch.tensor(v)))  # noqa: E731
+        c = policy.min_concentration + policy.eps
+        policy.head.bias.copy_(torch.stack([inv_softplus(2.0 - c), inv_softplus(5.0 - c)]))
+    state = torch.random.get_rng_state()
+    a = policy.act(torch.zeros(4000, 3), mode="sample", generator=torch.Generator().manual_seed(0))  # (4000, 1)
+    assert torch.equal(torch.random.get_rng_state(), state)  # the global generator did not move
+    z = ((a[:, 0] + 1) / 2).double().numpy()
+    assert stats.kstest(z, stats.beta(2.0, 5.0).cdf).pvalue > 1e-3
+    b = policy.act(torch.zeros(4000, 3), mode="sample", generator=torch.Generator().manual_seed(1))
+    assert not torch.equal(a, b)
+
+
 @pytest.mark.parametrize("name", ["beta", "classifier", "mdn"])
 def test_action_density_integrates_to_about_one(name):
     torch.manual_seed(0)
@@ -154,27 +173,26 @@ def test_multimodal_policies_find_both_modes_and_regression_averages():
 
 
 def test_chapter_02_figures_build():
-    import matplotlib
+    import matplotlib.pyplot as plt
 
-    matplotlib.use("Agg")
-    from ibc_tutorial import plotting
+    from ibc_tutorial.plotting import multimodality
     from ibc_tutorial.toy import SideRoadWorld, TreeWorld
 
-    fig = plotting.plot_beta_shapes([(0.5, 0.5), (2, 5)])
+    fig = multimodality.plot_beta_shapes([(0.5, 0.5), (2, 5)])
     assert "Beta" in fig.axes[0].get_title() and len(fig.axes[0].lines) == 2
-    plotting.plt.close(fig)
+    plt.close(fig)
     torch.manual_seed(0)
     policies = {name: make(1) for name, make in POLICIES.items()}
     for p in policies.values():
         p.encoder = MLPEncoder(1, embed_dim=16)  # observations of size 1, like the toy worlds'
-    fig = plotting.plot_action_distributions(policies, torch.zeros(1, 1), torch.rand(50) * 2 - 1, where="here")
+    fig = multimodality.plot_action_distributions(policies, torch.zeros(1, 1), torch.rand(50) * 2 - 1, where="here")
     assert [ax.get_title() for ax in fig.axes] == list(policies)
-    plotting.plt.close(fig)
-    fig = plotting.plot_density_fits(torch.rand(50) * 2 - 1, torch.linspace(-1, 1, 11), {"flat": torch.full((11,), 0.5)}, title="t")
+    plt.close(fig)
+    fig = multimodality.plot_density_fits(torch.rand(50) * 2 - 1, torch.linspace(-1, 1, 11), {"flat": torch.full((11,), 0.5)}, title="t")
     assert fig.axes[0].get_xlabel().startswith("steering")
-    plotting.plt.close(fig)
+    plt.close(fig)
     for world in (TreeWorld(), SideRoadWorld()):
         r = world.rollout(lambda obs: torch.zeros(len(obs), 1), 3, seed=0)
-        fig = plotting.plot_rollout_grid(world, {"a": r, "b": r, "c": r}, title="grid")
+        fig = multimodality.plot_rollout_grid(world, {"a": r, "b": r, "c": r}, title="grid")
         assert fig.axes[0].get_title().startswith("a:") and not fig.axes[3].axison  # the empty fourth panel is hidden
-        plotting.plt.close(fig)
+        plt.close(fig)

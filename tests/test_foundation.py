@@ -56,6 +56,25 @@ def test_checks_name_the_argument():
     assert utils.check_positive("h", 0, allow_zero=True) == 0.0
 
 
+def test_config_checks_name_the_field():
+    from dataclasses import dataclass
+
+    @dataclass
+    class Cfg:
+        speed: float = 1.0
+        noise: float = 0.0
+        p: float = 0.5
+
+    utils.check_positive_fields(Cfg(), ("speed",))
+    utils.check_positive_fields(Cfg(), ("noise",), allow_zero=True)
+    with pytest.raises(ValueError, match=r"config\.noise must be a finite number > 0"):
+        utils.check_positive_fields(Cfg(), ("speed", "noise"))
+    assert utils.check_probability("config.p", Cfg().p) == 0.5
+    for bad in (1.5, -0.1, float("nan"), "x"):
+        with pytest.raises(ValueError, match=r"config\.p must be a probability in \[0, 1\]"):
+            utils.check_probability("config.p", bad)
+
+
 def test_atomic_write_replaces_whole_file_and_leaves_no_temp(tmp_path):
     p = tmp_path / "sub" / "f.bin"
     utils.atomic_write_bytes(p, b"first")
@@ -70,9 +89,15 @@ def test_atomic_torch_save_loads_with_weights_only(tmp_path):
 
 
 def test_progress_is_silent_when_quiet(monkeypatch, capsys):
+    assert utils.QUIET_ENV == "TQDM_DISABLE"  # tqdm's own switch
     monkeypatch.setenv(utils.QUIET_ENV, "1")
+    assert utils.quiet()
     assert list(utils.progress(range(3))) == [0, 1, 2]
     assert capsys.readouterr().err == ""
+    for off in ("", "0", "false"):
+        monkeypatch.setenv(utils.QUIET_ENV, off)
+        assert not utils.quiet()
+    assert utils.progress(range(3), enabled=False).disable
 
 
 def _line_data(n=256, seed=0):
@@ -146,7 +171,7 @@ def test_executor_runs_a_notebook_in_place(tmp_path):
     import nbformat
 
     nb = nbformat.v4.new_notebook()
-    nb.cells = [nbformat.v4.new_code_cell("import os\nprint(os.environ.get('IBC_TUTORIAL_QUIET'), 1 + 1)")]
+    nb.cells = [nbformat.v4.new_code_cell("import os\nprint(os.environ.get('TQDM_DISABLE'), 1 + 1)")]
     path = tmp_path / "t.ipynb"
     nbformat.write(nb, path)
     subprocess.run([sys.executable, str(ROOT / "tools" / "execute_notebooks.py"), str(path)], check=True, capture_output=True)
@@ -171,9 +196,18 @@ def test_version_imports_no_subcommand_module():
     assert out.stdout.strip().endswith("False False")
 
 
+def test_help_lists_every_command_without_importing_them():
+    code = ("import sys; from ibc_tutorial.cli import main\ntry: main(['--help'])\nexcept SystemExit: pass\n"
+            "print([m for m in sys.modules if m.startswith(('ibc_tutorial.driving', 'ibc_tutorial.experiments'))])")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    for command in ("collect", "train", "evaluate", "replicate"):
+        assert command in out.stdout
+    assert out.stdout.strip().endswith("[]")
+
+
 def test_likelihood_objective_is_the_policys_loss_and_rejects_non_policies():
     from ibc_tutorial.policies import RegressionPolicy
-    from ibc_tutorial.training import likelihood_objective
+    from ibc_tutorial.objectives import likelihood_objective
 
     torch.manual_seed(0)
     policy = RegressionPolicy.for_vectors(2, 1)

@@ -8,7 +8,8 @@ import torch
 import torch.nn.functional as F
 from scipy.special import softmax as scipy_softmax
 
-from ibc_tutorial.inference import action_grid
+from ibc_tutorial.optimizers import ActionOptimizer
+from ibc_tutorial.optimizers.grid import GridOptimizer, action_grid
 from ibc_tutorial.losses import grid_cross_entropy, info_nce, soft_targets, temporal_smoothing
 from ibc_tutorial.metrics import expert_rank, grid_nll, whiteness
 
@@ -67,6 +68,51 @@ def test_grid_cross_entropy_rejects_bad_targets():
         grid_cross_entropy(torch.zeros(2, 3), torch.ones(2, 4) / 4)
 
 
+def test_grid_cross_entropy_refuses_empty_batches_and_grids():
+    with pytest.raises(ValueError, match=r"energies must hold at least one sample \(B >= 1\)"):
+        grid_cross_entropy(torch.zeros(0, 3), torch.zeros(0, 3))
+    with pytest.raises(ValueError, match="at least one candidate"):
+        grid_cross_entropy(torch.zeros(2, 0), torch.zeros(2, 0))
+
+
+# --------------------------------------------------------------------------- the grid itself
+def test_action_grid_is_the_cartesian_product_in_any_dimension():
+    axis = torch.linspace(-1, 1, 5)
+    torch.testing.assert_close(action_grid(5), axis[:, None])
+    g2 = action_grid(5, 2)  # (25, 2), first dimension slowest
+    assert g2.shape == (25, 2) and torch.equal(g2[7], torch.stack([axis[1], axis[2]]))
+    g3 = action_grid(4, 3, low=0.0, high=3.0)  # (64, 3): D = 3 is allowed now
+    assert g3.shape == (64, 3)
+    assert torch.equal(g3[0], torch.zeros(3)) and torch.equal(g3[-1], torch.full((3,), 3.0))
+    assert torch.equal(g3[1 * 16 + 2 * 4 + 3], torch.tensor([1.0, 2.0, 3.0]))  # row i·n² + j·n + k = (a_i, a_j, a_k)
+    assert len(torch.unique(g3, dim=0)) == 64
+    with pytest.raises(ValueError, match="low must be < high"):
+        action_grid(5, low=1.0, high=-1.0)
+    with pytest.raises(ValueError, match="n_per_dim"):
+        action_grid(1)
+    with pytest.raises(ValueError, match="action_dim"):
+        action_grid(5, 0)
+
+
+class _Quadratic:
+    """E(x, y) = |y − x|²: the argmin is the observation itself."""
+
+    def embed(self, obs):
+        return obs  # (B, D)
+
+    def energy_from_embedding(self, z, actions):
+        if actions.ndim == 2:
+            actions = actions.expand(len(z), -1, -1)  # (B, G, D)
+        return ((actions - z[:, None, :]) ** 2).sum(-1)  # (B, G)
+
+
+def test_grid_optimizer_finds_the_argmin_in_three_dimensions():
+    opt = GridOptimizer(action_grid(11, 3))  # (1331, 3), spacing 0.2
+    assert isinstance(opt, ActionOptimizer)
+    obs = torch.tensor([[0.2, -0.4, 1.0], [-1.0, 0.0, 0.6]])
+    torch.testing.assert_close(opt.infer(_Quadratic(), obs), obs)
+
+
 # --------------------------------------------------------------------------- temporal smoothing (eq. 4)
 def test_temporal_smoothing_is_alpha_times_mean_euclidean_norm():
     a = torch.tensor([[1.0, 2.0, 3.0], [0.0, 0.0, 0.0]])
@@ -89,6 +135,8 @@ def test_temporal_smoothing_bad_mask():
         temporal_smoothing(torch.zeros(2, 3), torch.zeros(2, 3), mask=torch.ones(3))
     with pytest.raises(ValueError, match="alpha"):
         temporal_smoothing(torch.zeros(2, 3), torch.zeros(2, 3), alpha=-1)
+    with pytest.raises(ValueError, match="at least one sample"):
+        temporal_smoothing(torch.zeros(0, 3), torch.zeros(0, 3))
 
 
 # --------------------------------------------------------------------------- whiteness (eq. 2)

@@ -86,3 +86,10 @@ def test_bad_input():
         info_nce(torch.zeros(3), torch.zeros(3, 4), -torch.ones(3))
     with pytest.raises(ValueError, match="finite"):
         info_nce(torch.tensor([float("nan")]), torch.zeros(1, 4))
+
+
+def test_empty_batch_is_refused_not_nan():
+    with pytest.raises(ValueError, match=r"pos_energy must hold at least one sample \(B >= 1\)"):
+        info_nce(torch.zeros(0), torch.zeros(0, 4))
+    with pytest.raises(ValueError, match="at least one sample"):
+        info_nce(torch.zeros(0), torch.zeros(0, 4), torch.zeros(0))

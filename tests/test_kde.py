@@ -1,4 +1,4 @@
-"""Gaussian KDE (eq. 4 of the DA-IBC paper), inverse-density weights and weighted sampling."""
+"""Gaussian KDE (eq. 4 of the DA-IBC paper), inverse-density weights (eq. 5) and their numerical range."""
 
 import math
 
@@ -7,7 +7,7 @@ import pytest
 import torch
 from scipy.stats import gaussian_kde
 
-from ibc_tutorial.kde import inverse_density_weights, kde_density, sample_indices, sampling_probs
+from ibc_tutorial.kde import inverse_density_weights, kde_density
 
 
 def loop_kde(query, data, h):
@@ -101,16 +101,16 @@ def test_inverse_density_weights_sum_to_one_and_rank_rare_actions_higher():
     torch.testing.assert_close(w.double(), inv / inv.sum(), rtol=1e-5, atol=0)
 
 
-def test_sampling_probs_and_sampler_raise_the_share_of_rare_actions():
+def test_inverse_density_weights_raise_the_share_of_rare_actions_in_minibatches():
+    """Drawn with probabilities w_i (as the training loop draws minibatches), rare actions are seen far more often."""
     g = torch.Generator().manual_seed(4)
     actions = torch.cat([torch.randn(950, 1, generator=g) * 0.05, 0.8 + torch.randn(50, 1, generator=g) * 0.05])
     rare = torch.zeros(1000, dtype=torch.bool)
     rare[950:] = True
-    uni = sampling_probs(actions, weighting="uniform")
-    inv = sampling_probs(actions)
-    assert float(uni.sum()) == pytest.approx(1.0) and float(inv.sum()) == pytest.approx(1.0, abs=1e-6)
-    idx_u = sample_indices(uni, 20000, generator=torch.Generator().manual_seed(0))
-    idx_w = sample_indices(inv, 20000, generator=torch.Generator().manual_seed(0))
+    inv = inverse_density_weights(actions)
+    assert float(inv.sum()) == pytest.approx(1.0, abs=1e-6)
+    idx_u = torch.multinomial(torch.full((1000,), 1e-3), 20000, replacement=True, generator=torch.Generator().manual_seed(0))
+    idx_w = torch.multinomial(inv, 20000, replacement=True, generator=torch.Generator().manual_seed(0))
     share_u, share_w = rare[idx_u].float().mean(), rare[idx_w].float().mean()
     assert abs(float(share_u) - 0.05) < 0.01
     # the inverse density flattens the two clusters to roughly equal shares
@@ -119,32 +119,74 @@ def test_sampling_probs_and_sampler_raise_the_share_of_rare_actions():
     assert abs(float(share_w) - float(inv[950:].sum())) < 0.015
 
 
-def test_sample_indices_is_the_draw_training_makes():
-    probs = torch.tensor([0.1, 0.2, 0.7])
-    a = sample_indices(probs, 64, generator=torch.Generator().manual_seed(5))
-    b = torch.multinomial(probs, 64, replacement=True, generator=torch.Generator().manual_seed(5))
-    assert torch.equal(a, b)
-    with pytest.raises(ValueError, match="probs"):
-        sample_indices(torch.tensor([-1.0, 2.0]), 3)
-    with pytest.raises(ValueError, match="batch_size"):
-        sample_indices(probs, 0)
-    with pytest.raises(ValueError, match="weighting"):
-        sampling_probs(torch.zeros(3, 1), weighting="kde")
+def test_empty_inputs_are_refused():
+    x = torch.zeros(5, 2)
+    with pytest.raises(ValueError, match="query must hold at least one point"):
+        kde_density(torch.zeros(0, 2), x)
+    with pytest.raises(ValueError, match="actions must hold at least one point"):
+        inverse_density_weights(torch.zeros(0, 2))
+    with pytest.raises(ValueError, match="at least one dimension"):
+        kde_density(torch.zeros(3, 0), torch.zeros(5, 0))
 
 
-def test_training_draws_the_minibatches_sample_indices_describes():
-    """``train(..., sample_probs=sampling_probs(...))`` draws its first minibatch exactly as ``sample_indices`` does."""
-    from ibc_tutorial.training import TrainConfig, train
+# --------------------------------------------------------------------------- numerical range (tiny or huge h, many D)
+def test_tiny_bandwidth_gives_exact_densities_or_names_the_bandwidth():
+    g = torch.Generator().manual_seed(5)
+    data = torch.rand(20, 1, generator=g)
+    query = torch.rand(10, 1, generator=g)
+    # no query coincides with a data point: every kernel is e^(−huge), the density is 0 (it was NaN)
+    assert torch.equal(kde_density(query, data, 1e-200), torch.zeros(10))
+    assert torch.equal(kde_density(query[:, :1].expand(10, 2).contiguous(), data.expand(20, 2).contiguous(), 1e-200), torch.zeros(10))
+    # at the data points themselves: 1 / (M h √(2π)) per coincident point, exact in float64 ...
+    dens = kde_density(data.double(), data.double(), 1e-200)
+    torch.testing.assert_close(dens, torch.full((20,), 1 / (20 * 1e-200 * math.sqrt(2 * math.pi)), dtype=torch.float64), rtol=1e-12, atol=0)
+    # ... and beyond float32's range: a clear error naming the bandwidth
+    with pytest.raises(ValueError, match="bandwidth"):
+        kde_density(data, data, 1e-200)
+    # the weights are all equal (each point sees only itself), not NaN
+    torch.testing.assert_close(inverse_density_weights(data, 1e-200), torch.full((20,), 0.05))
 
-    actions = torch.cat([torch.zeros(90, 1), torch.ones(10, 1)])
-    probs = sampling_probs(actions, bandwidth=0.2)
-    seen = []
-    w = torch.nn.Parameter(torch.zeros(1))
 
-    def loss_fn(batch, generator):
-        seen.append(batch["index"].clone())
-        return ((w - 1) ** 2).sum()
+def test_far_queries_underflow_gracefully_in_log_space():
+    """Kernels below float64's range (e^−800) can still give a representable density when h is small."""
+    h = 1e-100
+    data = torch.tensor([[0.0]], dtype=torch.float64)
+    u = torch.tensor([10.0, 40.0, 45.0], dtype=torch.float64)  # distances in units of h: u²/2 = 50, 800, 1012.5
+    got = kde_density((u * h)[:, None], data, h)
+    exact = [math.exp(-0.5 * float(v) ** 2 - math.log(h * math.sqrt(2 * math.pi))) for v in u]  # 8e-124, 1.4e-247, 0
+    assert got[1] > 0 and got[2] == 0  # e^−800 underflows, e^−800 / (h √(2π)) does not
+    torch.testing.assert_close(got, torch.tensor(exact, dtype=torch.float64), rtol=1e-9, atol=0)
 
-    data = {"index": torch.arange(100), "actions": actions}
-    train(torch.nn.ParameterList([w]), loss_fn, data, TrainConfig(steps=1, batch_size=32, seed=7, progress=False), sample_probs=probs)
-    assert torch.equal(seen[0], sample_indices(probs, 32, generator=torch.Generator().manual_seed(7)))
+
+def test_many_dimensions_give_finite_weights():
+    x = torch.rand(10, 50, generator=torch.Generator().manual_seed(6))
+    # each ĝ(y_i) ≈ 1 / (M h^50 (2π)^25) ~ 1e79 overflows float32 (the weights were NaN)
+    w = inverse_density_weights(x, 0.01)
+    assert torch.isfinite(w).all()
+    torch.testing.assert_close(w, torch.full((10,), 0.1))  # the points are far apart in units of h: equal weights
+    with pytest.raises(ValueError, match="bandwidth"):
+        kde_density(x, x, 0.01)
+    assert torch.isfinite(kde_density(x.double(), x.double(), 0.01)).all()
+    # a spread of densities in float64 ranks rare points higher, as in low dimensions
+    pts = torch.cat([torch.zeros(5, 50), torch.ones(1, 50)]).double()
+    w = inverse_density_weights(pts, 0.01)
+    assert w[5] > w[:5].max() and float(w.sum()) == pytest.approx(1.0)
+
+
+def test_huge_bandwidth_gives_flat_densities():
+    # h = 1e200 raised OverflowError (h ** D); the density is 1 / (h^D (2π)^(D/2)): tiny, or 0 below float64
+    data = torch.rand(5, 1, dtype=torch.float64)
+    torch.testing.assert_close(kde_density(data, data, 1e200), torch.full((5,), 1 / (1e200 * math.sqrt(2 * math.pi)), dtype=torch.float64))
+    assert torch.equal(kde_density(torch.rand(4, 2), torch.rand(5, 2), 1e200), torch.zeros(4))
+    torch.testing.assert_close(inverse_density_weights(torch.rand(4, 2), 1e200), torch.full((4,), 0.25))
+
+
+def test_normal_inputs_take_the_plain_path():
+    """The log-space fallback leaves ordinary inputs untouched: the result is eq. 4 summed directly."""
+    g = torch.Generator().manual_seed(7)
+    data = torch.rand(300, 2, generator=g, dtype=torch.float64)
+    query = torch.rand(50, 2, generator=g, dtype=torch.float64)
+    h = 0.2
+    sq = ((query[:, None, :] - data[None, :, :]) ** 2).sum(-1) / h**2  # (Q, M)
+    direct = torch.exp(-0.5 * sq).sum(1) / (300 * h**2 * 2 * math.pi)
+    torch.testing.assert_close(kde_density(query, data, h), direct, rtol=1e-12, atol=0)

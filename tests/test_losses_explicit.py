@@ -138,3 +138,17 @@ def test_regression_loss_mae_and_mse():
     assert float(regression_loss(pred, act, "mse")) == pytest.approx((0.5 + 2.0) / 2)
     with pytest.raises(ValueError, match="kind"):
         regression_loss(pred, act, "huber")
+
+
+def test_empty_batches_are_refused_not_nan():
+    empty = torch.zeros(0, 2)
+    with pytest.raises(ValueError, match=r"actions must hold at least one sample \(B >= 1\)"):
+        beta_nll(torch.ones(0, 2), torch.ones(0, 2), empty)
+    with pytest.raises(ValueError, match="at least one sample"):
+        regression_loss(empty, empty)
+    with pytest.raises(ValueError, match="at least one sample"):
+        classification_loss(torch.zeros(0, 2, 4), empty)
+    with pytest.raises(ValueError, match="at least one sample"):
+        mdn_nll(torch.zeros(0, 3), torch.zeros(0, 3, 2), torch.ones(0, 3, 2), empty)
+    # helpers that are not means over a batch still accept it
+    assert action_to_bin(empty, 4).shape == (0, 2)

@@ -1,4 +1,5 @@
-"""Counter-example samplers: shapes, bounds and statistics against independent references."""
+"""Counter-example samplers: shapes, bounds and statistics against independent references;
+chapter 04's experiment around them (``experiments.counter_examples``)."""
 
 import math
 
@@ -6,7 +7,18 @@ import pytest
 import torch
 from scipy import stats
 
+from ibc_tutorial.experiments.counter_examples import (
+    CounterExampleConfig,
+    CounterExampleRun,
+    evaluate,
+    expert_nll,
+    make_datasets,
+    mode_masses,
+    negatives_histogram,
+    run,
+)
 from ibc_tutorial.negatives import ExpertSampler, UniformSampler, expert_negatives, uniform_negatives
+from ibc_tutorial.toy import JunctionWorld
 
 
 def test_uniform_shape_bounds_and_distribution():
@@ -108,33 +120,10 @@ def test_bad_input():
         expert_negatives(torch.zeros(3, 1), 0, 3, 0.1)
 
 
-# --------------------------------------------------------------------------- chapter 04's problem and measures
-def test_approach_problem_density_matches_torch_distributions():
-    from ibc_tutorial.negatives_experiment import ApproachProblem
-
-    problem = ApproachProblem()
-    data = problem.sample(300, torch.Generator().manual_seed(0))
-    assert data["obs"].shape == (300, 4) and data["actions"].shape == (300, 2)
-    shares = torch.bincount(data["situation"], minlength=3).float() / 300
-    assert shares[0] > 0.5 and shares[1] > 0.05 and shares[2] > 0.05
-    modes, valid = problem.modes(data["obs"])
-    s = problem.config.expert_noise
-    for i in range(0, 300, 37):
-        m = modes[i][valid[i]]  # (K, 2)
-        mix = torch.distributions.MixtureSameFamily(
-            torch.distributions.Categorical(torch.ones(len(m))),
-            torch.distributions.Independent(torch.distributions.Normal(m, s), 1),
-        )
-        torch.testing.assert_close(problem.log_density(data["obs"][i : i + 1], data["actions"][i : i + 1])[0], mix.log_prob(data["actions"][i]), atol=1e-4, rtol=1e-5)
-    # junctions have three valid actions, the rest one
-    assert (valid.sum(1) == torch.where(data["situation"] == 1, 3, 1)).all()
-
-
+# --------------------------------------------------------------------------- chapter 04's experiment and measures
 def test_evaluate_of_the_expert_density_reaches_the_floor():
-    from ibc_tutorial.negatives_experiment import ApproachProblem, ExperimentConfig, evaluate, expert_nll, make_datasets
-
-    problem = ApproachProblem()
-    config = ExperimentConfig(n_heldout=60)
+    problem = JunctionWorld()
+    config = CounterExampleConfig(n_heldout=60)
     _, heldout = make_datasets(problem, config)
 
     class Oracle(torch.nn.Module):
@@ -153,15 +142,13 @@ def test_evaluate_of_the_expert_density_reaches_the_floor():
 
 
 def test_negatives_histogram_and_mode_masses():
-    from ibc_tutorial.negatives_experiment import ApproachProblem, mode_masses, negatives_histogram
-
     actions = torch.tensor([[0.0, 0.0]]).repeat(10, 1)
     h = negatives_histogram(ExpertSampler(0.0), actions, 4, batches=2, batch_size=4, bins=10)
     assert h.shape == (10, 10) and float(h.sum()) == pytest.approx(1.0) and float(h[5, 5]) == pytest.approx(1.0)
     u = negatives_histogram(UniformSampler(-1.0, 1.0), actions, 100, batches=20, bins=4)
     assert (u > 0.05).all()  # uniform counter-examples visit every cell
 
-    problem = ApproachProblem()
+    problem = JunctionWorld()
 
     class Flat(torch.nn.Module):
         hidden = 1
@@ -175,3 +162,30 @@ def test_negatives_histogram_and_mode_masses():
     m = mode_masses(Flat(), torch.tensor([[0.0, 1.0, 0.0, 0.5]]), problem, grid_n=41, radius=0.15)
     # a flat landscape puts on each disc of radius 0.15 about its share of the box: π 0.15² / 4
     torch.testing.assert_close(m, torch.full((1, 3), math.pi * 0.15**2 / 4), atol=0.004, rtol=0)
+
+
+def test_a_short_run_records_its_measures():
+    world = JunctionWorld()
+    config = CounterExampleConfig(n_train=128, n_heldout=16, steps=4, batch_size=8, eval_every=2, grid_n=11)
+    data = make_datasets(world, config)
+    out = run(world, UniformSampler(), config, seed=0, data=data)
+    assert isinstance(out, CounterExampleRun) and out.steps == [2, 4]
+    assert len(out.nll) == len(out.hit) == len(out.losses) == 2 and all(math.isfinite(v) for v in out.nll)
+    again = run(world, UniformSampler(), config, seed=0, data=data)
+    assert again.nll == out.nll  # reproducible from the seed
+
+
+def test_counter_example_config_is_checked():
+    with pytest.raises(ValueError, match="n_neg"):
+        CounterExampleConfig(n_neg=0)
+    with pytest.raises(ValueError, match="hit_radius"):
+        CounterExampleConfig(hit_radius=0.0)
+
+
+def test_expert_clipping_per_dimension_bounds():
+    g = torch.Generator().manual_seed(1)
+    expert = torch.tensor([[0.9, 0.4], [-0.9, 0.1]])
+    neg = expert_negatives(expert, 50, 40, 0.3, generator=g, low=[-1.0, 0.0], high=[1.0, 0.5])
+    assert (neg[..., 0] >= -1).all() and (neg[..., 0] <= 1).all()
+    assert (neg[..., 1] >= 0).all() and (neg[..., 1] <= 0.5).all()
+    assert (neg[..., 1] == 0.5).any() and (neg[..., 1] == 0.0).any()

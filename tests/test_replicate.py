@@ -2,9 +2,15 @@
 
 import json
 
+from pathlib import Path
+
+import pytest
+
 from ibc_tutorial import cli
-from ibc_tutorial.presets import METHODS, TINY
-from ibc_tutorial.replicate import collect_results, machine, run_dir
+from ibc_tutorial.experiments.agents.presets import LAPTOP, METHODS, TINY
+from ibc_tutorial.experiments.agents.results import collect_results, load_results, machine, run_dir
+
+SHIPPED = Path(__file__).resolve().parents[1] / "book" / "results" / "laptop"
 
 
 def test_replicate_tiny(tmp_path):
@@ -36,3 +42,14 @@ def test_replicate_tiny(tmp_path):
 def test_machine_description():
     m = machine()
     assert m["nproc"] >= 1 and m["torch_threads"] >= 1
+
+
+def test_the_shipped_results_load():
+    if not (SHIPPED / "results.json").exists():
+        pytest.skip("no shipped results")
+    shipped = load_results(SHIPPED)
+    res = shipped["results"]
+    assert res["preset"] == LAPTOP.to_dict() and res["complete"]
+    assert shipped["provenance"]["complete"] and set(res["table"]) == set(METHODS)
+    assert shipped["free_driving"] and "junction_energy" in shipped["landscapes"]
+    assert collect_results(SHIPPED, LAPTOP)["table"] == res["table"]  # the aggregation reads the shipped runs alike

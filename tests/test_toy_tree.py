@@ -13,13 +13,26 @@ def zero_policy(obs):
 
 
 # --------------------------------------------------------------------------- the car
-def test_step_straight_and_full_left():
-    s = torch.tensor([[0.0, 0.0, 0.0], [1.0, -2.0, 0.3]])
-    out = car.step(s, torch.tensor([[0.0], [1.0]]), speed=5.0, heading_max=0.7, dt=0.1)
+def test_step_straight_full_right_and_full_left():
+    s = torch.tensor([[0.0, 0.0, 0.0], [1.0, -2.0, 0.3], [1.0, -2.0, 0.3]])
+    out = car.step(s, torch.tensor([[0.0], [1.0], [-1.0]]), speed=5.0, heading_max=0.7, dt=0.1)
     assert torch.allclose(out[0], torch.tensor([0.5, 0.0, 0.0]))
-    # full steering: the heading becomes heading_max whatever it was, and the car moves that way
-    expected = torch.tensor([1.0 + 0.5 * math.cos(0.7), -2.0 + 0.5 * math.sin(0.7), 0.7])
+    # steer +1 = full right: the heading becomes -heading_max whatever it was, and y decreases
+    expected = torch.tensor([1.0 + 0.5 * math.cos(0.7), -2.0 - 0.5 * math.sin(0.7), -0.7])
     assert torch.allclose(out[1], expected, atol=1e-6)
+    # steer -1 = full left: +heading_max, y increases (y points to the left)
+    expected = torch.tensor([1.0 + 0.5 * math.cos(0.7), -2.0 + 0.5 * math.sin(0.7), 0.7])
+    assert torch.allclose(out[2], expected, atol=1e-6)
+
+
+def test_step_is_mirror_symmetric():
+    """Reflecting the state in y and negating the steering reflects the next state in y, exactly."""
+    g = torch.Generator().manual_seed(0)
+    s = torch.randn(64, 3, generator=g)
+    a = 2 * torch.rand(64, 1, generator=g) - 1
+    flip = torch.tensor([1.0, -1.0, -1.0])
+    kw = dict(speed=5.0, heading_max=0.6, dt=0.1)
+    assert torch.equal(car.step(s * flip, -a, **kw), car.step(s, a, **kw) * flip)
 
 
 def test_step_checks_its_arguments():
@@ -38,7 +51,7 @@ def test_segment_circle_contact_analytic_cases():
     s = car.segment_circle_contact(p0, p1, centre, 2.0)
     assert s[0] == pytest.approx(0.3)  # head-on: touches at x = -2, 3 m of 10
     assert math.isinf(s[1])  # passes 3 m away from a 2 m circle
-    assert s[2] == pytest.approx(0.5)  # tangent at x = 0
+    assert math.isinf(s[2])  # tangent at x = 0: it only touches, which is no contact
     assert s[3] == 0.0  # starts inside
     assert math.isinf(s[4])  # stops before reaching it
     # crossing line x = -1: enters where y = -sqrt(3)
@@ -69,6 +82,10 @@ def test_lateral_observation_variant():
     assert w.obs_dim == 2
     obs = w.obs_at([10.0, 10.0], lateral=[0.0, 1.0])
     assert torch.allclose(obs, torch.tensor([[1.0, 0.0], [1.0, 0.5]]))
+    # the lateral offset is measured to the right of the centre line (-y), signed like the steering
+    assert w.states_at(10.0, lateral=1.0)[0, 1] == -1.0
+    assert torch.allclose(w.observe(torch.tensor([[10.0, 1.0, 0.0]])), torch.tensor([[1.0, -0.5]]))
+    assert torch.allclose(w.physical(obs)[:, 1], torch.tensor([0.0, 1.0]))
     assert w.in_window(obs, (9.0, 11.0), max_abs_lateral=0.5).tolist() == [True, False]
     assert w.expert_demonstrations(2, 0).obs.shape == (2 * w.config.horizon, 2)
 
@@ -78,8 +95,8 @@ def test_bad_config_and_arguments_raise():
         TreeWorld(TreeConfig(tree_radius=0.0))
     with pytest.raises(ValueError, match="swerve_start_min"):
         TreeWorld(TreeConfig(swerve_start_min=12.0, swerve_start_max=8.0))
-    with pytest.raises(ValueError, match="left_prob"):
-        TreeWorld(TreeConfig(left_prob=1.5))
+    with pytest.raises(ValueError, match="right_prob"):
+        TreeWorld(TreeConfig(right_prob=1.5))
     w = TreeWorld()
     with pytest.raises(ValueError, match="n_episodes"):
         w.rollout(zero_policy, 0, seed=0)
@@ -110,7 +127,8 @@ def test_both_modes_half_and_half(expert):
     # Binomial(1000, 1/2): 4 standard deviations is about +-63
     assert abs(int((modes == 0).sum()) - 500) < 63
     side = w.pass_side(ro)
-    assert torch.equal(side, torch.where(modes == 0, -1, 1))  # mode 0 passes on the left (-1)
+    assert torch.equal(side, torch.where(modes == 0, 1, -1))  # mode 0 passes on the right (+1)
+    assert w.mode_names == ("passes right", "passes left")
 
 
 def test_experts_end_past_the_tree(expert):
@@ -126,7 +144,7 @@ def test_same_observation_two_modes_of_action():
     a, m = demos.actions[window, 0], demos.mode[window]
     assert window.sum() > 500
     assert (m == 0).any() and (m == 1).any()
-    assert a[m == 0].mean() > 0.5 and a[m == 1].mean() < -0.5  # left steers left, right steers right
+    assert a[m == 0].mean() > 0.5 and a[m == 1].mean() < -0.5  # right steers right (+), left steers left (-)
     # two clusters, nothing in between: almost no action near the mean of all of them
     assert (a.abs() < 0.3).float().mean() < 0.02
     assert abs(float(a.mean())) < 0.15  # the average action is about straight ahead
@@ -160,16 +178,18 @@ def test_straight_policy_hits_the_tree_where_the_discs_touch():
     assert not ro.alive[:, -1].any() and ro.alive[:, 0].all()
 
 
-def test_swerving_policy_passes_on_its_side():
+@pytest.mark.parametrize("steer, side", [(1.0, 1), (-1.0, -1)])
+def test_swerving_policy_passes_on_its_side(steer, side):
     w = TreeWorld()
 
-    def left(obs):  # steer left from 12 m before the tree until 2 m before it
+    def swerve(obs):  # steer from 12 m before the tree until 2 m before it (+1 right, -1 left)
         d = w.physical(obs)[:, :1]
-        return torch.where((d < 12.0) & (d > 2.0), torch.ones_like(d), torch.zeros_like(d))
+        return torch.where((d < 12.0) & (d > 2.0), torch.full_like(d, steer), torch.zeros_like(d))
 
-    ro = w.rollout(left, 20, seed=0)
+    ro = w.rollout(swerve, 20, seed=0)
     assert not ro.collided.any()
-    assert (w.pass_side(ro) == -1).all()
+    assert (w.pass_side(ro) == side).all()
+    assert (ro.states[:, 40, 1] * side < -3.0).all()  # right: y < 0, left: y > 0
 
 
 def test_rollouts_reproducible_from_seed():
@@ -236,7 +256,7 @@ def test_initial_states_argument():
 def test_chapter_01_figures_have_titles_and_labels():
     import matplotlib.pyplot as plt
 
-    from ibc_tutorial import plotting
+    from ibc_tutorial.plotting import multimodality
 
     w = TreeWorld()
     demos = w.expert_demonstrations(6, seed=0)
@@ -244,14 +264,46 @@ def test_chapter_01_figures_have_titles_and_labels():
     a = demos.actions[:, 0]
     grid = torch.linspace(-1, 1, 11)
     figs = [
-        plotting.plot_tree_scene(w, demos.states, demos.episode_mode),
-        plotting.plot_actions_by_distance(w, demos, window=(7.0, 9.0), predictions={"zero": (torch.tensor([0.0, 10.0]), torch.zeros(2))}),
-        plotting.plot_action_histogram(a, demos.mode, title="actions"),
-        plotting.plot_constant_losses(grid, {"MSE": grid**2, "MAE": grid.abs()}, minimisers={"MSE": 0.0}, flat={"MAE": (-0.1, 0.1)}),
-        plotting.plot_tree_closed_loop(w, {"zero": ro, "again": ro}),
+        multimodality.plot_tree_scene(w, demos.states, demos.episode_mode),
+        multimodality.plot_actions_by_distance(w, demos, window=(7.0, 9.0), predictions={"zero": (torch.tensor([0.0, 10.0]), torch.zeros(2))}),
+        multimodality.plot_action_histogram(a, demos.mode, title="actions"),
+        multimodality.plot_constant_losses(grid, {"MSE": grid**2, "MAE": grid.abs()}, minimisers={"MSE": 0.0}, flat={"MAE": (-0.1, 0.1)}),
+        multimodality.plot_tree_closed_loop(w, {"zero": ro, "again": ro}),
     ]
     for fig in figs:
         axes = [ax for ax in fig.axes if ax.get_visible()]
         assert fig._suptitle is not None or all(ax.get_title() for ax in axes)
         assert all(ax.get_ylabel() for ax in axes) and any(ax.get_xlabel() for ax in axes)
         plt.close(fig)
+
+
+# --------------------------------------------------------------------------- mirror symmetry
+def test_the_tree_world_is_mirror_symmetric():
+    """The tree stands on the centre line: reflecting a drive in y (states (x, -y, -heading),
+    steering negated) gives a drive of the same world, with the other pass side."""
+    w = TreeWorld(TreeConfig(obs_lateral=True))
+    flip = torch.tensor([1.0, -1.0, -1.0])
+
+    def policy(obs):  # any policy that uses the lateral offset
+        return torch.tanh(2.0 * obs[:, 1:] + torch.sin(3.0 * obs[:, :1]))
+
+    def mirrored(obs):
+        return -policy(obs * torch.tensor([1.0, -1.0]))
+
+    start = w.initial_states(40, torch.Generator().manual_seed(0))
+    a = w.rollout(policy, 40, seed=0, initial_states=start)
+    b = w.rollout(mirrored, 40, seed=0, initial_states=start * flip)
+    assert torch.equal(b.states, a.states * flip) and torch.equal(b.actions, -a.actions)
+    assert torch.equal(b.collided, a.collided) and torch.equal(w.pass_side(b), -w.pass_side(a))
+
+
+def test_right_and_left_experts_are_mirror_images():
+    """Without steering noise and from the centre line, an expert who passes on the right (mode 0,
+    steering > 0) drives the mirror image of one who passes on the left (mode 1)."""
+    cfg = dict(expert_noise_std=0.0, start_lateral_range=0.0)
+    right = TreeWorld(TreeConfig(right_prob=1.0, **cfg)).expert_demonstrations(5, seed=1)
+    left = TreeWorld(TreeConfig(right_prob=0.0, **cfg)).expert_demonstrations(5, seed=1)
+    assert (right.episode_mode == 0).all() and (left.episode_mode == 1).all()
+    assert torch.equal(left.states, right.states * torch.tensor([1.0, -1.0, -1.0]))
+    assert torch.equal(left.actions, -right.actions)
+    assert right.actions.max() > 0.5 and (right.states[:, :, 1] <= 0).all()  # right: steering +, y <= 0

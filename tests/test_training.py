@@ -1,13 +1,14 @@
-"""The shared training loop's energy-model objectives (InfoNCE with any sampler, grid variants)."""
+"""The one training loop (resumable, any data with ``batch``) and the energy-model objectives (InfoNCE with any sampler, grid variants)."""
 
 import pytest
 import torch
 
-from ibc_tutorial.inference import action_grid, grid_argmin
+from ibc_tutorial.optimizers.grid import action_grid, grid_argmin
 from ibc_tutorial.losses import grid_cross_entropy, info_nce, soft_targets, temporal_smoothing
 from ibc_tutorial.negatives import ExpertSampler, UniformSampler
 from ibc_tutorial.policies import EnergyModel, MLPEncoder
-from ibc_tutorial.training import TrainConfig, consecutive_pairs, grid_objective, info_nce_objective, train
+from ibc_tutorial.objectives import consecutive_pairs, grid_objective, info_nce_objective
+from ibc_tutorial.training import TrainConfig, Trainer, draw_minibatch, train
 
 
 def bimodal_data(m=512, seed=0):
@@ -119,3 +120,75 @@ def test_objective_bad_input():
         grid_objective(model, action_grid(5), temperature=0)
     with pytest.raises(ValueError, match="smoothing"):
         grid_objective(model, action_grid(5), smoothing=-1)
+
+
+def _params(model):
+    return [p.detach().clone() for p in model.parameters()]
+
+
+def test_a_resumed_run_is_bit_identical(tmp_path):
+    data = bimodal_data(200)
+    config = TrainConfig(steps=60, batch_size=16, log_every=20, seed=4)
+    whole = small_model(seed=5)
+    res_whole = train(whole, info_nce_objective(whole, ExpertSampler(0.1), 8), data, config)
+    # stop after 33 steps (mid log interval), save the state to disk, continue in a fresh model and trainer
+    first = small_model(seed=5)
+    trainer = Trainer(first, info_nce_objective(first, ExpertSampler(0.1), 8), data, TrainConfig(**{**config.__dict__, "steps": 33}))
+    res_a = trainer.run()
+    torch.save(trainer.state_dict(), tmp_path / "state.pt")
+    state = torch.load(tmp_path / "state.pt", weights_only=True)
+    second = small_model(seed=99)  # other initial weights: all overwritten by the state
+    res_b = train(second, info_nce_objective(second, ExpertSampler(0.1), 8), data, config, state=state)
+    assert all(torch.equal(a, b) for a, b in zip(_params(whole), _params(second)))
+    assert res_whole.steps == [20, 40, 60] and res_a.steps == [20, 33] and res_b.steps == [40, 60]
+    assert res_b.losses[1] == res_whole.losses[2]  # steps 41-60: the same minibatches and counter-examples
+
+
+def test_trainer_takes_any_data_with_batch():
+    class Squares:
+        """A map-style dataset whose minibatches are made on demand."""
+
+        def __len__(self):
+            return 50
+
+        def batch(self, indices):
+            x = indices.float()[:, None] / 50
+            return {"obs": x, "actions": x ** 2}
+
+    seen = []
+    model = torch.nn.Linear(1, 1)
+
+    def objective(batch, gen):
+        seen.append(batch["obs"])
+        return ((model(batch["obs"]) - batch["actions"]) ** 2).mean()
+
+    res = train(model, objective, Squares(), TrainConfig(steps=30, batch_size=8, log_every=10, lr=1e-2))
+    assert len(seen) == 30 and res.losses[-1] < res.losses[0]
+    with pytest.raises(ValueError, match="batch"):
+        train(model, objective, [1, 2, 3], TrainConfig(steps=1))
+
+
+def test_draw_minibatch_is_the_draw_training_makes():
+    probs = torch.tensor([0.0, 0.2, 0.0, 0.8])
+    a = draw_minibatch(probs, 4, 500, torch.Generator().manual_seed(1))
+    assert set(a.tolist()) == {1, 3} and 0.7 < (a == 3).float().mean() < 0.9
+    u = draw_minibatch(None, 7, 300, torch.Generator().manual_seed(1))
+    assert u.min() >= 0 and u.max() == 6
+    seen = []
+    model = torch.nn.Linear(1, 1)
+
+    def objective(batch, gen):
+        seen.append(batch["i"])
+        return model.weight.sum() * 0.0
+
+    train(model, objective, {"i": torch.arange(4)}, TrainConfig(steps=1, batch_size=32, seed=3), sample_probs=probs)
+    assert torch.equal(seen[0], draw_minibatch(probs, 4, 32, torch.Generator().manual_seed(3)))
+
+
+def test_trainer_refuses_a_foreign_state():
+    model = small_model()
+    trainer = Trainer(model, info_nce_objective(model, UniformSampler(), 4), bimodal_data(32), TrainConfig(steps=5))
+    with pytest.raises(ValueError, match="state must hold"):
+        trainer.load_state_dict({"model": model.state_dict()})
+    with pytest.raises(ValueError, match=r"state\['step'\] must be <="):
+        trainer.load_state_dict(dict(trainer.state_dict(), step=6))

@@ -6,7 +6,7 @@
 
 Run this after editing a chapter and commit the result: `pytest --nbval` re-runs each
 notebook and compares its fresh text outputs with the stored ones. Progress bars are
-silenced (IBC_TUTORIAL_QUIET=1, as under the tests), widget state and timing metadata are
+silenced (tqdm's TQDM_DISABLE=1, as under the tests), widget state and timing metadata are
 not stored, and a notebook that raises is left unchanged on disk.
 """
 

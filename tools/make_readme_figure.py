@@ -5,7 +5,7 @@
 
 It repeats chapter 01's steps with the same seeds (expert demonstrations, MSE and MAE regression
 policies, 200 rollouts each) and draws them with the same function the chapter uses,
-``ibc_tutorial.plotting.plot_tree_closed_loop``.
+``ibc_tutorial.plotting.multimodality.plot_tree_closed_loop``.
 """
 
 from __future__ import annotations
@@ -16,12 +16,13 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
-os.environ.setdefault("IBC_TUTORIAL_QUIET", "1")
+os.environ.setdefault("TQDM_DISABLE", "1")  # utils.QUIET_ENV: no progress bars
 
 import torch  # noqa: E402
 
 import ibc_tutorial as ibc  # noqa: E402
-from ibc_tutorial import plotting  # noqa: E402
+from ibc_tutorial.plotting import save  # noqa: E402
+from ibc_tutorial.plotting.multimodality import plot_tree_closed_loop  # noqa: E402
 from ibc_tutorial.policies.explicit import RegressionPolicy  # noqa: E402
 from ibc_tutorial.toy import TreeWorld  # noqa: E402
 from ibc_tutorial.training import TrainConfig, train  # noqa: E402
@@ -44,8 +45,8 @@ def main() -> int:
     rollouts = {"experts": world.expert_rollouts(200, seed=2)[0]}
     for kind in ("mse", "mae"):
         rollouts[kind.upper() + " regression"] = world.rollout(fit_regression(demos, kind), 200, seed=2)
-    fig = plotting.plot_tree_closed_loop(world, rollouts, title="Experts pass the tree on both sides; regression policies drive into it")
-    plotting.save(fig, OUT)
+    fig = plot_tree_closed_loop(world, rollouts, title="Experts pass the tree on both sides; regression policies drive into it")
+    save(fig, OUT)
     rates = ", ".join(f"{k} {world.collision_rate(r):.2f}" for k, r in rollouts.items())
     print(f"wrote {OUT.relative_to(ROOT)} (collision rates: {rates})")
     return 0

@@ -5,19 +5,22 @@ The DA-IBC paper estimates how common each expert action is with a kernel densit
 
 - in training, as the weight w_i = 1 / ĝ(y_i) of each sample in the InfoNCE loss (its eq. 5),
   which it applies *by sampling*: each minibatch is drawn with probabilities proportional to
-  w_i, so that rare actions (turns, hard braking) are seen more often;
+  w_i, so that rare actions (turns, hard braking) are seen more often (the training loop makes
+  those draws);
 - in inference, to draw the initial samples of its derivative-free optimiser (Algorithm 1;
-  see ``ibc_tutorial.inference.dfo``).
+  see ``ibc_tutorial.optimizers.dfo``).
 
-Functions:
+This module is the only place the weights 1/ĝ are computed:
 
 - ``kde_density(query, data, bandwidth)``: eq. 4 with a Gaussian product kernel, normalised, in
   chunks so that tens of thousands of query and data points fit in memory.
 - ``inverse_density_weights(actions, bandwidth)``: w_i ∝ 1 / ĝ(y_i), summing to 1.
-- ``sampling_probs(actions, bandwidth, weighting)``: the minibatch probabilities that
-  ``ibc_tutorial.training.train`` accepts as ``sample_probs`` (uniform or inverse-density).
-- ``sample_indices(probs, batch_size, generator)``: draw one minibatch of indices with those
-  probabilities, exactly as ``training.train`` does.
+
+**Numerical range.** Sums of kernels are taken in float64 and fall back to log space
+(log-sum-exp over the kernels) wherever they would underflow, and the normalising constant
+M h^D (2π)^(D/2) is handled in log space when it leaves float64's range. So a tiny or huge
+bandwidth, or many dimensions, give finite correct densities, or a ValueError naming
+``bandwidth`` when the densities themselves cannot be represented in the output's dtype.
 """
 
 from __future__ import annotations
@@ -26,13 +29,99 @@ import math
 
 import torch
 
-from ibc_tutorial.utils import check_choice, check_int, check_positive, check_tensor
+from ibc_tutorial.utils import check_int, check_positive, check_tensor
 
 DEFAULT_BANDWIDTH = 0.2
 """h = 0.2, the bandwidth the DA-IBC paper chose "through trial-and-error experimentation" (sec. 4.2)."""
 
 _CHUNK_ELEMENTS = 1 << 22
 """Largest number of (query, data) pairs held at once by ``kde_density`` (about 32 MB in float64)."""
+
+
+def _kernel_sums(q_all: torch.Tensor, x_all: torch.Tensor, chunk_elements: int) -> torch.Tensor:
+    """s(q) = Σ_j exp(−|q − x_j|² / 2) for points in units of h: q_all (Q, D), x_all (M, D) -> (Q,) float64.
+
+    The fast form: |q − x|² = |q|² + |x|² − 2 q·x as one matrix product per block. A row whose
+    kernels all underflow comes out 0, and NaN when the coordinates are too large to square;
+    ``_log_kernel_sums`` recomputes those rows.
+    """
+    n_q, m = len(q_all), len(x_all)
+    q_sq = (q_all * q_all).sum(dim=1)  # (Q,) |q|²
+    x_sq = (x_all * x_all).sum(dim=1)  # (M,) |x|²
+    # Split the M data points into chunks, then the queries so that each block holds at most
+    # chunk_elements (query, data) pairs.
+    m_chunk = min(m, chunk_elements)
+    q_chunk = max(1, chunk_elements // m_chunk)
+    out = torch.zeros(n_q, dtype=torch.float64)
+    for q0 in range(0, n_q, q_chunk):
+        q = q_all[q0 : q0 + q_chunk]  # (Qc, D)
+        for m0 in range(0, m, m_chunk):
+            x = x_all[m0 : m0 + m_chunk]  # (Mc, D)
+            # Σ_d u_d² = |q|² + |x|² − 2 q·x with u = (q − x_j) / h; clamp rounding below 0
+            sq = torch.addmm(q_sq[q0 : q0 + q_chunk, None] + x_sq[None, m0 : m0 + m_chunk], q, x.T, alpha=-2.0)  # (Qc, Mc)
+            # Π_d K(u_d) = (2π)^(−D/2) exp(−Σ_d u_d² / 2); the constant is applied by the caller
+            out[q0 : q0 + q_chunk] += torch.exp_(sq.clamp_min_(0.0).mul_(-0.5)).sum(dim=1)
+    return out
+
+
+def _log_kernel_sums(q: torch.Tensor, x: torch.Tensor, h: float, chunk_elements: int) -> torch.Tensor:
+    """log Σ_j exp(−|q − x_j|² / (2h²)) for points in data units: q (Q, D), x (M, D) -> (Q,) float64.
+
+    The safe form, for the rows the fast one cannot give: direct differences (an exact 0 for a
+    point and itself), divided by h (inf when h is tiny: that kernel is 0), and log-sum-exp.
+    """
+    n_q, (m, d) = len(q), x.shape
+    m_chunk = max(1, min(m, chunk_elements // max(1, d)))
+    q_chunk = max(1, chunk_elements // (m_chunk * max(1, d)))
+    out = torch.full((n_q,), -math.inf, dtype=torch.float64)
+    for q0 in range(0, n_q, q_chunk):
+        for m0 in range(0, m, m_chunk):
+            u = (q[q0 : q0 + q_chunk, None, :] - x[None, m0 : m0 + m_chunk, :]) / h  # (Qc, Mc, D)
+            log_k = -0.5 * (u * u).sum(dim=2)  # (Qc, Mc) log of the unnormalised product kernel
+            out[q0 : q0 + q_chunk] = torch.logaddexp(out[q0 : q0 + q_chunk], torch.logsumexp(log_k, dim=1))
+    return out
+
+
+def _density64(query: torch.Tensor, data: torch.Tensor, h: float, chunk_elements: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """(ĝ, log ĝ) at each query point, both (Q,) float64; see ``kde_density``."""
+    # Work in units of h, centred on the data's mean (keeps the squared distances below exact
+    # enough in float64 even for data far from the origin).
+    centre = data.detach().to(torch.float64).mean(dim=0)  # (D,)
+    q_c = query.detach().to(torch.float64) - centre  # (Q, D)
+    x_c = data.detach().to(torch.float64) - centre  # (M, D)
+    m, d = x_c.shape
+    s = _kernel_sums(q_c / h, x_c / h, chunk_elements)  # (Q,)
+    log_s = torch.log(s)  # (Q,)
+    bad = ~(s > 0)  # every kernel underflowed, or coordinates too large to square (NaN)
+    if bad.any():
+        log_s[bad] = _log_kernel_sums(q_c[bad], x_c, h, chunk_elements)
+    # 1 / (M h^D) and the kernels' (2π)^(−D/2): directly when it is a normal float64, else in logs
+    log_norm = math.log(m) + d * math.log(h) + 0.5 * d * math.log(2.0 * math.pi)
+    try:
+        norm = m * h**d * (2.0 * math.pi) ** (d / 2)
+    except OverflowError:  # Python floats raise instead of returning inf
+        norm = math.inf
+    if math.isfinite(norm) and norm > 0:
+        dens = s / norm  # (Q,) the common case, exactly as eq. 4 reads
+        dens[bad] = torch.exp(log_s[bad] - log_norm)
+    else:
+        dens = torch.exp(log_s - log_norm)  # (Q,) 0 only where the true density is below ~1e-308
+    return dens, log_s - log_norm
+
+
+def _check_kde_args(name: str, query: torch.Tensor, data: torch.Tensor, bandwidth, chunk_elements: int) -> float:
+    check_tensor(name, query, ndim=2)
+    check_tensor("data", data, ndim=2)
+    if query.shape[1] != data.shape[1]:
+        raise ValueError(f"{name} and data must have the same number of dimensions D, got {name} {tuple(query.shape)} and data {tuple(data.shape)}")
+    if len(query) == 0:
+        raise ValueError(f"{name} must hold at least one point, got shape {tuple(query.shape)}")
+    if len(data) == 0:
+        raise ValueError("data must hold at least one point, got shape " + str(tuple(data.shape)))
+    if query.shape[1] == 0:
+        raise ValueError(f"{name} and data must have at least one dimension (D >= 1), got shape {tuple(query.shape)}")
+    check_int("chunk_elements", chunk_elements, minimum=1)
+    return check_positive("bandwidth", bandwidth)
 
 
 def kde_density(
@@ -51,47 +140,29 @@ def kde_density(
     It integrates to 1 over R^D (not over the action box: mass near the bounds spills out).
 
     Args:
-        query: (Q, D) points at which to evaluate the density.
-        data: (M, D) the samples x_j (e.g. expert actions).
+        query: (Q, D) points at which to evaluate the density, Q >= 1.
+        data: (M, D) the samples x_j (e.g. expert actions), M >= 1.
         bandwidth: h > 0, in the units of the data.
         chunk_elements: at most this many (query, data) pairs are processed at once, so Q and M
             in the tens of thousands need only a few tens of MB.
 
     Returns:
-        (Q,) densities, in query's dtype (accumulated in float64).
+        (Q,) densities, in query's dtype (accumulated in float64; float32 for integer queries).
+
+    Raises:
+        ValueError naming ``bandwidth`` when a density is too large for the output dtype
+        (a tiny h, or many dimensions: ĝ ~ 1 / (h^D (2π)^(D/2)) at the data points).
     """
-    check_tensor("query", query, ndim=2)
-    check_tensor("data", data, ndim=2)
-    if query.shape[1] != data.shape[1]:
-        raise ValueError(f"query and data must have the same number of dimensions D, got query {tuple(query.shape)} and data {tuple(data.shape)}")
-    if len(data) == 0:
-        raise ValueError("data must hold at least one point, got shape " + str(tuple(data.shape)))
-    h = check_positive("bandwidth", bandwidth)
-    check_int("chunk_elements", chunk_elements, minimum=1)
-    # Work in units of h, centred on the data's mean (keeps the squared distances below exact
-    # enough in float64 even for data far from the origin).
-    centre = data.detach().to(torch.float64).mean(dim=0)  # (D,)
-    q_all = (query.detach().to(torch.float64) - centre) / h  # (Q, D)
-    x_all = (data.detach().to(torch.float64) - centre) / h  # (M, D)
-    n_q, d = q_all.shape
-    m = len(x_all)
-    q_sq = (q_all * q_all).sum(dim=1)  # (Q,) |q|²
-    x_sq = (x_all * x_all).sum(dim=1)  # (M,) |x|²
-    # Split the M data points into chunks, then the queries so that each block holds at most
-    # chunk_elements (query, data) pairs.
-    m_chunk = min(m, chunk_elements)
-    q_chunk = max(1, chunk_elements // m_chunk)
-    out = torch.zeros(n_q, dtype=torch.float64)
-    for q0 in range(0, n_q, q_chunk):
-        q = q_all[q0 : q0 + q_chunk]  # (Qc, D)
-        for m0 in range(0, m, m_chunk):
-            x = x_all[m0 : m0 + m_chunk]  # (Mc, D)
-            # Σ_d u_d² = |q|² + |x|² − 2 q·x with u = (q − x_j) / h; clamp rounding below 0
-            sq = torch.addmm(q_sq[q0 : q0 + q_chunk, None] + x_sq[None, m0 : m0 + m_chunk], q, x.T, alpha=-2.0)  # (Qc, Mc)
-            # Π_d K(u_d) = (2π)^(−D/2) exp(−Σ_d u_d² / 2); the constant is applied once below
-            out[q0 : q0 + q_chunk] += torch.exp_(sq.clamp_min_(0.0).mul_(-0.5)).sum(dim=1)
-    norm = m * h**d * (2.0 * math.pi) ** (d / 2)  # 1 / (M h^D) and the kernels' (2π)^(−D/2)
-    return (out / norm).to(query.dtype if query.is_floating_point() else torch.float32)
+    h = _check_kde_args("query", query, data, bandwidth, chunk_elements)
+    dens, _ = _density64(query, data, h, chunk_elements)  # (Q,) float64
+    dtype = query.dtype if query.is_floating_point() else torch.float32
+    out = dens.to(dtype)
+    if not torch.isfinite(out).all():
+        raise ValueError(
+            f"bandwidth h = {h:g} is too small for D = {data.shape[1]}: densities reach {float(dens.max()):.3g}, "
+            f"beyond {dtype}; use a larger bandwidth, or float64 inputs"
+        )
+    return out
 
 
 def inverse_density_weights(actions: torch.Tensor, bandwidth: float = DEFAULT_BANDWIDTH) -> torch.Tensor:
@@ -100,56 +171,22 @@ def inverse_density_weights(actions: torch.Tensor, bandwidth: float = DEFAULT_BA
     ĝ is the KDE of eq. 4 over the same actions (each action counts itself, so ĝ(y_i) > 0).
     Rare actions get large weights, common ones small: drawn with these probabilities, a
     minibatch covers the actions roughly uniformly over the region where experts acted.
+    When ĝ leaves the range of ``actions``' dtype (a tiny bandwidth, many dimensions), the
+    weights are computed from log ĝ instead, w = softmax(−log ĝ), which is the same quantity.
 
     Args:
-        actions: (M, D) expert actions.
+        actions: (M, D) expert actions, M >= 1.
         bandwidth: the KDE bandwidth h.
 
     Returns:
         (M,) non-negative weights summing to 1 (float32 for float32 actions).
     """
-    check_tensor("actions", actions, ndim=2)
-    g = kde_density(actions, actions, bandwidth).to(torch.float64)  # (M,)
+    h = _check_kde_args("actions", actions, actions, bandwidth, _CHUNK_ELEMENTS)
+    dens, log_dens = _density64(actions, actions, h, _CHUNK_ELEMENTS)  # (M,) float64
+    dtype = actions.dtype if actions.is_floating_point() else torch.float32
+    g = dens.to(dtype).to(torch.float64)  # (M,) ĝ(y_i) as kde_density returns it
     w = 1.0 / g
-    return (w / w.sum()).to(actions.dtype)
-
-
-def sampling_probs(actions: torch.Tensor, bandwidth: float = DEFAULT_BANDWIDTH, weighting: str = "inverse-kde") -> torch.Tensor:
-    """Minibatch probabilities for ``training.train(..., sample_probs=...)``: the paper's way of applying eq. 5.
-
-    Args:
-        actions: (M, D) expert actions of the training set.
-        bandwidth: the KDE bandwidth h.
-        weighting: "inverse-kde" (p_i ∝ 1 / ĝ(y_i), the DA-IBC paper) or "uniform" (p_i = 1 / M,
-            plain minibatches; ``train`` does the same when given ``sample_probs=None``).
-
-    Returns:
-        (M,) probabilities summing to 1.
-    """
-    check_tensor("actions", actions, ndim=2)
-    check_choice("weighting", weighting, ("inverse-kde", "uniform"))
-    if weighting == "uniform":
-        return torch.full((len(actions),), 1.0 / len(actions), dtype=actions.dtype)
-    return inverse_density_weights(actions, bandwidth)
-
-
-def sample_indices(probs: torch.Tensor, batch_size: int, *, generator: torch.Generator | None = None) -> torch.Tensor:
-    """Draw one minibatch of sample indices with replacement, with the given probabilities.
-
-    This is the draw ``training.train`` makes at every step when given ``sample_probs``
-    (``torch.multinomial`` with replacement), so with the same generator state it returns the
-    same indices; chapters use it to look at what weighted minibatches contain.
-
-    Args:
-        probs: (M,) non-negative probabilities (need not be normalised).
-        batch_size: number of indices to draw.
-        generator: a seeded ``torch.Generator`` (or None for torch's global one).
-
-    Returns:
-        (batch_size,) int64 indices into the M samples.
-    """
-    check_tensor("probs", probs, ndim=1)
-    check_int("batch_size", batch_size, minimum=1)
-    if (probs < 0).any() or probs.sum() <= 0:
-        raise ValueError("probs must be non-negative with a positive sum")
-    return torch.multinomial(probs, batch_size, replacement=True, generator=generator)
+    total = w.sum()
+    if bool(torch.isfinite(total)) and float(total) > 0:
+        return (w / total).to(dtype)
+    return torch.softmax(-log_dens, dim=0).to(dtype)  # (M,) the same weights, from log ĝ

@@ -4,6 +4,9 @@ Explicit policies (chapter 02): Beta negative log-likelihood (eq. 1 of the DA-IB
 mixture-density NLL, classification over bins. Energy models (chapters 03-04): InfoNCE
 (eqs. 2-3 of the DA-IBC paper, weighted: its eq. 5), cross-entropy over a fixed grid with
 soft targets (eq. 5 of the steering-EBM paper) and temporal smoothing (its eq. 4).
+
+Every loss is a mean over the batch, so each refuses an empty batch (B = 0) with a ValueError
+rather than returning NaN.
 """
 
 from __future__ import annotations
@@ -11,9 +14,14 @@ from __future__ import annotations
 import math
 
 import torch
-import torch.nn.functional as F  # noqa: F401
 
-from ibc_tutorial.utils import check_choice, check_int, check_tensor  # noqa: F401
+from ibc_tutorial.utils import check_choice, check_int, check_positive, check_tensor
+
+
+def _check_batch(name: str, x: torch.Tensor) -> None:
+    """Refuse an empty batch (B = 0), whose mean loss would be NaN."""
+    if len(x) == 0:
+        raise ValueError(f"{name} must hold at least one sample (B >= 1), got shape {tuple(x.shape)}")
 
 
 # =========================================================================== explicit policies (chapter 02)
@@ -56,6 +64,7 @@ def beta_nll(alpha: torch.Tensor, beta: torch.Tensor, actions: torch.Tensor, *, 
         a scalar tensor.
     """
     _check_actions("actions", actions)
+    _check_batch("actions", actions)
     check_tensor("alpha", alpha, shape=tuple(actions.shape))
     check_tensor("beta", beta, shape=tuple(actions.shape))
     if (alpha <= 0).any():
@@ -80,6 +89,7 @@ def regression_loss(predictions: torch.Tensor, actions: torch.Tensor, kind: str 
     """
     check_choice("kind", kind, ("mae", "mse"))
     check_tensor("actions", actions, ndim=2)
+    _check_batch("actions", actions)
     check_tensor("predictions", predictions, shape=tuple(actions.shape))
     err = predictions - actions  # (B, D)
     per_dim = err.abs() if kind == "mae" else err.square()
@@ -116,6 +126,7 @@ def classification_loss(logits: torch.Tensor, actions: torch.Tensor) -> torch.Te
         actions: (B, D) actions in [-1, 1].
     """
     _check_actions("actions", actions)
+    _check_batch("actions", actions)
     b, d = actions.shape
     check_tensor("logits", logits, shape=(b, d, None))
     n = logits.shape[2]
@@ -144,6 +155,7 @@ def mdn_nll(logits: torch.Tensor, means: torch.Tensor, stds: torch.Tensor, actio
         actions: (B, D) target actions.
     """
     check_tensor("actions", actions, ndim=2)
+    _check_batch("actions", actions)
     b, d = actions.shape
     check_tensor("logits", logits, shape=(b, None))
     k = logits.shape[1]
@@ -159,11 +171,9 @@ def mdn_nll(logits: torch.Tensor, means: torch.Tensor, stds: torch.Tensor, actio
 
 
 # =========================================================================== energy models (chapters 03-04)
-from ibc_tutorial.utils import check_positive as _check_positive  # noqa: E402
-
-
 def _check_energies(pos_energy: torch.Tensor, neg_energy: torch.Tensor, weights: torch.Tensor | None) -> None:
     check_tensor("pos_energy", pos_energy, ndim=1)
+    _check_batch("pos_energy", pos_energy)
     b = len(pos_energy)
     check_tensor("neg_energy", neg_energy, shape=(b, None))
     if neg_energy.shape[1] < 1:
@@ -227,7 +237,7 @@ def soft_targets(candidates: torch.Tensor, actions: torch.Tensor, temperature: f
     Returns:
         (B, K) probabilities, each row summing to 1.
     """
-    temperature = _check_positive("temperature", temperature)
+    temperature = check_positive("temperature", temperature)
     check_tensor("actions", actions, ndim=2)
     b, d = actions.shape
     if candidates.ndim == 2:
@@ -255,6 +265,9 @@ def grid_cross_entropy(energies: torch.Tensor, targets: torch.Tensor) -> torch.T
         targets: (B, K) non-negative target probabilities, rows summing to 1.
     """
     check_tensor("energies", energies, ndim=2)
+    _check_batch("energies", energies)
+    if energies.shape[1] < 1:
+        raise ValueError(f"energies must hold at least one candidate per sample (K >= 1), got shape {tuple(energies.shape)}")
     check_tensor("targets", targets, shape=tuple(energies.shape))
     if (targets < 0).any() or not torch.allclose(targets.sum(dim=1), torch.ones(len(targets), dtype=targets.dtype), atol=1e-4):
         raise ValueError("targets must be non-negative with rows summing to 1")
@@ -278,8 +291,9 @@ def temporal_smoothing(
         alpha: smoothing strength α >= 0.
         mask: optional (K,) or (B, K) bool, True for the columns that enter the loss.
     """
-    alpha = _check_positive("alpha", alpha, allow_zero=True)
+    alpha = check_positive("alpha", alpha, allow_zero=True)
     check_tensor("energies_t", energies_t, ndim=2)
+    _check_batch("energies_t", energies_t)
     check_tensor("energies_next", energies_next, shape=tuple(energies_t.shape))
     diff = energies_t - energies_next  # (B, K)
     if mask is not None:

@@ -128,7 +128,7 @@ def expert_negatives(
         lo, hi = _bounds(low, high)
         if len(lo) != d:
             raise ValueError(f"low and high must have length D = {d}, got {len(lo)}")
-        neg = torch.maximum(torch.minimum(neg, hi), lo)
+        neg = torch.clamp(neg, lo, hi)  # (B, N, D), per-dimension bounds (D,)
     return neg  # (B, N, D)
 
 

@@ -1,30 +1,65 @@
-"""The training loop shared by the chapters and the command line.
+"""The one training loop of the book: the toy chapters and the driving agents alike.
 
-A model is trained by minimising a ``loss_fn(batch, generator) -> scalar tensor`` over
-minibatches drawn from a dict of equally long tensors. The loop knows nothing about the
-kind of policy: explicit policies pass their negative log-likelihood, energy models pass
-InfoNCE with a counter-example sampler. Minibatch indices are drawn uniformly, or with
-given probabilities (the DA-IBC paper's way of applying the KDE weights of its eq. 5).
+A model is trained by Adam, minimising an *objective* ``objective(batch, generator) -> scalar``
+over minibatches of the training data. The loop knows nothing about the kind of policy: an
+explicit policy's objective is its negative log-likelihood, an energy model's is InfoNCE with
+a counter-example sampler (``ibc_tutorial.objectives`` builds both).
 
-Loss builders for energy models (chapters 03-05):
+The data is anything with a length M and a ``batch(indices) -> batch`` method (``Minibatches``):
+a dict of equally long tensors is wrapped as ``TensorData`` (the toy chapters), and a dataset
+that renders its samples on demand (the driving demonstrations) provides ``batch`` itself.
 
-- ``info_nce_objective(model, sampler, n_neg, weight_key=None)``: InfoNCE (eqs. 2-3, eq. 5 with
-  weights) with counter-examples from any sampler of ``ibc_tutorial.negatives``;
-- ``grid_objective(model, grid, temperature=None, smoothing=0.0)``: the steering-EBM paper's
-  cross-entropy over a fixed grid (its eq. 3), with soft targets (eq. 5) and temporal
-  smoothing (eq. 4) on pairs of consecutive frames from ``consecutive_pairs``.
+Minibatch indices are drawn uniformly, or with given probabilities (the DA-IBC paper's way of
+applying the KDE weights of its eq. 5): ``draw_minibatch`` is the only place they are drawn.
 
-``train(..., evaluate=fn)`` also records a held-out measure at every log point (for curves).
+``Trainer`` holds everything a run needs to continue: the model, Adam's state, the generator of
+the minibatch draws (also handed to the objective for its counter-examples), the step and the
+running loss. ``Trainer.state_dict`` / ``load_state_dict`` save and restore all of it, so an
+interrupted run resumes bit for bit as if it had not stopped. ``train`` is the one-call form.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Callable, Mapping
+from typing import Any, Callable, Mapping, Protocol, runtime_checkable
 
 import torch
 
 from ibc_tutorial.utils import check_int, check_positive, check_tensor, progress
+
+Objective = Callable[[Any, torch.Generator], torch.Tensor]
+"""``objective(batch, generator) -> scalar loss``: what ``train`` minimises (see ``ibc_tutorial.objectives``)."""
+
+
+@runtime_checkable
+class Minibatches(Protocol):
+    """Training data as the loop sees it: M samples, fetched a minibatch at a time."""
+
+    def __len__(self) -> int: ...
+
+    def batch(self, indices: torch.Tensor) -> Any:
+        """The samples at ``indices`` (B,) as one minibatch (what the objective receives)."""
+        ...
+
+
+class TensorData:
+    """A dict of tensors with a common first dimension M as ``Minibatches``: ``batch`` indexes each."""
+
+    def __init__(self, data: Mapping[str, torch.Tensor]):
+        if not data:
+            raise ValueError("data must hold at least one tensor")
+        sizes = {k: len(v) for k, v in data.items()}
+        m = next(iter(sizes.values()))
+        if any(s != m for s in sizes.values()) or m == 0:
+            raise ValueError(f"data tensors must share a non-zero first dimension, got lengths {sizes}")
+        self.data = dict(data)
+        self.m = m
+
+    def __len__(self) -> int:
+        return self.m
+
+    def batch(self, indices: torch.Tensor) -> dict[str, torch.Tensor]:
+        return {k: v[indices] for k, v in self.data.items()}  # each (B, ...)
 
 
 @dataclass
@@ -32,7 +67,7 @@ class TrainConfig:
     """Settings of one training run."""
 
     steps: int = 2000
-    """Number of gradient steps (minibatches)."""
+    """Number of gradient steps (minibatches) of the whole run (a resumed run stops here too)."""
     batch_size: int = 128
     """Samples per minibatch (the DA-IBC paper uses 128)."""
     lr: float = 1e-3
@@ -40,240 +75,149 @@ class TrainConfig:
     weight_decay: float = 0.0
     """Adam weight decay."""
     seed: int = 0
-    """Seeds the minibatch draws and the generator handed to ``loss_fn``."""
+    """Seeds the minibatch draws and the generator handed to the objective."""
     log_every: int = 50
-    """Record the mean loss every this many steps."""
+    """Record the mean loss every this many steps (and at the last step)."""
     progress: bool | None = None
     """Show a progress bar: None = yes, unless running under the tests (``utils.quiet``)."""
+    desc: str = "training"
+    """Label of the progress bar."""
 
 
 @dataclass
 class TrainResult:
-    """What ``train`` returns: the loss curve (one entry per ``log_every`` steps)."""
+    """What ``train`` / ``Trainer.run`` returns: the loss curve (one entry per log point)."""
 
     steps: list[int] = field(default_factory=list)
     """Step index at which each loss was recorded."""
     losses: list[float] = field(default_factory=list)
-    """Mean training loss over the preceding ``log_every`` steps."""
+    """Mean training loss over the steps since the previous log point."""
     evals: list = field(default_factory=list)
     """What ``evaluate()`` returned at each log point (empty when no ``evaluate`` was given)."""
 
 
-def train(
-    model: torch.nn.Module,
-    loss_fn: Callable[[dict[str, torch.Tensor], torch.Generator], torch.Tensor],
-    data: Mapping[str, torch.Tensor],
-    config: TrainConfig = TrainConfig(),
-    *,
-    sample_probs: torch.Tensor | None = None,
-    callback: Callable[[int, float], None] | None = None,
-    evaluate: Callable[[], object] | None = None,
-) -> TrainResult:
-    """Train ``model`` in place by Adam on minibatches of ``data``.
+def draw_minibatch(probs: torch.Tensor | None, m: int, batch_size: int, generator: torch.Generator) -> torch.Tensor:
+    """Indices (batch_size,) of one minibatch among M samples: uniform, or with probabilities ``probs`` (M,).
+
+    Drawn with replacement, as the DA-IBC paper applies its eq. 5 weights by sampling (sec. 2.5).
+    """
+    if probs is None:
+        return torch.randint(0, m, (batch_size,), generator=generator)  # (B,)
+    return torch.multinomial(probs, batch_size, replacement=True, generator=generator)  # (B,)
+
+
+def as_minibatches(data) -> Minibatches:
+    """``data`` as ``Minibatches``: a dict of tensors is wrapped in ``TensorData``, anything else must have ``batch``."""
+    if isinstance(data, Mapping):
+        return TensorData(data)
+    if not isinstance(data, Minibatches):
+        raise ValueError(f"data must be a dict of tensors or have __len__ and batch(indices), got {type(data).__name__}")
+    if len(data) == 0:
+        raise ValueError("data must hold at least one sample")
+    return data
+
+
+class Trainer:
+    """A resumable training run: ``run`` trains up to ``config.steps``; ``state_dict`` captures it all.
 
     Args:
-        model: the parameters to optimise.
-        loss_fn: maps a minibatch (a dict with the same keys as ``data``, each of length
-            ``batch_size``) and a seeded ``torch.Generator`` to a scalar loss.
-        data: tensors with a common first dimension M.
+        model: the parameters to optimise (trained in place).
+        objective: ``objective(batch, generator) -> scalar`` (see ``ibc_tutorial.objectives``).
+        data: a dict of tensors with a common first dimension M, or any ``Minibatches``.
         config: see ``TrainConfig``.
         sample_probs: optional (M,) probabilities of drawing each sample (e.g.
             ``kde.inverse_density_weights``); uniform when None.
-        callback: called as ``callback(step, mean_loss)`` at every log point.
-        evaluate: called without arguments at every log point, in eval mode and without
-            gradients (e.g. a held-out measure); its results are kept in ``TrainResult.evals``.
     """
-    check_int("config.steps", config.steps, minimum=1)
-    check_int("config.batch_size", config.batch_size, minimum=1)
-    check_int("config.log_every", config.log_every, minimum=1)
-    check_positive("config.lr", config.lr)
-    if not data:
-        raise ValueError("data must hold at least one tensor")
-    sizes = {k: len(v) for k, v in data.items()}
-    m = next(iter(sizes.values()))
-    if any(s != m for s in sizes.values()) or m == 0:
-        raise ValueError(f"data tensors must share a non-zero first dimension, got lengths {sizes}")
-    if sample_probs is not None:
-        check_tensor("sample_probs", sample_probs, shape=(m,))
-        if (sample_probs < 0).any() or sample_probs.sum() <= 0:
-            raise ValueError("sample_probs must be non-negative with a positive sum")
 
-    gen = torch.Generator().manual_seed(config.seed)
-    opt = torch.optim.Adam(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
-    result = TrainResult()
-    running, count = 0.0, 0
-    model.train()
-    for step in progress(range(1, config.steps + 1), desc="training", enabled=config.progress if config.progress is not None else None):
-        if sample_probs is None:
-            idx = torch.randint(0, m, (config.batch_size,), generator=gen)
-        else:
-            idx = torch.multinomial(sample_probs, config.batch_size, replacement=True, generator=gen)
-        batch = {k: v[idx] for k, v in data.items()}
-        loss = loss_fn(batch, gen)
-        if loss.ndim != 0 or not torch.isfinite(loss):
-            raise ValueError(f"loss_fn must return a finite scalar, got {loss.detach()!r} at step {step}")
-        opt.zero_grad(set_to_none=True)
-        loss.backward()
-        opt.step()
-        running += float(loss.detach())
-        count += 1
-        if step % config.log_every == 0 or step == config.steps:
-            mean = running / count
-            result.steps.append(step)
-            result.losses.append(mean)
-            if evaluate is not None:
-                model.eval()
-                with torch.no_grad():
-                    result.evals.append(evaluate())
+    def __init__(self, model: torch.nn.Module, objective: Objective, data, config: TrainConfig = TrainConfig(), *,
+                 sample_probs: torch.Tensor | None = None):
+        check_int("config.steps", config.steps, minimum=1)
+        check_int("config.batch_size", config.batch_size, minimum=1)
+        check_int("config.log_every", config.log_every, minimum=1)
+        check_positive("config.lr", config.lr)
+        if not callable(objective):
+            raise ValueError(f"objective must be callable, got {type(objective).__name__}")
+        self.data = as_minibatches(data)
+        m = len(self.data)
+        if sample_probs is not None:
+            check_tensor("sample_probs", sample_probs, shape=(m,))
+            if (sample_probs < 0).any() or sample_probs.sum() <= 0:
+                raise ValueError("sample_probs must be non-negative with a positive sum")
+        self.model, self.objective, self.config, self.sample_probs = model, objective, config, sample_probs
+        self.generator = torch.Generator().manual_seed(config.seed)
+        self.optimizer = torch.optim.Adam(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
+        self.step = 0
+        """Gradient steps taken so far (over every call to ``run``)."""
+        self._running, self._count = 0.0, 0  # loss sum and steps since the last log point
+
+    def state_dict(self) -> dict:
+        """Everything needed to continue exactly: model, Adam, generator, step, running loss (plain data)."""
+        return {"model": {k: v.detach().clone() for k, v in self.model.state_dict().items()},
+                "optimizer": self.optimizer.state_dict(), "generator": self.generator.get_state(),
+                "step": self.step, "running_loss": self._running, "running_count": self._count}
+
+    def load_state_dict(self, state: Mapping) -> None:
+        """Restore a ``state_dict`` (e.g. read back from a checkpoint)."""
+        missing = {"model", "optimizer", "generator", "step"} - set(state)
+        if missing:
+            raise ValueError(f"state must hold {sorted(missing)} (a Trainer.state_dict())")
+        self.step = check_int("state['step']", state["step"], minimum=0)
+        if self.step > self.config.steps:
+            raise ValueError(f"state['step'] must be <= config.steps = {self.config.steps}, got {self.step}")
+        self.model.load_state_dict(state["model"])
+        self.optimizer.load_state_dict(state["optimizer"])
+        self.generator.set_state(state["generator"])
+        self._running, self._count = float(state.get("running_loss", 0.0)), int(state.get("running_count", 0))
+
+    def run(self, *, evaluate: Callable[[], object] | None = None,
+            callback: Callable[[int, float], None] | None = None) -> TrainResult:
+        """Train from ``self.step`` to ``config.steps``; record the mean loss every ``log_every`` steps.
+
+        Args:
+            evaluate: called without arguments at every log point, in eval mode and without
+                gradients (e.g. a held-out measure); its results are kept in ``TrainResult.evals``.
+            callback: called as ``callback(step, mean_loss)`` at every log point, after
+                ``evaluate`` (e.g. to write a checkpoint from ``state_dict()``).
+        """
+        c, model = self.config, self.model
+        m = len(self.data)
+        result = TrainResult()
+        model.train()
+        for step in progress(range(self.step + 1, c.steps + 1), desc=c.desc, enabled=c.progress):
+            idx = draw_minibatch(self.sample_probs, m, c.batch_size, self.generator)  # (B,)
+            loss = self.objective(self.data.batch(idx), self.generator)
+            if loss.ndim != 0 or not torch.isfinite(loss):
+                raise ValueError(f"the objective must return a finite scalar, got {loss.detach()!r} at step {step}")
+            self.optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            self.optimizer.step()
+            self.step = step
+            self._running += float(loss.detach())
+            self._count += 1
+            if step % c.log_every == 0 or step == c.steps:
+                mean = self._running / self._count
+                self._running, self._count = 0.0, 0
+                result.steps.append(step)
+                result.losses.append(mean)
+                if evaluate is not None:
+                    model.eval()
+                    with torch.no_grad():
+                        result.evals.append(evaluate())
+                if callback is not None:
+                    callback(step, mean)
                 model.train()
-            if callback is not None:
-                callback(step, mean)
-            running, count = 0.0, 0
-    model.eval()
-    return result
+        model.eval()
+        return result
 
 
-# =========================================================================== energy-model objectives (chapters 03-05)
-# Builders of ``loss_fn(batch, generator)`` for ``train``: each closes over an EnergyModel and
-# the way its counter-examples are chosen, so one loop trains every variant of the book.
-from ibc_tutorial.losses import grid_cross_entropy, info_nce, soft_targets, temporal_smoothing  # noqa: E402
-from ibc_tutorial.utils import check_positive  # noqa: E402
+def train(model: torch.nn.Module, objective: Objective, data, config: TrainConfig = TrainConfig(), *,
+          sample_probs: torch.Tensor | None = None, evaluate: Callable[[], object] | None = None,
+          callback: Callable[[int, float], None] | None = None, state: Mapping | None = None) -> TrainResult:
+    """Train ``model`` in place by Adam on minibatches of ``data`` (see ``Trainer`` for the arguments).
 
-LossFn = Callable[[dict[str, torch.Tensor], torch.Generator], torch.Tensor]
-
-
-def likelihood_objective(policy: torch.nn.Module, *, obs_key: str = "obs", action_key: str = "actions") -> LossFn:
-    """The loss of an explicit policy (regression, Beta, classifier, MDN) as ``train`` wants it.
-
-    Returns ``loss_fn(batch, generator) = policy.loss(batch[obs_key], batch[action_key])``: the
-    policy's own negative log-likelihood (or regression loss); the generator is not needed.
+    With ``state`` (a ``Trainer.state_dict()``), the run continues from it up to ``config.steps``.
     """
-    if not callable(getattr(policy, "loss", None)):
-        raise ValueError(f"policy must have a loss(obs, actions) method, got {type(policy).__name__}")
-
-    def loss_fn(batch: dict[str, torch.Tensor], generator: torch.Generator) -> torch.Tensor:
-        return policy.loss(batch[obs_key], batch[action_key])
-
-    return loss_fn
-
-
-def info_nce_objective(
-    model: torch.nn.Module,
-    sampler: Callable[[torch.Tensor, int, torch.Generator], torch.Tensor],
-    n_neg: int,
-    *,
-    obs_key: str = "obs",
-    action_key: str = "actions",
-    weight_key: str | None = None,
-) -> LossFn:
-    """InfoNCE with counter-examples from ``sampler``: eqs. 2-3 of the DA-IBC paper (eq. 5 with weights).
-
-    Per minibatch: the sampler draws N counter-examples per sample from the minibatch's expert
-    actions (``negatives.UniformSampler`` for IBC, ``negatives.ExpertSampler`` for DA-IBC); the
-    model scores the expert action and its counter-examples against one encoding of the
-    observation; ``losses.info_nce`` turns the energies into the loss.
-
-    Args:
-        model: an ``EnergyModel``.
-        sampler: ``sampler(actions (B, D), n_neg, generator) -> (B, N, D)``.
-        n_neg: N_neg, counter-examples per sample (the paper: 1024).
-        obs_key, action_key: keys of the observations and expert actions (B, D) in a batch.
-        weight_key: key of per-sample weights (B,) for eq. 5, or None for eq. 2. (The DA-IBC
-            paper applies its KDE weights by weighted minibatch sampling instead: pass
-            ``sample_probs`` to ``train`` for that.)
-    """
-    n_neg = check_int("n_neg", n_neg, minimum=1)
-
-    def loss_fn(batch: dict[str, torch.Tensor], generator: torch.Generator) -> torch.Tensor:
-        actions = batch[action_key]  # (B, D)
-        negatives = sampler(actions, n_neg, generator)  # (B, N, D)
-        candidates = torch.cat([actions[:, None, :], negatives], dim=1)  # (B, 1 + N, D), expert first
-        energies = model.energy(batch[obs_key], candidates)  # (B, 1 + N)
-        weights = batch[weight_key] if weight_key is not None else None
-        return info_nce(energies[:, 0], energies[:, 1:], weights)
-
-    return loss_fn
-
-
-def grid_objective(
-    model: torch.nn.Module,
-    grid: torch.Tensor,
-    *,
-    temperature: float | None = None,
-    smoothing: float = 0.0,
-    obs_key: str = "obs",
-    action_key: str = "actions",
-    next_obs_key: str = "next_obs",
-    next_action_key: str = "next_actions",
-) -> LossFn:
-    """The steering-EBM paper's EBM: cross-entropy over a fixed grid (its eq. 3), with options.
-
-    The candidates of every sample are the ground truth and the G actions of a constant,
-    linearly spaced ``grid`` (K = G + 1, ground truth first). The target is one-hot on the
-    ground truth, or, with ``temperature``, the soft targets of eq. 5 (intended sign, see
-    ``losses.soft_targets``). With ``smoothing`` = α > 0, each batch holds pairs of consecutive
-    frames (see ``consecutive_pairs``): the cross-entropy is averaged over both frames (the
-    paper flattens the pairs into one minibatch of frames) and α‖e_t − e_{t+1}‖ of eq. 4 is
-    added over the grid's columns (the ground-truth column masked).
-
-    Args:
-        model: an ``EnergyModel``.
-        grid: (G, D) candidate actions, e.g. ``inference.action_grid(64)``.
-        temperature: T of eq. 5 for soft targets; None = one-hot targets.
-        smoothing: α of eq. 4; 0 = no temporal smoothing.
-        obs_key, action_key: keys of the frame-t observations and actions.
-        next_obs_key, next_action_key: keys of the frame-t+1 ones (used when smoothing > 0).
-    """
-    check_tensor("grid", grid, ndim=2)
-    if temperature is not None:
-        temperature = check_positive("temperature", temperature)
-    smoothing = check_positive("smoothing", smoothing, allow_zero=True)
-
-    def energies_of(obs, actions: torch.Tensor) -> torch.Tensor:
-        z = model.embed(obs)  # (B, E), once per observation
-        e_gt = model.energy_from_embedding(z, actions[:, None, :])  # (B, 1)
-        e_grid = model.energy_from_embedding(z, grid)  # (B, G), grid shared by the batch
-        return torch.cat([e_gt, e_grid], dim=1)  # (B, 1 + G)
-
-    def cross_entropy(energies: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
-        if temperature is None:
-            targets = torch.zeros_like(energies)
-            targets[:, 0] = 1.0  # one-hot on the ground truth
-        else:
-            candidates = torch.cat([actions[:, None, :], grid.expand(len(actions), -1, -1)], dim=1)  # (B, 1 + G, D)
-            targets = soft_targets(candidates, actions, temperature)  # (B, 1 + G), eq. 5
-        return grid_cross_entropy(energies, targets)  # eq. 3
-
-    def loss_fn(batch: dict[str, torch.Tensor], generator: torch.Generator) -> torch.Tensor:
-        e_t = energies_of(batch[obs_key], batch[action_key])
-        loss = cross_entropy(e_t, batch[action_key])
-        if smoothing == 0:
-            return loss
-        e_next = energies_of(batch[next_obs_key], batch[next_action_key])
-        loss = 0.5 * (loss + cross_entropy(e_next, batch[next_action_key]))  # mean over both frames
-        return loss + temporal_smoothing(e_t[:, 1:], e_next[:, 1:], smoothing)  # eq. 4, ground truth masked
-
-    return loss_fn
-
-
-def consecutive_pairs(data: Mapping[str, torch.Tensor], episode_key: str = "episode") -> dict[str, torch.Tensor]:
-    """Pairs of consecutive frames of the same episode, for temporal smoothing (eq. 4).
-
-    For every frame t whose successor t + 1 belongs to the same episode (frames are stored
-    in time order), returns each tensor of ``data`` at t, and, under ``next_<key>``, at t + 1.
-
-    Args:
-        data: tensors with a common first dimension M, including ``data[episode_key]`` (M,).
-    Returns:
-        a dict with the keys of ``data`` and ``next_`` + each key, each of length P < M.
-    """
-    if episode_key not in data:
-        raise ValueError(f"data must hold the episode index under {episode_key!r}, got keys {sorted(data)}")
-    ep = data[episode_key]
-    same = ep[1:] == ep[:-1]  # (M - 1,): frame t and t + 1 are in one episode
-    idx = torch.nonzero(same).squeeze(1)  # (P,)
-    if len(idx) == 0:
-        raise ValueError("data holds no two consecutive frames of one episode")
-    out = {k: v[idx] for k, v in data.items()}
-    out.update({f"next_{k}": v[idx + 1] for k, v in data.items()})
-    return out
+    trainer = Trainer(model, objective, data, config, sample_probs=sample_probs)
+    if state is not None:
+        trainer.load_state_dict(state)
+    return trainer.run(evaluate=evaluate, callback=callback)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 import os
 import random
 import tempfile
@@ -10,10 +11,11 @@ from typing import Iterable
 
 import numpy as np
 import torch
+from tqdm.auto import tqdm
 
-QUIET_ENV = "IBC_TUTORIAL_QUIET"
-"""Set to 1 (the test configuration and the notebook executor do) to silence progress bars,
-so that stored notebook outputs do not depend on timing."""
+QUIET_ENV = "TQDM_DISABLE"
+"""tqdm's own switch: set it to 1 (``conftest.py`` and ``tools/execute_notebooks.py`` do) to
+silence progress bars, so that stored notebook outputs do not depend on timing."""
 
 
 def seed_everything(seed: int) -> torch.Generator:
@@ -30,14 +32,18 @@ def seed_everything(seed: int) -> torch.Generator:
 
 
 def quiet() -> bool:
-    """True when progress output should be suppressed (under tests and the notebook executor)."""
-    return os.environ.get(QUIET_ENV, "") not in ("", "0")
+    """True when ``TQDM_DISABLE`` is set (to anything but 0 / false): under the tests and the
+    notebook executor.
+
+    Read here at each call rather than left to tqdm: tqdm reads its ``TQDM_*`` variables once,
+    when it is first imported, and its notebook bar (what ``tqdm.auto`` gives in Jupyter) passes
+    ``disable=False`` explicitly, which overrides the variable (tqdm 4.70)."""
+    return os.environ.get(QUIET_ENV, "").strip().lower() not in ("", "0", "false")
 
 
 def progress(iterable: Iterable | None = None, *, total: int | None = None, desc: str = "", enabled: bool | None = None):
-    """A tqdm progress bar for readers; a silent pass-through under tests (see ``quiet``)."""
-    from tqdm.auto import tqdm
-
+    """A tqdm progress bar for readers; a silent pass-through when ``TQDM_DISABLE=1`` (see
+    ``quiet``) or ``enabled`` is False."""
     show = (not quiet()) if enabled is None else enabled
     return tqdm(iterable, total=total, desc=desc, disable=not show, leave=False)
 
@@ -63,6 +69,24 @@ def check_positive(name: str, value, *, allow_zero: bool = False) -> float:
         raise ValueError(f"{name} must be a number, got {value!r}") from None
     if not np.isfinite(v) or v < 0 or (v == 0 and not allow_zero):
         raise ValueError(f"{name} must be a finite number {'>=' if allow_zero else '>'} 0, got {value!r}")
+    return v
+
+
+def check_positive_fields(config, names: Iterable[str], *, allow_zero: bool = False, prefix: str = "config") -> None:
+    """``check_positive`` on each field ``names`` of a config dataclass; the error names
+    ``config.<field>`` (``prefix`` changes the first part)."""
+    for name in names:
+        check_positive(f"{prefix}.{name}", getattr(config, name), allow_zero=allow_zero)
+
+
+def check_probability(name: str, value) -> float:
+    """Return ``value`` as a float in [0, 1], or raise ValueError naming ``name``."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a probability in [0, 1], got {value!r}") from None
+    if not 0.0 <= v <= 1.0:  # also rejects NaN
+        raise ValueError(f"{name} must be a probability in [0, 1], got {value!r}")
     return v
 
 
@@ -117,8 +141,6 @@ def _umask() -> int:
 
 def atomic_torch_save(obj, path: str | os.PathLike) -> Path:
     """``torch.save`` to ``path`` atomically (load back with ``torch.load(..., weights_only=True)``)."""
-    import io
-
     buf = io.BytesIO()
     torch.save(obj, buf)
     return atomic_write_bytes(path, buf.getvalue())

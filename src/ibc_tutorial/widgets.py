@@ -2,10 +2,31 @@
 
 Each explorer returns a widget to display in a cell that starts with ``# NBVAL_IGNORE_OUTPUT``;
 the chapter shows a static figure of the same thing beside it (widget state is not stored).
-Figures are drawn with ``ibc_tutorial.plotting`` and shown as PNG inside an ``Output`` widget.
+Pictures are PNGs in an ``ipywidgets.Image`` (not an ``Output`` widget, whose captured output
+the notebook executor cannot store without widget state).
 """
 
 from __future__ import annotations
+
+import io
+from dataclasses import replace
+
+import ipywidgets as w
+import matplotlib.pyplot as plt
+import numpy as np
+import torch
+
+from ibc_tutorial.optimizers.dfo import DFOConfig, DFOTrace, dfo_trace
+from ibc_tutorial.optimizers.grid import grid_argmin
+from ibc_tutorial.plotting import DPI
+
+
+def _png(fig) -> bytes:
+    """The figure as PNG bytes (for an ``ipywidgets.Image``), then closed."""
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=DPI, bbox_inches="tight")
+    plt.close(fig)
+    return buf.getvalue()
 
 
 # =========================================================================== chapter 03: energy explorer
@@ -13,37 +34,27 @@ def energy_explorer(model, obs_fn, grid, *, values, value: float | None = None, 
     """A slider over an observation parameter that redraws the energy model's landscape over actions.
 
     The figure shows p(y | x) ∝ exp(−E(x, y)) over ``grid`` (top) and E itself (bottom), with the
-    grid argmin marked. The static companion is ``plotting.plot_energy_curves``. The picture is a
-    PNG in an ``Image`` widget (not an ``Output`` widget, whose captured output the notebook
-    executor cannot store without widget state).
+    grid argmin (``optimizers.grid.grid_argmin``) marked. The static companion is
+    ``plotting.plot_energy_curves``.
 
     Args:
-        model: an ``EnergyModel`` (anything with ``energy(obs, actions)``).
+        model: an ``EnergyModel`` (anything with ``embed`` and ``energy_from_embedding``).
         obs_fn: maps the slider's value to one observation (1, obs_dim).
         grid: (G, 1) candidate actions.
         values: (low, high, step) of the slider.
         value: its initial value (default: ``low``).
     """
-    import io
-
-    import ipywidgets as w
-    import matplotlib.pyplot as plt
-    import numpy as np
-    import torch
-
-    from ibc_tutorial.plotting import DPI
-
     low, high, step = values
     slider = w.FloatSlider(value=low if value is None else value, min=low, max=high, step=step, description=description, continuous_update=False)
     image = w.Image(format="png")
-    a = grid[:, 0].numpy()
+    a = grid[:, 0].numpy()  # (G,)
 
     def draw(*_):
-        with torch.no_grad():
-            e = model.energy(obs_fn(float(slider.value)), grid)[0].numpy()  # (G,)
+        best_t, energies = grid_argmin(model, obs_fn(float(slider.value)), grid, return_energies=True)
+        e = energies[0].numpy()  # (G,)
         p = np.exp(-(e - e.min()))
         p = p / (p.sum() * (a[1] - a[0]))
-        best = a[int(e.argmin())]
+        best = float(best_t[0, 0])
         fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(6.0, 4.6), sharex=True)
         ax1.plot(a, p, color="C0")
         ax1.set_ylabel("p(y | x) ∝ exp(−E)")
@@ -55,10 +66,7 @@ def energy_explorer(model, obs_fn, grid, *, values, value: float | None = None, 
         ax2.set_xlabel(xlabel)
         fig.suptitle(f"{title}: {description} = {float(slider.value):.1f}")
         fig.tight_layout()
-        buf = io.BytesIO()
-        fig.savefig(buf, format="png", dpi=DPI)
-        plt.close(fig)
-        image.value = buf.getvalue()
+        image.value = _png(fig)
 
     slider.observe(draw, names="value")
     draw()
@@ -66,62 +74,66 @@ def energy_explorer(model, obs_fn, grid, *, values, value: float | None = None, 
 
 
 # =========================================================================== chapter 06: DFO iteration stepper
-def _png(fig) -> bytes:
-    """The figure as PNG bytes (for an ``ipywidgets.Image``), then closed."""
-    import io
+def _dfo_iteration_figure(trace: DFOTrace, it: int, x: np.ndarray, e: np.ndarray, bins: int):
+    """One iteration of a 1-D ``DFOTrace``: the population's histogram and the energy curve (red)."""
+    s = trace.samples[it - 1].numpy()[:, 0]  # (N,)
+    lo, hi = float(x.min()), float(x.max())
+    counts, edges = np.histogram(s, bins=bins, range=(lo, hi))
+    share = counts / len(s)
+    fig, ax = plt.subplots(figsize=(6.0, 3.6))
+    ax.bar(edges[:-1], share, width=edges[1] - edges[0], align="edge", color="C0", alpha=0.7, label="samples ỹ_i")
+    ax.set_ylim(0, 1.05 * max(0.25, share.max()))
+    ax.set_xlabel("action y")
+    ax.set_ylabel("share of samples per bin")
+    ax2 = ax.twinx()
+    ax2.plot(x, e, color="C3", lw=1.5)
+    ax2.set_ylim(e.min() - 0.5, e.min() + 1.3 * (np.percentile(e, 95) - e.min()) + 0.5)
+    ax2.tick_params(axis="y", colors="C3", labelsize=7)
+    ax2.set_ylabel("energy E(x, y) (nats, red)", color="C3")
+    if it == len(trace.samples):
+        ax.axvline(float(trace.action[0]), color="k", lw=2, label="returned ŷ")
+        how = "ŷ drawn from p̃" if trace.config.select == "sample" else "ŷ = the lowest-energy sample (argmax p̃)"
+        ax.set_title(f"iteration {it} (last)\n{how}", fontsize=9)
+    else:
+        ax.set_title(f"iteration {it}\nthen resample, noise σ = {trace.sigmas[it - 1]:.3g}", fontsize=9)
+    ax.legend(loc="upper center", fontsize=7)
+    fig.suptitle(f"DFO with init = {trace.config.init}, select = {trace.config.select}")
+    fig.tight_layout()
+    return fig
 
-    import matplotlib.pyplot as plt
 
-    from ibc_tutorial.plotting import DPI
-
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=DPI, bbox_inches="tight")
-    plt.close(fig)
-    return buf.getvalue()
-
-
-def dfo_stepper(energy_fn, grid, expert_actions, *, n_samples: int = 2000, n_iters: int = 5, seed: int = 0, bins: int = 60, **dfo_kwargs):
-    """Step through Algorithm 1 (``inference.dfo_trace``) on a 1-D energy landscape.
+def dfo_stepper(energy_fn, grid, expert_actions, config: DFOConfig = DFOConfig(n_samples=2000), *, seed: int = 0, bins: int = 60):
+    """Step through Algorithm 1 (``optimizers.dfo.dfo_trace``) on a 1-D energy landscape.
 
     Controls: the iteration shown, the initialisation ("inverse-kde", "kde", "uniform"), the final
     choice ("sample", "argmax") and the seed. Changing the initialisation, the choice or the seed
-    re-runs DFO; the slider only moves through the stored populations. The picture is an
-    ``ipywidgets.Image`` (no ``Output`` widget, so executing the notebook stores nothing of it).
+    re-runs DFO; the slider only moves through the stored populations. The static companion is
+    ``plotting.plot_dfo_iterations``.
 
     Args:
         energy_fn: maps actions (N, 1) to energies (N,).
         grid: (G, 1) actions at which to draw the energy curve.
         expert_actions: (M, 1) the expert actions DFO initialises from.
-        n_samples, n_iters, seed, dfo_kwargs: passed to ``dfo_trace``.
+        config: the DFO settings; its ``init`` and ``select`` are the controls' initial values.
+        seed: the initial seed of the run's generator.
+        bins: histogram bins over the grid's range.
     """
-    import ipywidgets as w
-    import matplotlib.pyplot as plt
-    import torch
-
-    from ibc_tutorial.inference import dfo_trace
-    from ibc_tutorial.plotting import _draw_dfo_iteration
-
-    x = grid[:, 0].numpy()
-    e = energy_fn(grid).detach().numpy()
-    iteration = w.IntSlider(value=1, min=1, max=n_iters, description="iteration")
-    init = w.Dropdown(options=["inverse-kde", "kde", "uniform"], value=dfo_kwargs.pop("init", "inverse-kde"), description="init")
-    select = w.Dropdown(options=["sample", "argmax"], value=dfo_kwargs.pop("select", "sample"), description="select")
+    x = grid[:, 0].numpy()  # (G,)
+    e = energy_fn(grid).detach().numpy()  # (G,)
+    iteration = w.IntSlider(value=1, min=1, max=config.n_iters, description="iteration")
+    init = w.Dropdown(options=["inverse-kde", "kde", "uniform"], value=config.init, description="init")
+    select = w.Dropdown(options=["sample", "argmax"], value=config.select, description="select")
     seed_box = w.IntText(value=seed, description="seed")
     image = w.Image(format="png")
     state = {}
 
     def run(*_):
         g = torch.Generator().manual_seed(int(seed_box.value))
-        state["trace"] = dfo_trace(energy_fn, expert_actions, n_samples=n_samples, n_iters=n_iters, init=init.value, select=select.value, generator=g, **dfo_kwargs)
+        state["trace"] = dfo_trace(energy_fn, expert_actions, replace(config, init=init.value, select=select.value), generator=g)
         draw()
 
     def draw(*_):
-        fig, ax = plt.subplots(figsize=(6.0, 3.6))
-        _draw_dfo_iteration(ax, state["trace"], int(iteration.value), x, e, bins)
-        ax.set_ylabel("share of samples per bin")
-        fig.suptitle(f"DFO with init = {init.value}, select = {select.value}")
-        fig.tight_layout()
-        image.value = _png(fig)
+        image.value = _png(_dfo_iteration_figure(state["trace"], int(iteration.value), x, e, bins))
 
     for control in (init, select, seed_box):
         control.observe(run, names="value")

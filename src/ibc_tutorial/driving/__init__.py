@@ -13,7 +13,9 @@ Modules, one concern each:
 - ``env``      the Gymnasium environment (registered as ``ibc_tutorial/Town01-v0`` and ``-Town02-v0``)
 - ``dataset``  the demonstration log and the torch ``Dataset`` that renders its BEVs
 - ``collect``  driving the expert to record demonstrations (``ibc-tutorial collect``)
-- ``rollout``  closed-loop episodes of a policy, batched over environments (the evaluation protocol)
+- ``rollout``  the one loop over environments: closed-loop episodes of a ``Policy``, batched
+               (scores, trajectories, per-step records)
+- ``analysis`` where a car went: junction passes, exits per approach, road coverage
 - ``render``   RGB pictures
 """
 
@@ -22,7 +24,7 @@ from ibc_tutorial.driving.car import Car, CarConfig
 from ibc_tutorial.driving.env import ENV_IDS, DrivingEnv, EnvConfig, make_env, register_envs
 from ibc_tutorial.driving.expert import PID, Expert, ExpertConfig
 from ibc_tutorial.driving.lights import GREEN, RED, YELLOW, LightSchedule, LightTiming
-from ibc_tutorial.driving.rollout import EpisodeResult, rollout
+from ibc_tutorial.driving.rollout import EpisodeResult, Policy, rollout
 from ibc_tutorial.driving.routes import Route, random_route
 from ibc_tutorial.driving.sim import DrivingSim, score
 from ibc_tutorial.driving.towns import TOWNS, Town, get_town
@@ -32,6 +34,6 @@ register_envs()
 __all__ = [
     "CHANNELS", "SUPPORTED_SIZES", "BEVRenderer", "get_raster", "get_renderer",
     "Car", "CarConfig", "DrivingEnv", "EnvConfig", "make_env", "PID", "Expert", "ExpertConfig",
-    "GREEN", "YELLOW", "RED", "LightSchedule", "LightTiming", "Route", "random_route", "EpisodeResult", "rollout",
+    "GREEN", "YELLOW", "RED", "LightSchedule", "LightTiming", "Route", "random_route", "EpisodeResult", "Policy", "rollout",
     "DrivingSim", "score", "TOWNS", "Town", "get_town", "ENV_IDS", "register_envs",
 ]

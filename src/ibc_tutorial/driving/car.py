@@ -32,7 +32,7 @@ BUILDING_COLLISION_TYPE = 2
 
 @dataclass(frozen=True)
 class CarConfig:
-    """Physical parameters of the car (a mid-size saloon, as in DESIGN.md section 4)."""
+    """Physical parameters of the car (a mid-size saloon; ``docs/design.md``)."""
 
     mass: float = 1500.0
     """Mass in kg."""

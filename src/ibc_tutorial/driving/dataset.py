@@ -7,8 +7,9 @@ any supported size. So the paper-sized dataset is a file of about a megabyte.
 
 File format (``.npz``, written atomically): the arrays of ``DemoLog`` plus ``format`` (the
 string ``FORMAT``), ``version`` (``VERSION``), ``meta`` (JSON: town, how it was collected) and
-``checksum`` (SHA-256 of every array's dtype, shape and bytes). A file that is truncated,
-altered, of another format or of another version is refused with a ``ValueError`` saying so.
+``checksum`` (``DemoLog.checksum``: SHA-256 of every array's dtype, shape and bytes). A file
+that is truncated, altered, of another format or of another version is refused with a
+``ValueError`` saying so.
 """
 
 from __future__ import annotations
@@ -121,6 +122,12 @@ class DemoLog:
 
     # ------------------------------------------------------------------ files
     def checksum(self) -> str:
+        """SHA-256 (hex) of the log's content: every array's name, dtype, shape and bytes.
+
+        The demonstrations' identity: two identical collections have the same checksum whenever
+        and wherever they were made (the file's bytes differ: the archive records when it was
+        written). Agent checkpoints record it as ``data_sha256``.
+        """
         h = hashlib.sha256()
         for name in ARRAYS:
             arr = np.ascontiguousarray(getattr(self, name))

@@ -2,7 +2,9 @@
 
 Observation (the paper's sec. 3.1): ``{"bev": uint8 (5, S, S) of 0/1, "state": float32 (3,)}``
 with state = [speed in m/s, previous steer, previous acceleration]. Action: ``Box(-1, 1, (2,))``
-= [steer (positive turns right), acceleration (negative brakes)], at 10 Hz. The reward of a
+= [steer, acceleration (negative brakes)], at 10 Hz. **Steering sign, the whole book's: +1 turns
+right, -1 turns left** (CARLA's convention; the world frame is right-handed, so a right turn
+decreases the heading). The reward of a
 step is the increase of the paper's score, distance x 0.7 ** red-light infractions, so an
 episode's return is its score. Terminated when the car leaves the drivable area or touches a
 building; truncated after ``max_steps``.

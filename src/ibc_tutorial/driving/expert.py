@@ -19,8 +19,8 @@ point trajectory and a PID controller"):
 The action is [steer, throttle - brake] in [-1, 1]^2. Optional steering noise (short
 perturbations, for data collection) changes what is *executed*, not the expert's label.
 
-Changes from DESIGN.md's starting point, found by driving town02 (largest distance from the
-lane's centre line over 4 x 150 s: 1.8 m with DESIGN's settings, 0.5 m with these):
+Changes from LBC's starting values (``docs/design.md``), found by driving town02 (largest distance
+from the lane's centre line over 4 x 150 s: 1.8 m with LBC's settings, 0.5 m with these):
 the steering P gain was raised from 0.75 to 1.5 (this car's front wheels turn at most 0.6 rad,
 CARLA's about 1.2 rad, so the same gain turned them half as far), and the lookahead before
 turns stays 5 m instead of 7.5 m (the longer one cut the corners); the full brake for a red
@@ -47,11 +47,11 @@ class ExpertConfig:
     lookahead_m: float = 5.0
     """Distance along the path to the steering target."""
     turn_lookahead_m: float = 5.0
-    """Distance to the steering target when a turn starts within ``turn_preview_m`` (DESIGN: 7.5)."""
+    """Distance to the steering target when a turn starts within ``turn_preview_m`` (LBC: 7.5)."""
     turn_preview_m: float = 10.0
     """How far ahead a turn slows the car and lengthens the lookahead (metres)."""
     steer_gains: tuple[float, float, float] = (1.5, 0.05, 0.0)
-    """(P, I, D) of the steering PID on the heading error in radians (DESIGN: 0.75, 0.05, 0.0)."""
+    """(P, I, D) of the steering PID on the heading error in radians (LBC: 0.75, 0.05, 0.0)."""
     speed_gains: tuple[float, float, float] = (0.5, 0.025, 0.1)
     """(P, I, D) of the speed PID on the speed error in m/s."""
     cruise_speed: float = 6.0

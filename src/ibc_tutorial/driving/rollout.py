@@ -1,4 +1,4 @@
-"""Closed-loop episodes of a policy, batched over environments: the paper's evaluation protocol.
+"""Closed-loop episodes of a policy, batched over environments: the one loop over the driving environment.
 
 The DA-IBC paper scores an agent over 10 episodes of 3000 steps in town02 (its Fig. 4). Here
 the episodes run side by side, so that a neural policy is called once per step on a batch of
@@ -6,10 +6,16 @@ observations rather than once per episode and step:
 
     results = rollout(policy, town="town02", episodes=10, steps=3000, bev_size=64, seed=0)
 
-``policy`` maps ``{"bev": uint8 (B, 5, S, S), "state": float32 (B, 3)}`` (numpy arrays, B = the
-episodes still running) to actions (B, 2); or it is the string ``"expert"`` for the PID expert.
-Episode ``i`` starts from ``env.reset(seed=seed + i)``, so two policies evaluated with the same
-``seed`` meet the same starts and the same light phases.
+``policy`` is a ``Policy`` (below), or the string ``"expert"`` for the PID expert. Episode ``i``
+starts from ``env.reset(seed=seed + i)``, so two policies evaluated with the same ``seed`` meet
+the same starts and the same light phases.
+
+The same loop serves three uses: scores only (the evaluation), the car's positions
+(``record_xy``: the free-driving trajectories), and a per-step record of where the car was and
+what it saw (``record_steps``, optionally with the observations: ``keep_obs``), from which the
+Fig. 6 moments (a junction, a red light) are picked. The demonstrations are collected by
+``driving.collect`` on the simulator itself, not here: the expert drives fixed routes there,
+with steering perturbations, which the Gymnasium environment does not model.
 """
 
 from __future__ import annotations
@@ -19,9 +25,18 @@ from typing import Callable
 
 import numpy as np
 
-from ibc_tutorial.driving.env import make_env
+from ibc_tutorial.driving.env import DrivingEnv, make_env
 from ibc_tutorial.driving.expert import Expert
 from ibc_tutorial.utils import check_int, progress
+
+Policy = Callable[[dict[str, np.ndarray]], np.ndarray]
+"""A closed-loop policy, the one form every driving policy of the book takes:
+``policy({"bev": uint8 (B, 5, S, S), "state": float32 (B, 3)}) -> actions (B, 2)`` on numpy
+batches (B = the episodes still running), actions (steer, acceleration) in [-1, 1]
+(``experiments.agents.Agent.policy(seed)`` makes one from a trained agent)."""
+
+TRACE_KEYS = ("pose", "speed", "lane", "red_ahead", "entry_dist")
+"""Per-state entries of ``EpisodeResult.trace`` (besides ``actions``, ``bev`` and ``state``)."""
 
 
 @dataclass
@@ -44,13 +59,61 @@ class EpisodeResult:
     """"off_road", "building" or "" (drove to the end)."""
     xy: np.ndarray = field(repr=False, default=None)
     """(steps + 1, 2) the car's positions, the start included (if recorded)."""
+    trace: dict = field(repr=False, default=None)
+    """With ``record_steps``: arrays over the T + 1 states (the start included): ``pose`` (T+1, 3),
+    ``speed`` (T+1,), ``lane`` (T+1,) (the lane whose waypoint is nearest, heading aligned),
+    ``red_ahead`` (T+1,) (the light of the approach the car is on shows red or yellow),
+    ``entry_dist`` (T+1,) (metres to that approach's junction entry, inf off approaches),
+    ``actions`` (T, 2); with ``keep_obs`` also ``bev`` (T+1, 5, S, S) and ``state`` (T+1, 3)."""
 
 
-def rollout(policy: Callable | str, town: str = "town02", episodes: int = 10, steps: int = 3000, bev_size: int = 64,
-            seed: int = 0, routeless: bool = True, record_xy: bool = True, show_progress: bool | None = None) -> list[EpisodeResult]:
+class _Trace:
+    """The per-step record of one episode (see ``EpisodeResult.trace``)."""
+
+    def __init__(self, env: DrivingEnv, keep_obs: bool):
+        self.env, self.keep_obs = env, keep_obs
+        self.rows: dict[str, list] = {k: [] for k in TRACE_KEYS + ("actions", "bev", "state")}
+
+    def note(self, obs: dict, info: dict) -> None:
+        tw, r = self.env.town, self.rows
+        x, y, yaw = info["x"], info["y"], info["yaw"]
+        lane, _, _ = tw.localize(x, y, yaw)
+        ap = tw.approach_of_lane.get(lane)
+        red, dist = False, float("inf")
+        if ap is not None and ap in tw.light_of_approach:
+            light = tw.light_of_approach[ap]
+            red = bool(self.env.sim.stop_flags()[2, light])  # red or yellow now
+            dist = float(np.hypot(*(np.asarray(tw.stop_lines[light].entry) - (x, y))))
+        r["pose"].append((x, y, yaw))
+        r["speed"].append(info["speed"])
+        r["lane"].append(lane)
+        r["red_ahead"].append(red)
+        r["entry_dist"].append(dist)
+        if self.keep_obs:
+            r["bev"].append(obs["bev"])
+            r["state"].append(obs["state"])
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        out = {k: np.asarray(self.rows[k]) for k in TRACE_KEYS}
+        out["pose"] = out["pose"].astype(np.float64)
+        out["actions"] = np.asarray(self.rows["actions"], dtype=np.float64).reshape(-1, 2)
+        if self.keep_obs:
+            out["bev"], out["state"] = np.stack(self.rows["bev"]), np.stack(self.rows["state"])
+        return out
+
+
+def rollout(policy: Policy | str, town: str = "town02", episodes: int = 10, steps: int = 3000, bev_size: int = 64,
+            seed: int = 0, routeless: bool = True, record_xy: bool = True, record_steps: bool = False,
+            keep_obs: bool = False, show_progress: bool | None = None) -> list[EpisodeResult]:
     """Run ``episodes`` episodes of at most ``steps`` steps side by side; return one result each.
 
     Actions are clipped to [-1, 1] (a NaN still raises the environment's ValueError).
+
+    Args:
+        policy: a ``Policy`` or "expert".
+        record_xy: keep every episode's positions in ``EpisodeResult.xy``.
+        record_steps: keep the per-step record in ``EpisodeResult.trace``.
+        keep_obs: with ``record_steps``, keep the observations in the trace too.
     """
     episodes = check_int("episodes", episodes, minimum=1)
     steps = check_int("steps", steps, minimum=1)
@@ -59,11 +122,17 @@ def rollout(policy: Callable | str, town: str = "town02", episodes: int = 10, st
         raise ValueError(f"policy must be a callable or 'expert', got {policy!r}")
     if not isinstance(policy, str) and not callable(policy):
         raise ValueError(f"policy must be a callable or 'expert', got {type(policy).__name__}")
+    if keep_obs and not record_steps:
+        raise ValueError("keep_obs needs record_steps=True")
     envs = [make_env(town, bev_size=bev_size, routeless=routeless, max_steps=steps) for _ in range(episodes)]
     obs, infos = zip(*(env.reset(seed=seed + i) for i, env in enumerate(envs)))
     obs, infos = list(obs), list(infos)
     experts = [Expert(env) for env in envs] if policy == "expert" else None
     tracks = [[(info["x"], info["y"])] for info in infos]
+    traces = [_Trace(env, keep_obs) for env in envs] if record_steps else None
+    if traces:
+        for i in range(episodes):
+            traces[i].note(obs[i], infos[i])
     active = list(range(episodes))
     done_info: dict[int, dict] = {}
     bar = progress(total=steps, desc=f"{episodes} episodes in {town}", enabled=show_progress)
@@ -71,9 +140,10 @@ def rollout(policy: Callable | str, town: str = "town02", episodes: int = 10, st
         if not active:
             break
         if experts is not None:
-            actions = np.stack([experts[i].act() for i in active])
+            actions = np.stack([experts[i].act() for i in active])  # (B, 2)
         else:
-            batch = {"bev": np.stack([obs[i]["bev"] for i in active]), "state": np.stack([obs[i]["state"] for i in active])}
+            batch = {"bev": np.stack([obs[i]["bev"] for i in active]),  # (B, 5, S, S) uint8
+                     "state": np.stack([obs[i]["state"] for i in active])}  # (B, 3) float32
             actions = np.asarray(policy(batch), dtype=np.float64).reshape(len(active), 2)
             with np.errstate(invalid="ignore"):
                 actions = np.where(np.isnan(actions), actions, np.clip(actions, -1.0, 1.0))
@@ -82,6 +152,9 @@ def rollout(policy: Callable | str, town: str = "town02", episodes: int = 10, st
             obs[i], _, terminated, truncated, info = envs[i].step(actions[k])
             if record_xy:
                 tracks[i].append((info["x"], info["y"]))
+            if traces:
+                traces[i].rows["actions"].append(actions[k])
+                traces[i].note(obs[i], info)
             if terminated or truncated:
                 done_info[i] = info
             else:
@@ -94,5 +167,6 @@ def rollout(policy: Callable | str, town: str = "town02", episodes: int = 10, st
         info = done_info.get(i) or envs[i].sim.info()
         results.append(EpisodeResult(seed + i, info["step"], info["distance_m"], info["red_light_infractions"], info["score"],
                                      bool(info["termination"]), info["termination"],
-                                     np.array(tracks[i]) if record_xy else None))
+                                     np.array(tracks[i]) if record_xy else None,
+                                     traces[i].arrays() if traces else None))
     return results

@@ -1,6 +1,6 @@
 """The simulation core shared by the Gymnasium environment and the data collector.
 
-One control step (DESIGN.md section 3): action -> car (pymunk, 2 physics substeps) -> pose ->
+One control step (``docs/design.md``, the data flow): action -> car (pymunk, 2 physics substeps) -> pose ->
 lights advance -> red-light infractions checked -> off-road and building collisions checked.
 No observation is rendered here: the environment renders the BEV, the collector stores only
 the state it is rendered from.

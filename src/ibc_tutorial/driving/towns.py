@@ -1,7 +1,7 @@
 """The two towns, laid out after CARLA's town01 (training) and town02 (evaluation).
 
 Only T-junctions and corners, one 4 m lane per direction, right-hand traffic, rounded
-corners, as in CARLA's first two towns (see DESIGN.md section 4). A layout is a list of node
+corners, as in CARLA's first two towns (the layouts are listed in ``docs/design.md``). A layout is a list of node
 centres, the axis-aligned roads between them, and the rectangular blocks the roads enclose;
 ``Town`` turns it into lanes with dense waypoints, approaches with their legal exits, stop
 lines (one traffic-light head per junction approach) and building footprints.

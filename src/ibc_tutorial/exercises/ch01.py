@@ -3,9 +3,12 @@
 - ``check_best_constant_mse(fn)``: ``fn(actions (N,)) -> float``, the constant c minimising
   the mean squared error (1/N) Σ (a_i - c)^2 over a set of actions.
 - ``check_hits_tree(fn)``: ``fn(car_xy (B, 2), tree_xy (2,), car_radius, tree_radius) -> (B,) bool``,
-  whether the car's disc overlaps the tree's.
+  whether the car's disc overlaps the tree's (discs that only touch do not).
 - ``check_swerve(fn)``: ``fn(y (E, T)) -> (E,)``, how far each episode moved towards the side
-  road (+y) from its first lateral offset: max_t (y_t - y_0), at least 0.
+  road, which branches off to the right (-y, as y points to the left), from its first lateral
+  offset: max_t (y_0 - y_t), at least 0.
+
+Steering, as everywhere in the book: +1 turns right, -1 left.
 
 Each compares the reader's function with an independent reference on inputs it draws itself,
 then, when they differ, recognises the usual mistakes and names them without the answer.
@@ -30,11 +33,12 @@ def _as_float(out) -> float | None:
         return None
 
 
-def _bimodal_actions(seed: int, n_left: int, n_right: int) -> torch.Tensor:
+def _bimodal_actions(seed: int, n_right: int, n_left: int) -> torch.Tensor:
+    """Steering of experts passing on the right (about +0.75) and on the left (about -0.7), shuffled."""
     gen = torch.Generator().manual_seed(seed)
-    left = 0.75 + 0.08 * torch.randn(n_left, generator=gen)
-    right = -0.7 + 0.1 * torch.randn(n_right, generator=gen)
-    return torch.cat([left, right])[torch.randperm(n_left + n_right, generator=gen)].clamp(-1, 1)
+    right = 0.75 + 0.08 * torch.randn(n_right, generator=gen)
+    left = -0.7 + 0.1 * torch.randn(n_left, generator=gen)
+    return torch.cat([right, left])[torch.randperm(n_right + n_left, generator=gen)].clamp(-1, 1)
 
 
 # --------------------------------------------------------------------------- 1. best constant (MSE)
@@ -79,7 +83,9 @@ def _hits_cases():
     # random points around the tree, plus hand-picked ones near the boundary (distance 2.5)
     pts = tree + torch.empty(200, 2).uniform_(-5.0, 5.0, generator=gen)
     special = torch.tensor([[20.0, 2.4], [20.0, 2.6], [17.6, 0.0], [22.6, 0.0], [20.0 + 1.7, 1.7], [20.0 + 1.8, -1.8], [20.0, 0.0], [10.0, 0.0], [21.55, 0.0], [20.0, -1.05]])
-    return torch.cat([pts, special]), tree, 1.0, 1.5
+    # exactly 2.5 m from the tree (exact in float32): the discs only touch, which is no collision
+    touching = tree + torch.tensor([[2.5, 0.0], [0.0, -2.5], [-1.5, 2.0], [2.0, -1.5]])
+    return torch.cat([pts, special, touching]), tree, 1.0, 1.5
 
 
 def check_hits_tree(fn) -> Feedback:
@@ -97,6 +103,8 @@ def check_hits_tree(fn) -> Feedback:
         ref = dist < rc + rt
         if torch.equal(got, ref):
             return correct("Two discs overlap when their centres are closer than the sum of their radii.")
+        if torch.equal(got, dist <= rc + rt) or torch.equal(got, ((xy - tree) ** 2).sum(1) <= (rc + rt) ** 2):
+            return hint("right everywhere except where the two discs only touch (centres exactly r_car + r_tree apart): touching is not overlapping, so that comparison must be strict.")
         if torch.equal(got, dist < rt) or torch.equal(got, dist <= rt):
             return hint("a car whose centre stays outside the tree's disc can still touch it: the car has a size too.")
         if torch.equal(got, dist < rc) or torch.equal(got, dist <= rc):
@@ -122,7 +130,7 @@ def _swerve_cases() -> torch.Tensor:
     start = torch.empty(6, 1).uniform_(-0.3, 0.3, generator=gen)
     bump = torch.tensor([[0.8], [0.0], [-0.5], [0.3], [1.2], [0.05]]) * torch.sin(torch.pi * t)[None, :]
     drift = torch.tensor([[0.0], [0.2], [0.0], [-0.4], [0.0], [0.0]]) * t[None, :]
-    return start + bump + drift + 0.01 * torch.randn(6, 30, generator=gen)  # (E=6, T=30)
+    return -(start + bump + drift + 0.01 * torch.randn(6, 30, generator=gen))  # (E=6, T=30): most bumps to the right (-y)
 
 
 def check_swerve(fn) -> Feedback:
@@ -133,7 +141,7 @@ def check_swerve(fn) -> Feedback:
         out = fn(y.clone())
         if not isinstance(out, torch.Tensor):
             return hint(f"return a torch.Tensor with one swerve per episode, got {type(out).__name__}.")
-        ref = y.max(dim=1).values - y[:, 0]  # >= 0: t = 0 is one of the t
+        ref = y[:, 0] - y.min(dim=1).values  # >= 0: t = 0 is one of the t
         if out.shape != ref.shape:
             if out.shape == (y.shape[1],):
                 return hint(f"return one number per episode (rows, {y.shape[0]} of them), not one per time step: which dimension do you reduce over?")
@@ -141,12 +149,17 @@ def check_swerve(fn) -> Feedback:
         out = out.detach().to(ref.dtype)
         if torch.allclose(out, ref, atol=1e-5):
             return correct("The largest move towards the side road, measured from where the car was.")
-        if torch.allclose(out, y.max(dim=1).values.clamp_min(0.0), atol=1e-5) or torch.allclose(out, y.max(dim=1).values, atol=1e-5):
+        low = y.min(dim=1).values
+        if torch.allclose(out, (-low).clamp_min(0.0), atol=1e-5) or torch.allclose(out, -low, atol=1e-5):
             return hint("measure from where each car was at the start (its first offset), not from the centre line: a car driving a little off-centre all along has not swerved.")
+        if torch.allclose(out, y.max(dim=1).values - y[:, 0], atol=1e-5):
+            return hint("that is the largest move to the left (y increasing); the side road branches off to the right, where y decreases.")
         if torch.allclose(out, (y - y[:, :1]).abs().max(dim=1).values, atol=1e-5):
-            return hint("only moves towards the side road (to the left, y increasing) count as a swerve towards it.")
-        if torch.allclose(out, (y[:, -1] - y[:, 0]).clamp_min(0.0), atol=1e-5):
+            return hint("only moves towards the side road (to the right, y decreasing) count as a swerve towards it.")
+        if torch.allclose(out, (y[:, 0] - y[:, -1]).clamp_min(0.0), atol=1e-5):
             return hint("the swerve is the *largest* deviation during the episode, not where the car ends up.")
-        return hint("for some episodes your value differs from the largest move towards the side road (y increasing) since the first time step.")
+        if torch.allclose(out, low - y[:, 0], atol=1e-5):
+            return hint("check the sign: a swerve is a distance moved, at least 0, so subtract the smallest y from the first one.")
+        return hint("for some episodes your value differs from the largest move towards the side road (y decreasing) since the first time step.")
 
     return run_check(check, "swerve")

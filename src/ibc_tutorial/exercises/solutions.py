@@ -13,8 +13,8 @@ def ch01_hits_tree(car_xy, tree_xy, car_radius, tree_radius):
 
 
 def ch01_swerve(y):
-    """(E,) the largest move towards +y since the first time step (>= 0, as t = 0 counts too)."""
-    return y.max(dim=1).values - y[:, 0]
+    """(E,) the largest move towards the side road, to the right (-y), since the first time step (>= 0, as t = 0 counts too)."""
+    return y[:, 0] - y.min(dim=1).values
 
 
 # =========================================================================== chapter 02: explicit policies

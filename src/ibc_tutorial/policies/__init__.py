@@ -1,6 +1,6 @@
 """Policies: observation encoders, explicit policies (chapter 02) and the energy model."""
 
-from ibc_tutorial.policies.encoders import MLPEncoder, ObservationEncoder
+from ibc_tutorial.policies.encoders import BEVStateEncoder, MLPEncoder, ObservationEncoder
 
 # the energy model (chapters 03-06)
 from ibc_tutorial.policies.energy import EnergyModel, GridArgminPolicy, GridSamplePolicy
@@ -11,6 +11,7 @@ from ibc_tutorial.policies.explicit import BetaPolicy, ClassifierPolicy, Explici
 __all__ = [
     "ObservationEncoder",
     "MLPEncoder",
+    "BEVStateEncoder",
     # the energy model (chapters 03-06)
     "EnergyModel",
     "GridArgminPolicy",

@@ -2,7 +2,8 @@
 
 An encoder maps a batch of observations to embeddings of size ``embed_dim``; every policy
 head (regression, Beta, classifier, MDN, energy) sits on top of one, so a chapter can swap
-the small MLP of the toy worlds for the bird's-eye-view CNN of the driving chapters.
+the small MLP of the toy worlds (``MLPEncoder``) for the bird's-eye-view CNN of the driving
+chapters (``BEVStateEncoder``, the DA-IBC paper's Fig. 2).
 """
 
 from __future__ import annotations
@@ -10,7 +11,10 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-from ibc_tutorial.utils import check_int
+from ibc_tutorial.utils import check_int, check_tensor
+
+SPEED_SCALE = 10.0
+"""``BEVStateEncoder`` divides the speed entry of the state (m/s) by this before its MLP (inputs of order 1)."""
 
 
 class ObservationEncoder(nn.Module):
@@ -46,3 +50,53 @@ class MLPEncoder(ObservationEncoder):
             got = tuple(obs.shape) if isinstance(obs, torch.Tensor) else type(obs).__name__
             raise ValueError(f"obs must be a tensor of shape (B, {self.obs_dim}), got {got}")
         return self.net(obs)  # (B, embed_dim)
+
+
+def _conv_out(size: int, n: int) -> int:
+    for _ in range(n):
+        size = (size + 2 * 1 - 3) // 2 + 1  # kernel 3, stride 2, padding 1
+    return size
+
+
+class BEVStateEncoder(ObservationEncoder):
+    """Dict observations ``{"bev": (B, 5, S, S), "state": (B, 3)}`` -> z (B, 2 * embed_dim): the DA-IBC paper's Fig. 2.
+
+    The BEV (uint8 0/1 or float) goes through ``len(channels)`` 3x3 stride-2 convolutions with
+    ReLU, then a linear layer to ``embed_dim`` (the paper's 256-d BEV embedding); the state
+    (speed in m/s, previous steer, previous acceleration) through a two-layer MLP to
+    ``embed_dim`` (the paper's 256-d state embedding). z is their concatenation (sec. 3.3).
+    """
+
+    def __init__(self, bev_size: int = 64, channels=(16, 32, 32, 64), embed_dim: int = 256, in_channels: int = 5):
+        super().__init__()
+        self.bev_size = check_int("bev_size", bev_size, minimum=8)
+        self.in_channels = check_int("in_channels", in_channels, minimum=1)
+        check_int("embed_dim", embed_dim, minimum=1)
+        channels = tuple(int(c) for c in channels)
+        if not channels or min(channels) < 1:
+            raise ValueError(f"channels must be positive integers, got {channels!r}")
+        self.channels = channels
+        convs: list[nn.Module] = []
+        c_in = in_channels
+        for c in channels:
+            convs += [nn.Conv2d(c_in, c, kernel_size=3, stride=2, padding=1), nn.ReLU()]
+            c_in = c
+        side = _conv_out(bev_size, len(channels))
+        self.cnn = nn.Sequential(*convs, nn.Flatten(), nn.Linear(c_in * side * side, embed_dim), nn.ReLU())
+        self.state_mlp = nn.Sequential(nn.Linear(3, embed_dim), nn.ReLU(), nn.Linear(embed_dim, embed_dim), nn.ReLU())
+        self.branch_dim = embed_dim
+        self.embed_dim = 2 * embed_dim
+
+    def batch_size(self, obs) -> int:
+        return len(obs["bev"])
+
+    def forward(self, obs) -> torch.Tensor:
+        if not isinstance(obs, dict) or "bev" not in obs or "state" not in obs:
+            raise ValueError(f"obs must be a dict with 'bev' and 'state', got {type(obs).__name__}")
+        bev, state = obs["bev"], obs["state"]
+        s = self.bev_size
+        check_tensor("obs['bev']", bev, shape=(None, self.in_channels, s, s), finite=False)
+        check_tensor("obs['state']", state, shape=(len(bev), 3))
+        x = bev.float()  # (B, 5, S, S) of 0./1.
+        st = state.float() * torch.tensor([1.0 / SPEED_SCALE, 1.0, 1.0])  # (B, 3), speed rescaled
+        return torch.cat([self.cnn(x), self.state_mlp(st)], dim=1)  # (B, 2 E)

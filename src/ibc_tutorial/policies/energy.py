@@ -27,6 +27,7 @@ from __future__ import annotations
 import torch
 from torch import nn
 
+from ibc_tutorial.optimizers.grid import grid_argmin, grid_energies
 from ibc_tutorial.policies.encoders import ObservationEncoder
 from ibc_tutorial.utils import check_int, check_tensor
 
@@ -123,7 +124,7 @@ class GridArgminPolicy:
     """An implicit policy for rollouts: obs (B, obs_dim) -> argmin over ``grid`` of E(obs, ·), (B, D).
 
     A plain callable (the toy worlds' policy interface), evaluated without gradients, with the
-    model in eval mode. ``grid`` is (G, D), e.g. ``inference.action_grid(201)`` for steering.
+    model in eval mode. ``grid`` is (G, D), e.g. ``optimizers.grid.action_grid(201)`` for steering.
     """
 
     def __init__(self, model: EnergyModel, grid: torch.Tensor):
@@ -133,8 +134,6 @@ class GridArgminPolicy:
         self.model, self.grid = model, grid
 
     def __call__(self, obs) -> torch.Tensor:
-        from ibc_tutorial.inference import grid_argmin
-
         was_training = self.model.training
         self.model.eval()
         try:
@@ -159,8 +158,6 @@ class GridSamplePolicy:
 
     @torch.no_grad()
     def __call__(self, obs) -> torch.Tensor:
-        from ibc_tutorial.inference import grid_energies
-
         was_training = self.model.training
         self.model.eval()
         try:

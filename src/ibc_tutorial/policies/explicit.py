@@ -149,7 +149,7 @@ class BetaPolicy(ExplicitPolicy):
     Acting: "mean" (α / (α + β), rescaled); "mode", the peak of the density: (α − 1)/(α + β − 2)
     when α, β > 1, otherwise the bound on the side of the smaller concentration (where the
     density is largest; the mean when α = β ≤ 1, e.g. the flat α = β = 1); or "sample" (a
-    draw, via two Gamma draws so that ``generator`` seeds it).
+    draw of ``torch.distributions.Beta``, seeded by ``generator``).
     """
 
     modes = ("mean", "mode", "sample")
@@ -193,13 +193,20 @@ class BetaPolicy(ExplicitPolicy):
 
 
 def _sample_beta(alpha: torch.Tensor, beta: torch.Tensor, generator: torch.Generator | None) -> torch.Tensor:
-    """Beta(α, β) draws as X / (X + Y) with X ~ Gamma(α, 1), Y ~ Gamma(β, 1).
+    """Draws (B, D) of Beta(α, β) in [0, 1] by ``torch.distributions.Beta``, seeded by ``generator``.
 
-    ``torch._standard_gamma`` is the sampler behind ``torch.distributions.Gamma``; unlike
-    ``Beta.sample`` it takes a ``generator``, so the draws are seeded."""
-    x = torch._standard_gamma(alpha, generator=generator)
-    y = torch._standard_gamma(beta, generator=generator)
-    return x / (x + y).clamp_min(1e-30)
+    ``Beta.sample`` takes no generator and draws from torch's global one, so with a
+    ``generator`` it runs under ``torch.random.fork_rng`` with the global generator seeded from
+    one draw of ``generator``: reproducible, and the global random state is left as it was.
+    Without one, it draws from the global generator."""
+    dist = torch.distributions.Beta(alpha, beta)
+    if generator is None:
+        return dist.sample()
+    seed = int(torch.randint(0, 2**62, (), generator=generator))
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(seed)
+        return dist.sample()
+
 
 # --------------------------------------------------------------------------- classifier
 class ClassifierPolicy(ExplicitPolicy):

@@ -1,13 +1,14 @@
 """The side-road world: Fig. 1 (right) of the steering-EBM paper.
 
-A straight road along the x axis; at ``branch_x`` a side road branches off to the left
-(towards +y) at ``side_angle_deg``. Most experts keep straight (mode 0, probability
+A straight road along the x axis; at ``branch_x`` a side road branches off to the right
+(towards -y, as ``y`` points to the left) at ``side_angle_deg``, so taking it needs positive
+steering (+1 turns right, -1 left). Most experts keep straight (mode 0, probability
 ``straight_prob``); the others take the side road (mode 1). Their choice is drawn per
 episode, independently of the start, and nothing in the observation shows it. The paper
 saw unimodal regression models "swerve slightly (the red trajectory) towards the side road
 ... minor because side roads are rarely taken in our training data": ``swerve`` measures
-that, as the largest move towards the side road (from 5 m before the branch point on) of
-the episodes that stay on the main road.
+that, as the largest move towards the side road (to the right, from 5 m before the branch
+point on) of the episodes that stay on the main road.
 
 As in the tree world, the policy observes the distance to the branch point alone, and the
 straight experts keep to the centre line (``expert_holds_start_offset=False``).
@@ -25,7 +26,7 @@ from dataclasses import dataclass
 import torch
 
 from ibc_tutorial.toy.world import Rollouts, ToyConfig, ToyWorld
-from ibc_tutorial.utils import check_positive
+from ibc_tutorial.utils import check_positive_fields, check_probability
 
 
 @dataclass
@@ -35,7 +36,7 @@ class SideRoadConfig(ToyConfig):
     branch_x: float = 20.0
     """x where the side road's centre line leaves the main road's (m)."""
     side_angle_deg: float = 30.0
-    """Angle between the side road and the main road (degrees), opening to the left (+y)."""
+    """Angle between the side road and the main road (degrees), opening to the right (-y)."""
     road_half_width: float = 2.0
     """How far the car's centre may be from a road's centre line (m) before it has left the road."""
     straight_prob: float = 0.8
@@ -55,25 +56,24 @@ class SideRoadConfig(ToyConfig):
 
 
 class SideRoadWorld(ToyWorld):
-    """A main road and a side road branching left: ``expert_demonstrations``, ``rollout``, ``swerve``.
+    """A main road and a side road branching right: ``expert_demonstrations``, ``rollout``, ``swerve``.
 
     Observation (1,): [distance ahead to the branch point along x / 10 m] (with ``obs_lateral=True``
-    also [lateral offset y / 2 m]). Action (1,): steering in [-1, 1], heading = 0.6 rad * steer.
-    Modes: 0 = keeps straight, 1 = takes the side road.
+    also [lateral offset to the right (-y) / 2 m]). Action (1,): steering in [-1, 1], +1 = right,
+    heading = -0.6 rad * steer. Modes: 0 = keeps straight, 1 = takes the side road (to the right).
     """
 
     anchor_name = "branch"
+    mode_names = ("keeps straight", "takes the side road")
 
     def __init__(self, config: SideRoadConfig | None = None):
         config = SideRoadConfig() if config is None else config
         super().__init__(config)
         c = config
-        for name in ("branch_x", "road_half_width", "corner_length", "swerve_from"):
-            check_positive(f"config.{name}", getattr(c, name))
+        check_positive_fields(c, ("branch_x", "road_half_width", "corner_length", "swerve_from"))
         if not 0.0 < c.side_angle_deg < 90.0:
             raise ValueError(f"config.side_angle_deg must be in (0, 90), got {c.side_angle_deg}")
-        if not 0.0 <= c.straight_prob <= 1.0:
-            raise ValueError(f"config.straight_prob must be in [0, 1], got {c.straight_prob}")
+        check_probability("config.straight_prob", c.straight_prob)
 
     @property
     def anchor_x(self) -> float:
@@ -81,22 +81,22 @@ class SideRoadWorld(ToyWorld):
 
     @property
     def side_direction(self) -> torch.Tensor:
-        """(2,) unit vector along the side road."""
+        """(2,) unit vector along the side road, away from the branch point: (cos a, -sin a), to the right."""
         a = math.radians(self.config.side_angle_deg)
-        return torch.tensor([math.cos(a), math.sin(a)])
+        return torch.tensor([math.cos(a), -math.sin(a)])
 
     def mode_probs(self) -> torch.Tensor:
         return torch.tensor([self.config.straight_prob, 1.0 - self.config.straight_prob])
 
     def side_road_lateral(self, x: torch.Tensor) -> torch.Tensor:
-        """y (m) of the side road's centre line at ``x`` (0 before the branch)."""
-        return math.tan(math.radians(self.config.side_angle_deg)) * (x - self.config.branch_x).clamp_min(0.0)
+        """y (m) of the side road's centre line at ``x`` (0 before the branch, negative beyond: to the right)."""
+        return -math.tan(math.radians(self.config.side_angle_deg)) * (x - self.config.branch_x).clamp_min(0.0)
 
     def reference_lateral(self, x: torch.Tensor, plan: torch.Tensor) -> torch.Tensor:
         # side-road expert: a path that bends smoothly (a quadratic over corner_length centred on
-        # the branch point) from the main road's centre line onto the side road's
+        # the branch point) from the main road's centre line onto the side road's, to the right
         c = self.config
-        k = math.tan(math.radians(c.side_angle_deg))
+        k = -math.tan(math.radians(c.side_angle_deg))  # dy/dx of the side road (< 0)
         u = (x - c.branch_x + c.corner_length / 2).clamp(0.0, c.corner_length)
         bend = k * u * u / (2 * c.corner_length) + k * (x - c.branch_x - c.corner_length / 2).clamp_min(0.0)
         return torch.where(plan[:, 0] == 1, bend, plan[:, 1])
@@ -133,9 +133,9 @@ class SideRoadWorld(ToyWorld):
 
     def swerve(self, rollouts: Rollouts) -> torch.Tensor:
         """(E,) float: how far (m) each episode that stayed on the main road moved towards the side
-        road, from where it was ``swerve_from`` m before the branch point on: the largest y after
-        that point minus y at that point, at least 0. NaN for the episodes that did not stay on
-        the main road.
+        road (to the right, -y), from where it was ``swerve_from`` m before the branch point on:
+        y at that point minus the smallest y after it, at least 0. NaN for the episodes that did
+        not stay on the main road.
 
         Measuring from the episode's own offset there (not from y = 0) separates the swerve from
         a car that merely drives a little off-centre all along."""
@@ -143,6 +143,6 @@ class SideRoadWorld(ToyWorld):
         near = s[:, :, 0] >= self.config.branch_x - self.config.swerve_from  # (E, T+1)
         first = near.float().argmax(dim=1)  # first state of the section (0 if it is never reached)
         y0 = s[torch.arange(len(s)), first, 1]  # (E,)
-        y = torch.where(near, s[:, :, 1], torch.full_like(s[:, :, 1], -float("inf")))
-        dev = (y.max(dim=1).values - y0).clamp_min(0.0)  # an episode that never got there counts 0
+        y = torch.where(near, s[:, :, 1], torch.full_like(s[:, :, 1], float("inf")))
+        dev = (y0 - y.min(dim=1).values).clamp_min(0.0)  # an episode that never got there counts 0
         return torch.where(self.stayed_on_main_road(rollouts), dev, torch.full_like(dev, float("nan")))

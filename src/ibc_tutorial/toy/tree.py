@@ -2,14 +2,15 @@
 
 A car drives along the x axis at constant speed; a tree (a disc) stands on the centre
 line ahead. Each expert decides, with probability 1/2 and independently of where it
-starts, to pass the tree on the left (mode 0, y > 0) or on the right (mode 1, y < 0). It
+starts, to pass the tree on the right (mode 0, y < 0, steering > 0) or on the left (mode 1,
+y > 0, steering < 0): steering +1 turns right, -1 left, and ``y`` points to the left. It
 drives along the centre line until ``swerve_start`` m before the tree, then heads for
 ``pass_offset`` m to its side, and heads back once it is ``return_after`` m past the tree
 (a pure-pursuit controller, see ``ToyWorld.expert_steer``, with a little steering noise).
 
 **The observation is the distance to the tree alone** (``obs_lateral=False``): a driver with
 no navigation command, whose view ahead looks the same whichever side it will take. So for
-one and the same observation the demonstrations hold two modes of action, left and right,
+one and the same observation the demonstrations hold two modes of action, right and left,
 which is the situation of the paper's caption: "If the experts have passed the tree from
 left and right with equal frequency in the training data, behavioral cloning with a
 unimodal policy and no high-level navigation commands would average the training
@@ -32,7 +33,7 @@ import torch
 
 from ibc_tutorial.toy import car
 from ibc_tutorial.toy.world import Rollouts, ToyConfig, ToyWorld
-from ibc_tutorial.utils import check_positive
+from ibc_tutorial.utils import check_positive_fields, check_probability
 
 
 @dataclass
@@ -61,30 +62,29 @@ class TreeConfig(ToyConfig):
     """Largest such distance: each expert draws its own uniformly in [min, max], independently of its side."""
     return_after: float = 3.0
     """Distance past the tree (m) from which the expert heads back to the centre line."""
-    left_prob: float = 0.5
-    """Probability that an expert passes on the left (mode 0)."""
+    right_prob: float = 0.5
+    """Probability that an expert passes on the right (mode 0); it passes on the left otherwise (mode 1)."""
 
 
 class TreeWorld(ToyWorld):
     """The tree on the road: ``expert_demonstrations``, ``rollout``, ``pass_side``, ``collision_rate``.
 
     Observation (1,): [distance ahead to the tree along x / 10 m] (with ``obs_lateral=True`` also
-    [lateral offset y / 2 m]). Action (1,): steering in [-1, 1], heading = 0.7 rad * steer.
-    Modes: 0 = passes on the left (y > 0), 1 = passes on the right.
+    [lateral offset to the right (-y) / 2 m]). Action (1,): steering in [-1, 1], +1 = right,
+    heading = -0.7 rad * steer. Modes: 0 = passes on the right (y < 0), 1 = on the left (y > 0).
     """
 
     anchor_name = "tree"
+    mode_names = ("passes right", "passes left")
 
     def __init__(self, config: TreeConfig | None = None):
         config = TreeConfig() if config is None else config
         super().__init__(config)
         c = config
-        for name in ("tree_radius", "car_radius", "pass_offset", "swerve_start_min", "swerve_start_max", "return_after"):
-            check_positive(f"config.{name}", getattr(c, name))
+        check_positive_fields(c, ("tree_radius", "car_radius", "pass_offset", "swerve_start_min", "swerve_start_max", "return_after"))
         if not c.swerve_start_min <= c.swerve_start_max:
             raise ValueError(f"config.swerve_start_min must be <= config.swerve_start_max, got {c.swerve_start_min} and {c.swerve_start_max}")
-        if not 0.0 <= c.left_prob <= 1.0:
-            raise ValueError(f"config.left_prob must be in [0, 1], got {c.left_prob}")
+        check_probability("config.right_prob", c.right_prob)
 
     @property
     def anchor_x(self) -> float:
@@ -96,7 +96,7 @@ class TreeWorld(ToyWorld):
         return self.config.car_radius + self.config.tree_radius
 
     def mode_probs(self) -> torch.Tensor:
-        return torch.tensor([self.config.left_prob, 1.0 - self.config.left_prob])
+        return torch.tensor([self.config.right_prob, 1.0 - self.config.right_prob])
 
     def sample_plans(self, start: torch.Tensor, generator: torch.Generator) -> torch.Tensor:
         """(E, 3): [mode, lateral offset held away from the tree (m), distance before the tree
@@ -112,7 +112,7 @@ class TreeWorld(ToyWorld):
         # car is return_after m past the tree, then plan[:, 1] again
         c = self.config
         car_x = x - c.expert_lookahead
-        sign = 1.0 - 2.0 * plan[:, 0]  # mode 0 -> +1 (left), mode 1 -> -1 (right)
+        sign = 2.0 * plan[:, 0] - 1.0  # mode 0 -> -1 (right, y < 0), mode 1 -> +1 (left)
         swerving = (car_x >= c.tree_x - plan[:, 2]) & (car_x <= c.tree_x + c.return_after)
         return torch.where(swerving, sign * c.pass_offset, plan[:, 1])
 
@@ -126,8 +126,9 @@ class TreeWorld(ToyWorld):
         return ((positions[..., :2] - centre) ** 2).sum(-1) < self.clearance**2
 
     def pass_side(self, rollouts: Rollouts) -> torch.Tensor:
-        """(E,) int64: -1 passed on the left (y > 0 where x crosses the tree), +1 on the right,
-        0 collided (or never reached the tree)."""
+        """(E,) int64: +1 passed on the right (y < 0 where x crosses the tree), -1 on the left
+        (y > 0): the sign of the steering that takes a car there. 0 collided (or never reached
+        the tree)."""
         s = rollouts.states  # (E, T+1, 3)
         past = s[:, :, 0] >= self.config.tree_x  # (E, T+1)
         reached = past.any(dim=1)

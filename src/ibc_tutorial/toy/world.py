@@ -3,7 +3,8 @@ start, the expert's controller, the batched closed-loop rollout, and the two rec
 produces (``Demonstrations`` of the expert, ``Rollouts`` of any policy).
 
 A *policy* is any callable ``policy(obs) -> actions`` with ``obs`` a float32 tensor
-(B, obs_dim) and ``actions`` a tensor (B, 1) of steering in [-1, 1]. A rollout calls it once
+(B, obs_dim) and ``actions`` a tensor (B, 1) of steering in [-1, 1], **+1 turning right and
+-1 left** (the book's convention; see ``ibc_tutorial.toy.car``). A rollout calls it once
 per step on all B episodes at once. A policy that returns NaN, the wrong shape or a value
 outside [-1, 1] gets a ``ValueError`` saying what was expected: nothing is clipped silently.
 
@@ -14,8 +15,9 @@ the expert's *mode*, drawn once per episode, independently of the start state: t
 puts two modes of action into the data for one and the same observation.
 
 Units: metres, radians, seconds. ``x`` runs along the road in the direction of travel, ``y``
-to the left. The same ``seed`` gives the same start states to ``rollout``,
-``expert_rollouts`` and ``expert_demonstrations``.
+to the left (a right-handed frame), so a positive steering command makes ``y`` decrease. The
+same ``seed`` gives the same start states to ``rollout``, ``expert_rollouts`` and
+``expert_demonstrations``.
 """
 
 from __future__ import annotations
@@ -28,10 +30,10 @@ import numpy as np
 import torch
 
 from ibc_tutorial.toy import car
-from ibc_tutorial.utils import check_int, check_positive, check_tensor
+from ibc_tutorial.utils import check_int, check_positive, check_positive_fields, check_tensor
 
 Policy = Callable[[torch.Tensor], torch.Tensor]
-"""policy(obs (B, obs_dim) float32) -> actions (B, 1) in [-1, 1]."""
+"""policy(obs (B, obs_dim) float32) -> actions (B, 1) in [-1, 1], +1 = full right."""
 
 
 @dataclass
@@ -43,7 +45,8 @@ class ToyConfig:
     dt: float = 0.1
     """Time step (s): the car moves speed * dt = 0.5 m per step."""
     heading_max: float = 0.6
-    """Direction of travel at full steering |steer| = 1 (rad, relative to the road)."""
+    """Direction of travel at full steering |steer| = 1 (rad, relative to the road; steer = +1
+    gives heading -heading_max, to the right)."""
     horizon: int = 80
     """Steps per episode (the car covers a little less than speed * dt * horizon metres along x)."""
     start_lateral_range: float = 1.0
@@ -58,9 +61,9 @@ class ToyConfig:
     obs_distance_scale: float = 10.0
     """Observations divide the distance along x (m) by this, so that they are of order 1."""
     obs_lateral: bool = True
-    """Whether the observation includes the lateral offset y (else it is the distance alone)."""
+    """Whether the observation includes the lateral offset (else it is the distance alone)."""
     obs_lateral_scale: float = 2.0
-    """Observations divide the lateral offset y (m) by this."""
+    """Observations divide the lateral offset (m, to the right of the centre line: -y) by this."""
 
 
 @dataclass
@@ -70,13 +73,14 @@ class Demonstrations:
     obs: torch.Tensor
     """(M, obs_dim) float32 observations."""
     actions: torch.Tensor
-    """(M, 1) float32 steering the expert applied (noise included), in [-1, 1]."""
+    """(M, 1) float32 steering the expert applied (noise included), in [-1, 1], +1 = right."""
     episode: torch.Tensor
     """(M,) int64 episode index of each sample."""
     step: torch.Tensor
     """(M,) int64 time step of each sample within its episode."""
     mode: torch.Tensor
-    """(M,) int64 the expert's mode in that episode (tree: 0 left, 1 right; side road: 0 straight, 1 side road)."""
+    """(M,) int64 the expert's mode in that episode (the world's ``mode_names``: tree 0 passes
+    right, 1 passes left; side road 0 keeps straight, 1 takes the side road)."""
     states: torch.Tensor
     """(E, T+1, 3) float32 [x m, y m, heading rad] of each expert episode."""
     episode_mode: torch.Tensor
@@ -97,7 +101,7 @@ class Rollouts:
     states: torch.Tensor
     """(E, T+1, 3) float32 [x m, y m, heading rad]; an episode that collided stays where it hit."""
     actions: torch.Tensor
-    """(E, T, 1) float32 actions the policy returned (after a collision: returned, not applied)."""
+    """(E, T, 1) float32 steering the policy returned, +1 = right (after a collision: returned, not applied)."""
     obs: torch.Tensor
     """(E, T, obs_dim) float32 observations the policy was given."""
     collided: torch.Tensor
@@ -139,22 +143,26 @@ class ToyWorld:
     """Base class of ``TreeWorld`` and ``SideRoadWorld``: subclasses give the landmark's x
     (``anchor_x``), the expert's reference path, the mode probabilities and the collision test.
 
-    The observation is ``[distance ahead to the landmark along x, lateral offset y]`` divided
+    The observation is ``[distance ahead to the landmark along x, lateral offset]`` divided
     by ``obs_distance_scale`` and ``obs_lateral_scale`` (the lateral offset only when
     ``config.obs_lateral``), and nothing about the expert's plan. The heading is not observed:
     it is the last action (see ``ibc_tutorial.toy.car``).
+
+    The *lateral offset* (observed, and the ``lateral`` argument of ``states_at`` / ``obs_at``)
+    is measured **to the right** of the centre line, -y, signed like the steering: a car at a
+    positive offset is where positive steering takes it.
     """
 
     action_dim = 1
     n_modes = 2
     anchor_name = "landmark"
+    mode_names: tuple[str, ...] = ("mode 0", "mode 1")
+    """What each of the expert's modes does, indexed by ``Demonstrations.mode``."""
 
     def __init__(self, config: ToyConfig):
         c = config
-        for name in ("speed", "dt", "heading_max", "expert_lookahead", "obs_distance_scale", "obs_lateral_scale"):
-            check_positive(f"config.{name}", getattr(c, name))
-        for name in ("start_lateral_range", "expert_noise_std"):
-            check_positive(f"config.{name}", getattr(c, name), allow_zero=True)
+        check_positive_fields(c, ("speed", "dt", "heading_max", "expert_lookahead", "obs_distance_scale", "obs_lateral_scale"))
+        check_positive_fields(c, ("start_lateral_range", "expert_noise_std"), allow_zero=True)
         check_int("config.horizon", c.horizon, minimum=1)
         if not c.heading_max < math.pi / 2:
             raise ValueError(f"config.heading_max must be < pi/2 (the car drives forward), got {c.heading_max}")
@@ -196,16 +204,17 @@ class ToyWorld:
     # ------------------------------------------------------------------ observations
     def observe(self, states: torch.Tensor) -> torch.Tensor:
         """Observation of ``states`` (..., 3) -> (..., obs_dim) float32: [distance ahead to the
-        landmark along x / obs_distance_scale, lateral offset y / obs_lateral_scale (if observed)]."""
+        landmark along x / obs_distance_scale, lateral offset to the right (-y) / obs_lateral_scale
+        (if observed)]."""
         c = self.config
         d = (self.anchor_x - states[..., 0]) / c.obs_distance_scale
         if not c.obs_lateral:
             return d[..., None].to(torch.float32)
-        y = states[..., 1] / c.obs_lateral_scale
-        return torch.stack([d, y], dim=-1).to(torch.float32)
+        right = -states[..., 1] / c.obs_lateral_scale
+        return torch.stack([d, right], dim=-1).to(torch.float32)
 
     def physical(self, obs: torch.Tensor) -> torch.Tensor:
-        """Undo the scaling of ``observe``: (..., obs_dim) -> [distance to the landmark m, lateral offset m (if observed)]."""
+        """Undo the scaling of ``observe``: (..., obs_dim) -> [distance to the landmark m, lateral offset to the right m (if observed)]."""
         check_tensor("obs", obs)
         if obs.ndim == 0 or obs.shape[-1] != self.obs_dim:
             raise ValueError(f"obs must end in dimension {self.obs_dim}, got shape {tuple(obs.shape)}")
@@ -213,14 +222,15 @@ class ToyWorld:
         return obs * torch.tensor([c.obs_distance_scale, c.obs_lateral_scale][: self.obs_dim], dtype=obs.dtype)
 
     def states_at(self, distance, lateral=0.0) -> torch.Tensor:
-        """States (N, 3) at ``distance`` m before the landmark (along x) and lateral offset
-        ``lateral`` m, heading straight ahead; numbers or 1-D sequences (broadcast together)."""
-        d, y = torch.broadcast_tensors(_as_1d("distance", distance), _as_1d("lateral", lateral))
-        return torch.stack([self.anchor_x - d, y, torch.zeros_like(d)], dim=-1)  # (N, 3)
+        """States (N, 3) at ``distance`` m before the landmark (along x) and ``lateral`` m to the
+        right of the centre line (y = -lateral), heading straight ahead; numbers or 1-D sequences
+        (broadcast together)."""
+        d, right = torch.broadcast_tensors(_as_1d("distance", distance), _as_1d("lateral", lateral))
+        return torch.stack([self.anchor_x - d, -right, torch.zeros_like(d)], dim=-1)  # (N, 3)
 
     def obs_at(self, distance, lateral=0.0) -> torch.Tensor:
-        """Observations (N, obs_dim) ``distance`` m before the landmark at lateral offset
-        ``lateral`` m (the centre line by default): e.g. to plot a policy's action there."""
+        """Observations (N, obs_dim) ``distance`` m before the landmark, ``lateral`` m to the right
+        of the centre line (on it by default): e.g. to plot a policy's action there."""
         return self.observe(self.states_at(distance, lateral))
 
     def in_window(self, obs: torch.Tensor, distance: tuple[float, float], max_abs_lateral: float = 0.5) -> torch.Tensor:
@@ -243,18 +253,18 @@ class ToyWorld:
     def initial_states(self, n_episodes: int, generator: torch.Generator) -> torch.Tensor:
         """Start states (E, 3): x = 0, y uniform in [-start_lateral_range, start_lateral_range], heading 0."""
         n = check_int("n_episodes", n_episodes, minimum=1)
-        y = self.config.start_lateral_range * (2.0 * torch.rand(n, generator=generator) - 1.0)
+        y = self.config.start_lateral_range * (1.0 - 2.0 * torch.rand(n, generator=generator))
         return torch.stack([torch.zeros(n), y, torch.zeros(n)], dim=-1)
 
     def expert_steer(self, states: torch.Tensor, plan: torch.Tensor, generator: torch.Generator | None = None) -> torch.Tensor:
         """The expert's steering (B, 1) at ``states`` (B, 3) following ``plan`` (B, P): pure
         pursuit, i.e. head for the point of its path ``expert_lookahead`` m ahead, plus Gaussian
-        noise when a ``generator`` is given, clipped to [-1, 1]."""
+        noise when a ``generator`` is given, clipped to [-1, 1] (+1 = right)."""
         c = self.config
         x, y = states[:, 0], states[:, 1]
         target_y = self.reference_lateral(x + c.expert_lookahead, plan)  # (B,)
-        wanted = torch.atan2(target_y - y, torch.full_like(y, c.expert_lookahead))  # heading (rad)
-        steer = wanted / c.heading_max
+        wanted = torch.atan2(target_y - y, torch.full_like(y, c.expert_lookahead))  # heading (rad, > 0 left)
+        steer = -wanted / c.heading_max  # heading = -heading_max * steer (see toy.car)
         if generator is not None and c.expert_noise_std > 0:
             steer = steer + c.expert_noise_std * torch.randn(steer.shape, generator=generator)
         return steer.clamp(-1.0, 1.0)[:, None]  # (B, 1)

@@ -5,10 +5,13 @@ it loads with ``torch.load(..., weights_only=True)``: no pickled code runs. It h
 
 - ``format`` / ``format_version``: what the file is (``FORMAT``, ``FORMAT_VERSION``);
 - ``package_version``: the ``ibc_tutorial`` version that wrote it;
-- ``method``, ``architecture`` (the network's class and sizes) and the whole ``preset``;
-- ``data_sha256``: the SHA-256 of the demonstration file it was trained on;
+- ``method``, ``architecture`` (``agent.architecture``: the network's class and sizes) and the
+  whole ``preset``;
+- ``data_sha256``: the SHA-256 of the demonstrations' content (``DemoLog.checksum``: every
+  recorded step's state and action, not the file's bytes, which carry the time it was written);
 - ``epoch``, ``model`` (the state dict), the expert actions and DFO initial weights the agent
-  acts with, and, for resuming, ``optimizer`` and ``generator`` states and the metrics so far.
+  acts with, and, for resuming, ``optimizer`` and ``generator`` states (``training.Trainer``)
+  and the metrics so far.
 
 It is written atomically (``utils.atomic_torch_save``). ``load_checkpoint`` refuses, with a
 ``ValueError`` that says why, a file that is not a checkpoint, one of another format version or
@@ -18,13 +21,13 @@ for (or whose weights do not fit it).
 
 from __future__ import annotations
 
-import hashlib
 from pathlib import Path
 
 import torch
 
 from ibc_tutorial import __version__
-from ibc_tutorial.presets import METHODS, Preset
+from ibc_tutorial.experiments.agents.agent import Agent, architecture, network_from_architecture
+from ibc_tutorial.experiments.agents.presets import METHODS, Preset
 from ibc_tutorial.utils import atomic_torch_save, check_choice
 
 FORMAT = "ibc_tutorial.agent"
@@ -33,39 +36,19 @@ FORMAT_VERSION = 1
 """The layout version of the checkpoint dict; another one is refused."""
 
 
-def file_sha256(path) -> str:
-    """SHA-256 (hex) of a file's bytes: identifies the demonstration file an agent learned from."""
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
-
-
-def architecture(method: str, preset: Preset) -> dict:
-    """The network's identity: what must match for weights to be reused."""
-    check_choice("method", method, METHODS)
-    arch = {"network": "BetaPolicy" if method == "bc" else "EnergyModel", "encoder": "BEVStateEncoder",
-            "bev_size": preset.bev_size, "cnn_channels": list(preset.cnn_channels), "embed_dim": preset.embed_dim,
-            "action_dim": 2}
-    if method == "bc":
-        from ibc_tutorial.agents import BC_MIN_CONCENTRATION
-
-        arch.update(min_concentration=BC_MIN_CONCENTRATION)
-    else:
-        arch.update(head_hidden=preset.head_hidden, head_layers=preset.head_layers)
-    return arch
-
-
 def _minor(version: str) -> str:
     return ".".join(str(version).split(".")[:2])
 
 
 def save_checkpoint(path, *, method: str, preset: Preset, network: torch.nn.Module, data_sha256: str, epoch: int,
                     expert_actions: torch.Tensor, init_weights: torch.Tensor | None = None,
-                    optimizer: torch.optim.Optimizer | None = None, generator: torch.Generator | None = None,
+                    optimizer: dict | None = None, generator: torch.Tensor | None = None,
                     metrics: list | None = None) -> Path:
-    """Write an agent checkpoint atomically (see the module docstring for its contents)."""
+    """Write an agent checkpoint atomically (see the module docstring for its contents).
+
+    ``optimizer`` and ``generator`` are the states kept for resuming (``Trainer.state_dict()``'s
+    ``"optimizer"`` and ``"generator"``), or None in a final checkpoint.
+    """
     ckpt = {
         "format": FORMAT,
         "format_version": FORMAT_VERSION,
@@ -78,8 +61,8 @@ def save_checkpoint(path, *, method: str, preset: Preset, network: torch.nn.Modu
         "model": {k: v.detach().clone() for k, v in network.state_dict().items()},
         "expert_actions": expert_actions.detach().float().clone(),
         "init_weights": None if init_weights is None else init_weights.detach().float().clone(),
-        "optimizer": None if optimizer is None else optimizer.state_dict(),
-        "generator": None if generator is None else generator.get_state(),
+        "optimizer": optimizer,
+        "generator": generator,
         "metrics": list(metrics or []),
     }
     return atomic_torch_save(ckpt, path)
@@ -122,12 +105,9 @@ def load_checkpoint(path, *, method: str | None = None, preset: Preset | None = 
 
 def network_from_checkpoint(ckpt: dict) -> torch.nn.Module:
     """Rebuild the network a checked checkpoint describes and load its weights."""
-    from ibc_tutorial.agents import build_network
-
-    preset = Preset.from_dict(ckpt["preset"])
-    if architecture(ckpt["method"], preset) != ckpt["architecture"]:
+    if architecture(ckpt["method"], Preset.from_dict(ckpt["preset"])) != ckpt["architecture"]:
         raise ValueError("the checkpoint's preset and architecture disagree: the file was altered")
-    net = build_network(ckpt["method"], preset)
+    net = network_from_architecture(ckpt["architecture"])
     try:
         net.load_state_dict(ckpt["model"], strict=True)
     except RuntimeError as exc:
@@ -136,10 +116,8 @@ def network_from_checkpoint(ckpt: dict) -> torch.nn.Module:
     return net
 
 
-def load_agent(path, *, method: str | None = None, preset: Preset | None = None):
-    """An ``agents.Agent`` from a checkpoint file (checked as ``load_checkpoint`` does); returns (agent, ckpt)."""
-    from ibc_tutorial.agents import Agent
-
+def load_agent(path, *, method: str | None = None, preset: Preset | None = None) -> tuple[Agent, dict]:
+    """An ``Agent`` from a checkpoint file (checked as ``load_checkpoint`` does); returns (agent, ckpt)."""
     ckpt = load_checkpoint(path, method=method, preset=preset)
     net = network_from_checkpoint(ckpt)
     agent = Agent(ckpt["method"], net, Preset.from_dict(ckpt["preset"]), ckpt["expert_actions"], ckpt["init_weights"])

@@ -7,8 +7,9 @@ the network's size, the training settings of the DA-IBC paper's sec. 4.2, the in
 **The three methods, as the DA-IBC paper defines them** (its secs. 2.4, 2.4.1, 2.5, 4.3, 5):
 
 - ``bc``: the Beta policy of eq. 1 (its sec. 3.2 and [Antonelo et al. 2024]), acting with the
-  Beta's mean (α, β > 0: see ``agents.BC_MIN_CONCENTRATION`` for why not α, β >= 1). Minibatches drawn with the inverse-KDE probabilities ("For BC, the loss
-  function is weighted analogously", sec. 2.5).
+  Beta's mean (α, β > 0: see ``agent.BC_MIN_CONCENTRATION`` for why not α, β >= 1).
+  Minibatches drawn with the inverse-KDE probabilities ("For BC, the loss function is
+  weighted analogously", sec. 2.5).
 - ``ibc``: "conventional IBC" [Florence et al. 2022]: InfoNCE (eq. 2) with counter-examples
   drawn uniformly from the action box, ỹ ~ U(y_min, y_max) (sec. 2.4), and the original DFO:
   initial samples uniform over the box, final action the lowest-energy sample (argmax of p̃).
@@ -24,11 +25,14 @@ the network's size, the training settings of the DA-IBC paper's sec. 4.2, the in
 
 The paper gives no σ for the counter-example noise; ``neg_sigma`` = 0.1 is the value chapter
 04 studied.
+
+A variant is made with ``dataclasses.replace(LAPTOP, epochs=12)``; ``differences(PAPER, p)``
+lists what a preset changes from the paper.
 """
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, fields, replace
+from dataclasses import asdict, dataclass, fields
 
 from ibc_tutorial.utils import check_choice, check_int, check_positive
 
@@ -131,10 +135,6 @@ class Preset:
         if unknown:
             raise ValueError(f"unknown preset fields {sorted(unknown)}")
         return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
-
-    def with_(self, **changes) -> "Preset":
-        """A copy with some fields changed."""
-        return replace(self, **changes)
 
 
 PAPER = Preset(name="paper")

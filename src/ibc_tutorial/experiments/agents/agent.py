@@ -1,0 +1,155 @@
+"""The driving agents of the DA-IBC paper: its Fig. 2 network with a Beta head (BC) or an energy head (IBC, DA-IBC).
+
+The network (the DA-IBC paper's sec. 3.3 and Fig. 2):
+
+- ``policies.BEVStateEncoder``: a CNN turns the five-channel bird's-eye view (B, 5, S, S) into a
+  256-d embedding, an MLP the state (speed, previous steer, previous acceleration) (B, 3) into
+  another; their concatenation is the observation's embedding z (B, 512);
+- on top, either ``policies.BetaPolicy`` (BC, eq. 1; α, β > 0, see ``BC_MIN_CONCENTRATION``) or
+  ``policies.EnergyModel`` (IBC and DA-IBC; its first layer factorised, so z is computed once
+  per observation and only the action's part runs per candidate).
+
+``architecture(method, preset)`` is the network's one description (what a checkpoint stores
+and checks); ``build_network`` builds from it. ``Agent`` couples a network with the way it acts
+(Beta mean; or Algorithm 1 with the method's initialisation and final selection) and gives the
+closed-loop ``driving.rollout.Policy`` that ``driving.rollout`` calls on numpy observation batches.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from torch import nn
+
+from ibc_tutorial.driving.rollout import Policy
+from ibc_tutorial.experiments.agents.presets import METHODS, Preset
+from ibc_tutorial.kde import inverse_density_weights
+from ibc_tutorial.optimizers.dfo import DFOConfig, dfo
+from ibc_tutorial.policies.encoders import BEVStateEncoder
+from ibc_tutorial.policies.energy import EnergyModel
+from ibc_tutorial.policies.explicit import BetaPolicy
+from ibc_tutorial.utils import check_choice, check_tensor
+
+ACTION_DIM = 2
+"""(steer, acceleration)."""
+
+BC_MIN_CONCENTRATION = 0.0
+"""α, β > 0 for the driving BC agent (not the α, β >= 1 of ``BetaPolicy``'s default).
+
+The expert's accelerations are mostly exactly -1 (braking for a light) or +1 (starting off).
+A Beta with α, β >= 1 has zero density at the bounds, so every such label pushes its α or β
+down to the floor of 1; with the labels at both bounds the acceleration head collapses to
+Beta(1, 1), the flat density, whose mean (0) never moves the car, and softplus's vanishing
+gradient keeps it there (seen in a first laptop run: α = β = 1.001 everywhere, town02 score 0).
+With the floor at 0 the Beta can put its mass at a bound (α < 1 or β < 1), and after 250
+minibatches the predicted mean acceleration follows the label (correlation 0.94)."""
+
+
+def architecture(method: str, preset: Preset) -> dict:
+    """The Fig. 2 network of ``method`` at ``preset``'s sizes, as plain data: what must match for weights to be reused."""
+    check_choice("method", method, METHODS)
+    arch = {"network": "BetaPolicy" if method == "bc" else "EnergyModel", "encoder": "BEVStateEncoder",
+            "bev_size": preset.bev_size, "cnn_channels": [int(c) for c in preset.cnn_channels],
+            "embed_dim": preset.embed_dim, "action_dim": ACTION_DIM}
+    if method == "bc":
+        arch.update(min_concentration=BC_MIN_CONCENTRATION)
+    else:
+        arch.update(head_hidden=preset.head_hidden, head_layers=preset.head_layers)
+    return arch
+
+
+def network_from_architecture(arch: dict) -> nn.Module:
+    """Build the (untrained) network an ``architecture`` dict describes."""
+    heads = ("BetaPolicy", "EnergyModel")
+    if not isinstance(arch, dict) or arch.get("encoder") != "BEVStateEncoder" or arch.get("network") not in heads:
+        raise ValueError(f"arch must describe a BEVStateEncoder with a BetaPolicy or EnergyModel head, got {arch!r}")
+    enc = BEVStateEncoder(arch["bev_size"], tuple(arch["cnn_channels"]), arch["embed_dim"])
+    if arch["network"] == "BetaPolicy":
+        return BetaPolicy(enc, action_dim=arch["action_dim"], min_concentration=arch["min_concentration"])
+    return EnergyModel(enc, action_dim=arch["action_dim"], hidden=arch["head_hidden"], layers=arch["head_layers"])
+
+
+def build_network(method: str, preset: Preset) -> nn.Module:
+    """The Fig. 2 network for ``method``: a ``BetaPolicy`` (bc) or an ``EnergyModel`` (ibc, da-ibc)."""
+    return network_from_architecture(architecture(method, preset))
+
+
+def to_tensor_obs(obs) -> dict[str, torch.Tensor]:
+    """Numpy or torch ``{"bev", "state"}`` batches -> torch tensors (uint8 BEV, float32 state)."""
+    bev, state = obs["bev"], obs["state"]
+    bev = torch.from_numpy(np.ascontiguousarray(bev)) if isinstance(bev, np.ndarray) else bev
+    state = torch.from_numpy(np.asarray(state, dtype=np.float32)) if isinstance(state, np.ndarray) else state.float()
+    return {"bev": bev, "state": state}
+
+
+def dfo_config(method: str, preset: Preset) -> DFOConfig | None:
+    """How ``method`` runs Algorithm 1 (None for bc): the original IBC's DFO, or DA-IBC's (see ``presets``)."""
+    check_choice("method", method, METHODS)
+    if method == "bc":
+        return None
+    p = preset
+    if method == "ibc":
+        init, select = "uniform", "argmax"  # the original IBC's DFO: uniform start, lowest energy
+    else:
+        init, select = "inverse-kde", "sample"  # Algorithm 1: w ∝ 1 / ĝ start, ŷ ~ Categorical(p̃) (line 14)
+    return DFOConfig(n_samples=p.dfo_samples, n_iters=p.dfo_iters, sigma_init=p.dfo_sigma_init, shrink=p.dfo_shrink,
+                     bandwidth=p.kde_bandwidth, init=init, select=select)
+
+
+class Agent:
+    """A trained network and how it acts: the closed-loop policy of one method.
+
+    Args:
+        method: "bc", "ibc" or "da-ibc" (see ``presets`` for what each means).
+        network: from ``build_network(method, preset)``.
+        preset: the settings (DFO sizes, KDE bandwidth).
+        expert_actions: (M, 2) the training set's expert actions: the support of the DFO
+            initialisation of DA-IBC (unused by bc and ibc, but kept for every method).
+        init_weights: optional precomputed (M,) DFO initial weights w ∝ 1 / ĝ
+            (``kde.inverse_density_weights``); computed here if None and needed (da-ibc).
+    """
+
+    def __init__(self, method: str, network: nn.Module, preset: Preset, expert_actions: torch.Tensor,
+                 init_weights: torch.Tensor | None = None):
+        self.method = check_choice("method", method, METHODS)
+        self.network = network
+        self.preset = preset
+        self.expert_actions = check_tensor("expert_actions", expert_actions, ndim=2).float()  # (M, 2)
+        if method == "da-ibc" and init_weights is None:
+            init_weights = inverse_density_weights(self.expert_actions, preset.kde_bandwidth)  # (M,) eqs. 4-5
+        self.init_weights = init_weights
+        self.dfo_config = dfo_config(method, preset)
+        """Algorithm 1's settings for this agent (None for bc)."""
+
+    @torch.no_grad()
+    def act(self, obs, generator: torch.Generator | None = None) -> torch.Tensor:
+        """Actions (B, 2) in [-1, 1] for a batch of observations (numpy or torch dict)."""
+        obs = to_tensor_obs(obs)
+        self.network.eval()
+        if self.method == "bc":
+            return self.network.act(obs, mode="mean")  # (B, 2)
+        z = self.network.embed(obs)  # (B, E), once per observation
+        weights = self.init_weights if self.method == "da-ibc" else None
+        return dfo(lambda a: self.network.energy_from_embedding(z, a), self.expert_actions, self.dfo_config,
+                   n_obs=len(z), init_weights=weights, generator=generator)  # (B, 2)
+
+    def policy(self, seed: int = 0) -> Policy:
+        """The seeded ``driving.rollout.Policy`` of this agent: numpy obs batch -> numpy actions (B, 2)."""
+        gen = torch.Generator().manual_seed(int(seed))
+
+        def policy(obs):
+            return self.act(obs, gen).numpy()
+
+        return policy
+
+    @torch.no_grad()
+    def energy_grid(self, obs, n_per_dim: int = 41) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """E over a (steer, acceleration) grid for one observation: (steer (G,), accel (G,), E (G, G)) [accel, steer]."""
+        if self.method == "bc":
+            raise ValueError("energy_grid needs an energy agent (ibc or da-ibc), got bc")
+        obs = to_tensor_obs(obs)
+        v = torch.linspace(-1.0, 1.0, n_per_dim)
+        acc, steer = torch.meshgrid(v, v, indexing="ij")
+        grid = torch.stack([steer.reshape(-1), acc.reshape(-1)], dim=1)  # (G², 2)
+        e = self.network.energy_from_embedding(self.network.embed(obs), grid)[0]  # (G²,)
+        return v.numpy(), v.numpy(), e.reshape(n_per_dim, n_per_dim).numpy()

@@ -1,0 +1,183 @@
+"""The files of a replication folder: where each run goes, what ``results.json`` aggregates, provenance, loading.
+
+A replication folder (``ibc-tutorial replicate --out FOLDER``) holds
+
+- ``data/town01.npz``: the demonstrations;
+- ``runs/<method>/seed<k>/``: one training run each (``metrics.jsonl``, ``final_eval.json``,
+  and ``final.pt`` for the agents kept);
+- ``results.json``: everything the chapters read (the table, the per-seed finals, the Fig. 4
+  curves, the preset and its differences from the paper's, the Fig. 5/6 summaries);
+- ``free_driving.npz`` and ``landscapes.npz``: the arrays of the Fig. 5 and Fig. 6 analogues;
+- ``provenance.json`` and ``PROVENANCE.md``: command, commit, date, machine, wall time, what is
+  finished.
+
+``load_results(folder)`` is what chapters 08-09 call.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import platform
+import subprocess
+from datetime import datetime, timezone
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from ibc_tutorial import __version__
+from ibc_tutorial.experiments.agents.evaluate import summarize
+from ibc_tutorial.experiments.agents.presets import METHODS, PAPER, Preset, differences
+from ibc_tutorial.experiments.agents.train import read_metrics
+from ibc_tutorial.utils import atomic_write_bytes
+
+RESULTS = "results.json"
+"""The file the chapters read."""
+PROVENANCE = "provenance.json"
+"""How, where and when the results were made (``PROVENANCE.md`` says the same for readers)."""
+FREE_DRIVING = "free_driving.npz"
+"""Trajectories of the free-driving episodes (Fig. 5 analogue)."""
+LANDSCAPES = "landscapes.npz"
+"""Energy grids, observations and DFO inferences (Fig. 6 analogue)."""
+DATA = "data/town01.npz"
+"""The demonstrations, relative to the folder."""
+
+
+def now() -> str:
+    """The current UTC time, ISO 8601 to the second."""
+    return datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+
+
+def machine() -> dict:
+    """CPU count and model, OS, Python and torch versions, torch's threads."""
+    model = platform.processor() or ""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                model = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return {"nproc": os.cpu_count(), "cpu": model, "os": platform.platform(), "python": platform.python_version(),
+            "torch": torch.__version__, "torch_threads": torch.get_num_threads()}
+
+
+def git_commit() -> str:
+    """``git rev-parse HEAD`` of the working tree (or "unknown"), with "+changes" if it is not clean."""
+    try:
+        head = subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True, timeout=10).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], capture_output=True, text=True,
+                               timeout=10).stdout.strip()
+        return (head or "unknown") + (" +uncommitted changes" if dirty else "")
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+
+
+def run_dir(out, method: str, seed: int) -> Path:
+    """Folder of one training run."""
+    return Path(out) / "runs" / method / f"seed{seed}"
+
+
+def run_name(method: str, seed: int) -> str:
+    """How a run is named in the provenance: ``method/seed<k>``."""
+    return f"{method}/seed{seed}"
+
+
+def finished_runs(out, preset: Preset) -> list[str]:
+    """The runs of ``preset`` under ``out`` that have their ``final_eval.json``, in planned order."""
+    return [run_name(m, s) for s in preset.seeds for m in METHODS if (run_dir(out, m, s) / "final_eval.json").exists()]
+
+
+def write_json(path, obj) -> Path:
+    """``obj`` as indented JSON, written atomically."""
+    return atomic_write_bytes(path, json.dumps(obj, indent=1).encode())
+
+
+def write_npz(path, arrays: dict) -> Path:
+    """Arrays as a compressed ``.npz``, written atomically."""
+    buf = io.BytesIO()
+    np.savez_compressed(buf, **arrays)
+    return atomic_write_bytes(path, buf.getvalue())
+
+
+# ---------------------------------------------------------------------- aggregation
+def collect_results(out, preset: Preset) -> dict:
+    """Read every finished run under ``out`` into the table, per-seed finals and curves of ``results.json``."""
+    out = Path(out)
+    table, curves, finals = {}, {}, {}
+    for method in METHODS:
+        rows, per_seed = [], {}
+        curves[method] = {}
+        for seed in preset.seeds:
+            d = run_dir(out, method, seed)
+            if (d / "metrics.jsonl").exists():
+                m = read_metrics(d)
+                curves[method][str(seed)] = {"epoch": [e["epoch"] for e in m], "score": [e["eval"]["score_mean"] for e in m],
+                                             "distance_m": [e["eval"]["distance_m_mean"] for e in m],
+                                             "infractions": [e["eval"]["red_light_infractions_mean"] for e in m],
+                                             "loss": [e["loss"] for e in m]}
+            f = d / "final_eval.json"
+            if f.exists():
+                ev = json.loads(f.read_text())
+                rows += ev["episodes"]
+                per_seed[str(seed)] = ev["summary"]
+        finals[method] = per_seed
+        if rows:
+            table[method] = dict(summarize(rows), agents=len(per_seed))  # episodes of every seed pooled
+    return {"table": table, "final_per_seed": finals, "curves": curves}
+
+
+def preset_results(preset: Preset, complete: bool) -> dict:
+    """The entries of ``results.json`` that describe the settings: the preset, the paper's, their differences."""
+    return {"preset": preset.to_dict(), "paper": PAPER.to_dict(),
+            "differences": {k: list(v) for k, v in differences(PAPER, preset).items()}, "complete": complete}
+
+
+# ---------------------------------------------------------------------- provenance
+def write_provenance(out, preset: Preset, started: str, wall_s: float, done: list[str], planned: list[str],
+                     command: str, complete: bool) -> None:
+    """``provenance.json`` and ``PROVENANCE.md``: how, where and when the results were made."""
+    out = Path(out)
+    old = json.loads((out / PROVENANCE).read_text()) if (out / PROVENANCE).exists() else {}
+    notes = list(old.get("notes", []))  # kept across resumed invocations
+    prov = {"command": command, "commit": git_commit(), "package_version": __version__, "started": started,
+            "finished": now() if complete else None, "updated": now(), "wall_seconds": round(wall_s, 1),
+            "complete": complete, "runs_done": done, "runs_planned": planned, "machine": machine(),
+            "preset": preset.to_dict(), "notes": notes}
+    write_json(out / PROVENANCE, prov)
+    m = prov["machine"]
+    lines = [
+        f"# Provenance of the `{preset.name}` replication", "",
+        f"- command: `{command}`",
+        f"- commit: `{prov['commit']}` (ibc_tutorial {__version__})",
+        f"- started: {started}; {'finished: ' + prov['finished'] if complete else 'NOT FINISHED (last update ' + prov['updated'] + ')'}",
+        f"- wall time: {wall_s / 60:.1f} min",
+        f"- machine: {m['nproc']} CPUs ({m['cpu']}), {m['os']}, Python {m['python']}, torch {m['torch']} "
+        f"with {m['torch_threads']} thread(s)",
+        f"- runs finished: {len(done)} of {len(planned)}" + ("" if complete else f" (missing: {sorted(set(planned) - set(done))})"),
+        "", "Differences of this preset from the paper's settings (field: paper -> this preset):", "",
+    ]
+    lines += [f"- `{k}`: {a} -> {b}" for k, (a, b) in differences(PAPER, preset).items()]
+    if notes:
+        lines += ["", "Notes:", ""] + [f"- {n}" for n in notes]
+    atomic_write_bytes(out / "PROVENANCE.md", ("\n".join(lines) + "\n").encode())
+
+
+# ---------------------------------------------------------------------- reading (the chapters)
+def load_results(out) -> dict:
+    """What the chapters read from a replication folder: ``results.json`` and ``provenance.json`` as
+    dicts, ``free_driving.npz`` and ``landscapes.npz`` as dicts of arrays (empty if absent)."""
+    out = Path(out)
+    if not (out / RESULTS).exists():
+        raise ValueError(f"no {RESULTS} in {out}: run 'ibc-tutorial replicate --out {out}' first")
+    res = {"results": json.loads((out / RESULTS).read_text()),
+           "provenance": json.loads((out / PROVENANCE).read_text()) if (out / PROVENANCE).exists() else {}}
+    for key, name in (("free_driving", FREE_DRIVING), ("landscapes", LANDSCAPES)):
+        if (out / name).exists():
+            with np.load(out / name) as z:
+                res[key] = {k: z[k] for k in z.files}
+        else:
+            res[key] = {}
+    return res

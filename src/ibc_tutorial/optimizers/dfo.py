@@ -1,0 +1,332 @@
+"""Derivative-free optimisation: Algorithm 1 of the DA-IBC paper (chapter 06).
+
+- ``DFOConfig``: the algorithm's settings, with the paper's names and values.
+- ``dfo``: one call for one observation (``n_obs=None``) or B observations at once (``n_obs=B``).
+- ``dfo_trace``: the same draws for one observation, keeping every iteration's population.
+- ``initial_weights`` / ``initial_samples``: the initialisation (Algorithm 1 line 2).
+- ``DFOOptimizer`` (an ``ActionOptimizer``) and ``dfo_policy``: DFO on an energy model, for rollouts.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import torch
+
+from ibc_tutorial.kde import DEFAULT_BANDWIDTH, inverse_density_weights, kde_density
+from ibc_tutorial.optimizers.common import SELECTIONS, bounds, check_box, check_expert_actions, energies, select_action, single_observation
+from ibc_tutorial.utils import check_choice, check_int, check_positive, check_tensor
+
+if TYPE_CHECKING:  # type hints only: langevin imports this module
+    from ibc_tutorial.optimizers.langevin import LangevinConfig
+
+INITS = ("uniform", "kde", "inverse-kde")
+"""Initialisations of Algorithm 1: "uniform" (original IBC), "kde" (Algorithm 1 line 2 as printed:
+w_i ∝ KDE(y_i)) and "inverse-kde" (the DA-IBC paper's text, sec. 2.4.1: w_i = 1 / ĝ(y_i))."""
+
+
+@dataclass(frozen=True)
+class DFOConfig:
+    """Settings of Algorithm 1 of the DA-IBC paper; the defaults are the paper's (sec. 4.2).
+
+    Validated once, when built. ``low``/``high`` may be numbers or one number per action
+    dimension; that their length matches the actions' D is checked when DFO runs.
+    """
+
+    n_samples: int = 16384
+    """N_samples, the population size N (the paper: 16,384)."""
+    n_iters: int = 5
+    """N_iters, the number of energy evaluations of the population (the paper: 5)."""
+    sigma_init: float = 0.5
+    """σ_init, the standard deviation of the first noise, added after the first resampling (the paper: 0.5)."""
+    shrink: float = 0.5
+    """K, the factor shrinking σ after each iteration, σ ← K σ (the paper: 0.5)."""
+    low: float | tuple[float, ...] = -1.0
+    """y_min, the lower bound of the action box (a number, or one per action dimension)."""
+    high: float | tuple[float, ...] = 1.0
+    """y_max, the upper bound of the action box (a number, or one per action dimension)."""
+    bandwidth: float = DEFAULT_BANDWIDTH
+    """h, the KDE bandwidth of the "kde" and "inverse-kde" initialisations (the paper: 0.2)."""
+    init: str = "inverse-kde"
+    """Initialisation (line 2): "inverse-kde" (the paper's text), "kde" (its Algorithm 1 as printed) or "uniform" (IBC)."""
+    select: str = "sample"
+    """Final choice (line 14): "sample" ŷ ~ Categorical({ỹ_i}, {p̃_i}) (the paper) or "argmax" (IBC)."""
+
+    def __post_init__(self) -> None:
+        set_ = object.__setattr__  # frozen: normalise the fields once, here
+        set_(self, "n_samples", check_int("n_samples", self.n_samples, minimum=1))
+        set_(self, "n_iters", check_int("n_iters", self.n_iters, minimum=1))
+        set_(self, "sigma_init", check_positive("sigma_init", self.sigma_init, allow_zero=True))
+        set_(self, "shrink", check_positive("shrink", self.shrink, allow_zero=True))
+        set_(self, "bandwidth", check_positive("bandwidth", self.bandwidth))
+        check_choice("init", self.init, INITS)
+        check_choice("select", self.select, SELECTIONS)
+        low, high = check_box(self.low, self.high)
+        set_(self, "low", low)
+        set_(self, "high", high)
+
+
+@dataclass
+class DFOTrace:
+    """Algorithm 1 iteration by iteration, for one observation (what ``dfo_trace`` returns)."""
+
+    samples: list[torch.Tensor]
+    """Per iteration, the (N, D) population whose energies line 4 computes."""
+    energies: list[torch.Tensor]
+    """Per iteration, the (N,) energies E_i of that population."""
+    probs: list[torch.Tensor]
+    """Per iteration, the (N,) softmax probabilities p̃_i (line 5)."""
+    sigmas: list[float]
+    """Per iteration, the noise scale σ added after resampling (line 9); NaN for the last iteration."""
+    action: torch.Tensor
+    """(D,) the returned action ŷ."""
+    energy_evaluations: int
+    """Number of energy evaluations, N × N_iters: the cost of one decision."""
+    config: DFOConfig
+    """The settings the trace was run with (``config.select`` tells how ``action`` was chosen)."""
+
+
+# --------------------------------------------------------------------------- line 2: the initial population
+def initial_weights(expert_actions: torch.Tensor, config: DFOConfig | LangevinConfig = DFOConfig()) -> torch.Tensor | None:
+    """The Categorical weights over expert actions of Algorithm 1 line 2; None for ``init="uniform"``.
+
+    "kde": w_i ∝ ĝ(y_i) (the algorithm as printed), from ``kde.kde_density``; "inverse-kde":
+    w_i ∝ 1 / ĝ(y_i) (the text), ``kde.inverse_density_weights``. Computing them costs a KDE over
+    the M expert actions (M² kernel evaluations): closed-loop code computes them once and passes
+    them to ``dfo`` as ``init_weights``.
+
+    Args:
+        expert_actions: (M, D) expert actions.
+        config: a ``DFOConfig`` or ``LangevinConfig`` (its ``init`` and ``bandwidth`` are used).
+    Returns:
+        (M,) float32 weights summing to 1, or None.
+    """
+    check_tensor("expert_actions", expert_actions, ndim=2)
+    if config.init == "uniform":
+        return None
+    if config.init == "inverse-kde":
+        return inverse_density_weights(expert_actions, config.bandwidth).to(torch.float32)  # eqs. 4-5
+    g = kde_density(expert_actions, expert_actions, config.bandwidth).to(torch.float64)  # (M,) ĝ(y_i), eq. 4
+    return (g / g.sum()).to(torch.float32)
+
+
+def initial_samples(
+    expert_actions: torch.Tensor,
+    n_obs: int,
+    config: DFOConfig | LangevinConfig = DFOConfig(),
+    *,
+    init_weights: torch.Tensor | None = None,
+    generator: torch.Generator | None = None,
+) -> torch.Tensor:
+    """The initial population {ỹ_i} of Algorithm 1 line 2, for ``n_obs`` observations: (B, N, D).
+
+    "uniform": ỹ_i ~ U(low, high) (original IBC). "kde"/"inverse-kde": ỹ_i ~ Categorical({y_i^expert},
+    {w_i}) with the weights of ``initial_weights`` (or the given ``init_weights``): copies of
+    expert actions, no noise yet (the first noise comes after the first resampling, line 9).
+
+    Args:
+        expert_actions: (M, D) expert actions inside the box, M >= 1.
+        n_obs: B, the number of observations.
+        config: a ``DFOConfig`` or ``LangevinConfig`` (``n_samples``, ``init``, ``low``, ``high``,
+            ``bandwidth``).
+        init_weights: optional precomputed (M,) weights (skips the KDE).
+        generator: a seeded ``torch.Generator`` for reproducible draws.
+    """
+    check_tensor("expert_actions", expert_actions, ndim=2)
+    check_int("n_obs", n_obs, minimum=1)
+    m, d = expert_actions.shape
+    lo, hi = bounds(config.low, config.high, d)  # (D,), (D,)
+    experts = check_expert_actions(expert_actions, lo, hi)  # (M, D) float32
+    n = config.n_samples
+    if config.init == "uniform":
+        u = torch.rand(n_obs, n, d, generator=generator)  # (B, N, D)
+        return lo + (hi - lo) * u
+    if init_weights is None:
+        init_weights = initial_weights(experts, config)
+    else:
+        check_tensor("init_weights", init_weights, shape=(m,))
+        if (init_weights < 0).any() or init_weights.sum() <= 0:
+            raise ValueError("init_weights must be non-negative with a positive sum")
+    idx = torch.multinomial(init_weights, n_obs * n, replacement=True, generator=generator)  # (B·N,)
+    return experts[idx].reshape(n_obs, n, d)  # (B, N, D)
+
+
+# --------------------------------------------------------------------------- lines 3-14
+def _dfo_core(energy_fn, y: torch.Tensor, config: DFOConfig, lo, hi, generator, record: bool):
+    """Algorithm 1 of the DA-IBC paper from line 3 on, for B observations at once.
+
+    y: (B, N, D) the initial population of line 2. Returns (ŷ (B, D), per-iteration records or None).
+    """
+    b, n, d = y.shape
+    n_iters = config.n_iters
+    sigma = config.sigma_init  # line 2: σ = σ_init
+    rec = {"samples": [], "energies": [], "probs": [], "sigmas": []} if record else None
+    for it in range(1, n_iters + 1):  # line 3: for iter = 1, 2, ..., N_iters
+        e = energies(energy_fn, y)  # line 4: E_i = E_θ(x, ỹ_i)                      (B, N)
+        p = torch.softmax(-e, dim=1)  # line 5: p̃_i = exp(−E_i) / Σ_j exp(−E_j)        (B, N)
+        if rec is not None:
+            rec["samples"].append(y.clone())
+            rec["energies"].append(e.clone())
+            rec["probs"].append(p.clone())
+            rec["sigmas"].append(sigma if it < n_iters else float("nan"))
+        if it < n_iters:  # line 6
+            # lines 7-8: resample N_samples with replacement, Multinomial(N_samples, {p̃_i}, {ỹ_i})
+            idx = torch.multinomial(p, n, replacement=True, generator=generator)  # (B, N)
+            y = torch.gather(y, 1, idx[:, :, None].expand(b, n, d))  # (B, N, D)
+            # line 9: add noise N(0, σ) (σ is a standard deviation, as in the IBC reference)
+            y = y + sigma * torch.randn(y.shape, generator=generator)
+            # line 10: clip to [y_min, y_max]. Samples the noise pushed out of the box are clamped
+            # onto its faces, as the IBC reference does (tf.clip_by_value): they are not redrawn.
+            y = torch.clamp(y, lo, hi)  # (B, N, D), bounds (D,)
+            sigma = config.shrink * sigma  # line 11: σ ← K σ
+    return select_action(y, p, config.select, generator), rec  # line 14
+
+
+def _check_call(expert_actions: torch.Tensor, config: DFOConfig) -> tuple[torch.Tensor, torch.Tensor]:
+    check_tensor("expert_actions", expert_actions, ndim=2)
+    if not isinstance(config, DFOConfig):
+        raise ValueError(f"config must be a DFOConfig, got {type(config).__name__}")
+    return bounds(config.low, config.high, expert_actions.shape[1])
+
+
+def dfo(
+    energy_fn,
+    expert_actions: torch.Tensor,
+    config: DFOConfig = DFOConfig(),
+    *,
+    n_obs: int | None = None,
+    init_weights: torch.Tensor | None = None,
+    generator: torch.Generator | None = None,
+) -> torch.Tensor:
+    """Derivative-free optimisation, Algorithm 1 of the DA-IBC paper.
+
+    Line 2 draws N_samples initial actions; then N_iters times: compute their energies (line 4)
+    and softmax probabilities p̃_i ∝ exp(−E_i) (line 5); except in the last iteration, resample
+    N_samples of them with replacement by p̃ (lines 7-8), add Gaussian noise of standard
+    deviation σ (line 9), clip to [low, high] (line 10) and shrink σ ← K σ (line 11). Finally
+    ŷ ~ Categorical({ỹ_i}, {p̃_i}) of the last iteration (line 14; ``select="argmax"`` takes the
+    most probable sample instead, as the original IBC does).
+
+    **The initial weights: the paper contradicts itself.** Its text (sec. 2.4.1) draws the
+    initial samples from the expert actions with weights w_i = 1 / ĝ(y_i^expert), the inverse
+    KDE of sec. 2.5; its Algorithm 1, line 2, prints w_i ∝ KDE(y_i^expert). The two are very
+    different priors: expert actions are already distributed like ĝ, so "kde" weights draw
+    actions roughly like ĝ², piling the samples onto the most common actions (driving
+    straight on), while "inverse-kde" weights draw them roughly uniformly over the region where
+    experts acted, rare turns included. Both are here (``init="inverse-kde"`` / ``"kde"``),
+    beside the original IBC's ``init="uniform"`` over the box. The default is the text's
+    "inverse-kde": in chapter 06 it reaches the valleys of rare actions with few samples where
+    "kde" misses them, and it does not bias the choice between modes towards the frequent one.
+
+    **Bounds.** Noise can push samples out of [low, high]; they are clamped onto the bounds
+    (Algorithm 1 line 10, as the IBC reference's ``tf.clip_by_value``), so the returned action
+    always lies inside the box. Expert actions must lie inside it.
+
+    **One observation or B.** With ``n_obs=None``, ``energy_fn`` maps candidate actions (N, D)
+    to energies (N,) for the observation at hand and the result is (D,). With ``n_obs=B``,
+    ``energy_fn`` maps (B, N, D) to (B, N) (row b scored against observation b) and the result
+    is (B, D). The first is the second with B = 1: same core, same draws.
+
+    Args:
+        energy_fn: the energies of candidate actions (lower = better), called N_iters times.
+        expert_actions: (M, D) expert actions: the support of the initialisation (and D).
+        config: the settings (``DFOConfig``; the paper's by default).
+        n_obs: None (one observation) or B.
+        init_weights: optional precomputed (M,) weights from ``initial_weights`` (skips the KDE).
+        generator: a seeded ``torch.Generator`` for reproducible draws.
+
+    Returns:
+        (D,) the action ŷ, or (B, D) one per observation.
+    """
+    lo, hi = _check_call(expert_actions, config)
+    if n_obs is None:
+        b, fn = 1, single_observation(energy_fn)
+    else:
+        b, fn = check_int("n_obs", n_obs, minimum=1), energy_fn
+    with torch.no_grad():
+        y = initial_samples(expert_actions, b, config, init_weights=init_weights, generator=generator)  # (B, N, D)
+        action, _ = _dfo_core(fn, y, config, lo, hi, generator, record=False)  # (B, D)
+    return action[0] if n_obs is None else action
+
+
+def dfo_trace(
+    energy_fn,
+    expert_actions: torch.Tensor,
+    config: DFOConfig = DFOConfig(),
+    *,
+    init_weights: torch.Tensor | None = None,
+    generator: torch.Generator | None = None,
+) -> DFOTrace:
+    """``dfo`` for one observation (``energy_fn``: (N, D) -> (N,)), also returning every iteration's population.
+
+    Same arguments and the same draws as ``dfo``: with equally seeded generators,
+    ``dfo_trace(...).action`` equals ``dfo(...)``. For figures and widgets.
+    """
+    lo, hi = _check_call(expert_actions, config)
+    with torch.no_grad():
+        y = initial_samples(expert_actions, 1, config, init_weights=init_weights, generator=generator)  # (1, N, D)
+        action, rec = _dfo_core(single_observation(energy_fn), y, config, lo, hi, generator, record=True)
+    return DFOTrace(
+        samples=[s[0] for s in rec["samples"]],
+        energies=[e[0] for e in rec["energies"]],
+        probs=[p[0] for p in rec["probs"]],
+        sigmas=rec["sigmas"],
+        action=action[0],
+        energy_evaluations=config.n_samples * config.n_iters,
+        config=config,
+    )
+
+
+# --------------------------------------------------------------------------- on an energy model
+class DFOOptimizer:
+    """Algorithm 1 on an energy model, an ``ActionOptimizer``: expert actions and weights fixed once.
+
+    Args:
+        expert_actions: (M, D) expert actions (the initialisation's support).
+        config: the settings.
+        init_weights: optional precomputed (M,) initial weights; by default computed here, once
+            (``initial_weights``).
+    """
+
+    def __init__(self, expert_actions: torch.Tensor, config: DFOConfig = DFOConfig(), *, init_weights: torch.Tensor | None = None):
+        bounds_ = _check_call(expert_actions, config)
+        check_expert_actions(expert_actions, *bounds_)
+        self.expert_actions, self.config = expert_actions, config
+        self.init_weights = initial_weights(expert_actions, config) if init_weights is None else init_weights
+
+    @torch.no_grad()
+    def infer(self, model, obs, *, generator: torch.Generator | None = None) -> torch.Tensor:
+        """(B, D) actions for a batch of B observations (a tensor, or a dict of tensors).
+
+        Each observation is embedded once (``model.embed``); only the action part of the head
+        runs per candidate (``model.energy_from_embedding``). B is the embedding's length, so
+        dict observations work too.
+        """
+        z = model.embed(obs)  # (B, E), once per observation
+        return dfo(lambda a: model.energy_from_embedding(z, a), self.expert_actions, self.config,
+                   n_obs=len(z), init_weights=self.init_weights, generator=generator)  # (B, D)
+
+
+def dfo_policy(model, expert_actions: torch.Tensor, config: DFOConfig = DFOConfig(), *,
+               init_weights: torch.Tensor | None = None, generator: torch.Generator | None = None):
+    """A closed-loop policy ``policy(obs) -> actions (B, D)`` running ``dfo`` on ``model`` in eval mode.
+
+    ``model`` is an energy model with ``embed(obs) -> z`` and ``energy_from_embedding(z, actions
+    (B, N, D)) -> (B, N)`` (see ``DFOOptimizer.infer``); ``obs`` is a batch of observations, a
+    tensor or a dict of tensors. The initial weights over ``expert_actions`` are computed once,
+    here. The model is put in eval mode for each decision and restored after it.
+    """
+    optimizer = DFOOptimizer(expert_actions, config, init_weights=init_weights)
+
+    def policy(obs) -> torch.Tensor:
+        was_training = getattr(model, "training", False)
+        if was_training:
+            model.eval()
+        try:
+            return optimizer.infer(model, obs, generator=generator)  # (B, D)
+        finally:
+            if was_training:
+                model.train()
+
+    return policy

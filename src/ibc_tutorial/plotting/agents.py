@@ -1,0 +1,118 @@
+"""Figures of chapters 08-09: the agents' network, their training, and the replication of the
+DA-IBC paper's results in town02 (trajectories, energy landscapes)."""
+
+from __future__ import annotations
+
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.patches import FancyBboxPatch
+
+from ibc_tutorial.plotting.common import ACCEL_LABEL, STEER_LABEL, as_array, check_panels, finish, label_axes
+from ibc_tutorial.plotting.town import draw_bev, plot_town
+
+METHOD_COLORS = {"bc": "C0", "ibc": "C2", "da-ibc": "C3", "expert": "k"}
+"""Colour of each method in the figures of chapters 08-09."""
+METHOD_LABELS = {"bc": "BC (Beta)", "ibc": "IBC", "da-ibc": "DA-IBC", "expert": "expert"}
+"""Name of each method in legends and titles."""
+
+
+def plot_agent_architecture(bev_size: int = 64, channels=(16, 32, 32, 64), embed_dim: int = 256, head_hidden: int = 128):
+    """The DA-IBC paper's Fig. 2 as boxes and arrows: BEV CNN and state MLP, concatenated, then the
+    Beta head (BC) or the energy head with its factorised first layer (IBC, DA-IBC)."""
+    fig, ax = plt.subplots(figsize=(11, 4.6))
+    ax.set_xlim(0, 11)
+    ax.set_ylim(0, 5)
+    ax.axis("off")
+
+    def box(x, y, w, h, text, color):
+        ax.add_patch(FancyBboxPatch((x, y), w, h, boxstyle="round,pad=0.05", fc=color, ec="k", lw=1))
+        ax.text(x + w / 2, y + h / 2, text, ha="center", va="center", fontsize=8.5)
+
+    def arrow(x0, y0, x1, y1):
+        ax.annotate("", xy=(x1, y1), xytext=(x0, y0), arrowprops=dict(arrowstyle="->", lw=1.2))
+
+    side, convs = bev_size, []
+    for c in channels:
+        side = (side + 1) // 2
+        convs.append(f"{c}x{side}x{side}")
+    box(0.1, 3.2, 1.6, 1.2, f"BEV\n5 x {bev_size} x {bev_size}\n(road, lanes,\nred lights t-16, -9, -1)", "#dde8f5")
+    box(2.1, 3.2, 2.0, 1.2, "CNN: 3x3 stride-2 convs\n" + " -> ".join(convs[:2]) + "\n-> " + " -> ".join(convs[2:]), "#c6dbef")
+    box(4.5, 3.3, 1.3, 1.0, f"linear\n-> {embed_dim}", "#c6dbef")
+    box(0.1, 1.3, 1.6, 1.0, "state (3)\nspeed, previous\nsteer, acceleration", "#e5f5e0")
+    box(2.1, 1.3, 3.7, 1.0, f"MLP: 3 -> {embed_dim} -> {embed_dim}", "#c7e9c0")
+    box(6.2, 2.2, 1.2, 1.2, f"z\nconcat\n{2 * embed_dim}", "#fdd0a2")
+    box(7.9, 3.5, 2.9, 1.0, "BC: linear -> (α, β) per action\nBeta(α, β) on [-1, 1]  (eq. 1)", "#fcbba1")
+    box(7.9, 0.6, 2.9, 2.4, f"IBC / DA-IBC energy head:\nW_z z + b  (once per x)\n+ W_a y  (per candidate y)\nReLU -> {head_hidden} -> ReLU\n-> E(x, y)  (scalar)", "#fcbba1")
+    box(6.2, 0.3, 1.2, 0.9, "action y\n(steer, acc)", "#f0f0f0")
+    for x0, y0, x1, y1 in ((1.7, 3.8, 2.1, 3.8), (4.1, 3.8, 4.5, 3.8), (1.7, 1.8, 2.1, 1.8), (5.8, 3.8, 6.5, 3.4),
+                           (5.8, 1.8, 6.5, 2.2), (7.4, 3.0, 7.9, 3.9), (7.4, 2.6, 7.9, 2.2), (7.4, 0.75, 7.9, 1.2)):
+        arrow(x0, y0, x1, y1)
+    ax.set_title("The agents' network (the DA-IBC paper's Fig. 2, at the laptop preset's sizes)")
+    return fig
+
+
+def plot_training_curves(curves: dict, *, key: str = "score", ylabel: str = "town02 score (m x 0.7^infractions)",
+                         title: str = "Score in town02 during training (mean ± std over seeds)", ax=None):
+    """Score (or another key of ``curves[method][seed]``) against epoch: mean and ±1 std over seeds per method."""
+    if ax is None:
+        _, ax = plt.subplots(figsize=(7.5, 4.2))
+    for method, per_seed in curves.items():
+        if not per_seed:
+            continue
+        epochs = sorted(set.intersection(*(set(c["epoch"]) for c in per_seed.values())))
+        vals = np.array([[c[key][c["epoch"].index(e)] for e in epochs] for c in per_seed.values()])  # (seeds, E)
+        m, s = vals.mean(0), vals.std(0)
+        color = METHOD_COLORS.get(method)
+        ax.plot(epochs, m, "o-", color=color, label=f"{METHOD_LABELS.get(method, method)} ({len(vals)} seeds)")
+        ax.fill_between(epochs, m - s, m + s, color=color, alpha=0.2)
+    label_axes(ax, "epoch", ylabel, title)
+    ax.legend()
+    ax.grid(alpha=0.3)
+    return ax.figure
+
+
+def plot_loss_curves(curves: dict, *, title: str = "Training loss"):
+    """One panel per method: loss per logged point (``curves[method] = (x, losses)``)."""
+    n = check_panels("curves", curves)
+    fig, axes = plt.subplots(1, n, figsize=(4.0 * n, 3.3), squeeze=False)
+    for ax, (method, (x, loss)) in zip(axes[0], curves.items()):
+        ax.plot(x, loss, "o-", color=METHOD_COLORS.get(method))
+        label_axes(ax, "epoch", "Beta NLL (eq. 1)" if method == "bc" else "InfoNCE (eq. 2)", METHOD_LABELS.get(method, method))
+        ax.grid(alpha=0.3)
+    return finish(fig, True, title=title)
+
+
+def plot_trajectories(town, trajectories: dict, *, titles: dict | None = None, suptitle: str = "Free driving in town02"):
+    """One map per entry of ``trajectories`` ({name: [xy (T, 2), ...]}), each episode a line, starts as dots."""
+    n = check_panels("trajectories", trajectories)
+    fig, axes = plt.subplots(1, n, figsize=(6.0 * n, 5.4), squeeze=False)
+    for ax, (name, tracks) in zip(axes[0], trajectories.items()):
+        plot_town(town, ax=ax, title=(titles or {}).get(name, name), markers=False)
+        for k, xy in enumerate(tracks):
+            xy = as_array(xy)  # (T, 2)
+            color = f"C{(3 * k + 1) % 10}"
+            ax.plot(xy[:, 0], xy[:, 1], color=color, lw=1.8, alpha=0.85, label=f"episode {k}")
+            ax.plot(xy[0, 0], xy[0, 1], "o", color=color, ms=7, mec="k")
+            ax.plot(xy[-1, 0], xy[-1, 1], "X", color=color, ms=8, mec="k")
+        ax.legend(fontsize=8, loc="upper right")
+    return finish(fig, True, title=suptitle + " (dot: start, cross: end)")
+
+
+def plot_energy_landscapes(panels: list, steer, accel, *, suptitle: str = "Energy landscapes of DA-IBC"):
+    """Per panel (title, E (A, S) over accel x steer, points (K, 2), bev (5, S, S) or None): the BEV and E with the points."""
+    check_panels("panels", panels)
+    fig, axes = plt.subplots(len(panels), 2, figsize=(9.5, 4.1 * len(panels)), squeeze=False,
+                             gridspec_kw={"width_ratios": [1, 1.5]})
+    for (ax_b, ax_e), (title, e, points, bev) in zip(axes, panels):
+        if bev is not None:
+            draw_bev(ax_b, bev)
+        ax_b.set_xticks([])
+        ax_b.set_yticks([])
+        ax_b.set_title("what the agent sees")
+        e = as_array(e)  # (A, S)
+        cs = ax_e.contourf(steer, accel, e - e.min(), levels=20, cmap="viridis")
+        fig.colorbar(cs, ax=ax_e, label="E(x, y) - min E")
+        p = as_array(points)  # (K, 2)
+        ax_e.scatter(p[:, 0], p[:, 1], c="red", s=28, edgecolors="white", linewidths=0.8, label=f"{len(p)} DFO inferences")
+        label_axes(ax_e, f"y_1: {STEER_LABEL}", f"y_2: {ACCEL_LABEL}", title, legend=True, loc="lower right")
+    return finish(fig, True, title=suptitle)

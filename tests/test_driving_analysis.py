@@ -1,0 +1,73 @@
+"""The one loop over environments (driving.rollout) and the free-driving measures (driving.analysis)."""
+
+import numpy as np
+import pytest
+
+from ibc_tutorial.driving import get_town, rollout
+from ibc_tutorial.driving.analysis import exits_per_approach, junction_visits, road_coverage
+
+
+@pytest.fixture(scope="module")
+def expert_drive():
+    (r,) = rollout("expert", town="town02", episodes=1, steps=400, bev_size=32, seed=3, record_steps=True, keep_obs=True)
+    return r
+
+
+def test_rollout_records_every_step(expert_drive):
+    r = expert_drive
+    t = r.trace
+    n = r.steps + 1
+    assert t["pose"].shape == (n, 3) and t["speed"].shape == (n,) and t["lane"].shape == (n,)
+    assert t["red_ahead"].dtype == bool and t["entry_dist"].shape == (n,) and t["actions"].shape == (n - 1, 2)
+    assert t["bev"].shape == (n, 5, 32, 32) and t["state"].shape == (n, 3)
+    np.testing.assert_array_equal(t["pose"][:, :2], r.xy)
+    np.testing.assert_allclose(t["state"][1:, 1:], t["actions"], atol=1e-6)  # the state holds the previous action
+    assert np.isinf(t["entry_dist"][~np.isin(t["lane"], list(get_town("town02").approach_of_lane))]).all()
+
+
+def test_rollout_scores_alone_and_refuses_bad_requests():
+    (r,) = rollout("expert", town="town02", episodes=1, steps=5, bev_size=32, seed=3, record_xy=False)
+    assert r.xy is None and r.trace is None and r.steps == 5
+    with pytest.raises(ValueError, match="keep_obs"):
+        rollout("expert", episodes=1, steps=5, keep_obs=True)
+    with pytest.raises(ValueError, match="policy"):
+        rollout("pid", episodes=1, steps=5)
+
+
+def test_junction_visits_read_the_exit_from_the_lanes(expert_drive):
+    tw = get_town("town02")
+    ap = next(a for a in tw.approaches if a.is_junction)
+    turn, conn = next(iter(ap.exits.items()))
+    after = tw.lanes[conn].successors[0]
+    lanes = [ap.lane] * 5 + [conn] * 3 + [after] * 4 + [ap.lane] * 2 + [conn, after]
+    visits = junction_visits(tw, np.array(lanes))
+    assert visits == [{"approach": ap.id, "node": ap.node, "turn": turn, "step": 4},
+                      {"approach": ap.id, "node": ap.node, "turn": turn, "step": 13}]
+    assert exits_per_approach(visits) == {ap.id: {"node": ap.node, "visits": 2, "turns": [turn]}}
+    assert all(v["turn"] in ("left", "straight", "right") for v in junction_visits("town02", expert_drive.trace["lane"]))
+
+
+def test_road_coverage_counts_lanes_driven_in_their_direction():
+    tw = get_town("town02")
+    road = np.isin(tw.wp_lane, tw.road_lanes)
+    wp, wh = tw.wp_xy[road], tw.wp_heading[road]
+    assert road_coverage(tw, np.c_[wp, wh]) == 1.0  # every waypoint, on it, heading along
+    assert road_coverage(tw, np.c_[wp[:1], wh[:1] + np.pi]) == 0.0  # wrong way
+    assert road_coverage(tw, np.zeros((0, 3))) == 0.0
+    with pytest.raises(ValueError, match="radius"):
+        road_coverage(tw, np.c_[wp, wh], radius=0)
+
+
+def test_road_coverage_agrees_with_a_kd_tree():
+    spatial = pytest.importorskip("scipy.spatial")
+    tw = get_town("town02")
+    road = np.isin(tw.wp_lane, tw.road_lanes)
+    wp, wh = tw.wp_xy[road], tw.wp_heading[road]
+    rng = np.random.default_rng(0)
+    idx = rng.choice(len(wp), 1500)
+    poses = np.c_[wp[idx] + rng.normal(0, 2, (1500, 2)), wh[idx] + rng.normal(0, 1.0, 1500)]
+    covered = np.zeros(len(wp), dtype=bool)
+    for i, near in enumerate(spatial.cKDTree(poses[:, :2]).query_ball_point(wp, r=3.0)):
+        if near:
+            covered[i] = (np.abs(np.angle(np.exp(1j * (poses[near, 2] - wh[i])))) <= np.pi / 3).any()
+    assert road_coverage(tw, poses) == float(covered.mean())

@@ -1,0 +1,182 @@
+"""The plotting package: figures build on tiny synthetic inputs with titles and axis labels, steering
+axes use the book's convention, and ``show`` emits a PNG only."""
+
+from pathlib import Path
+from types import SimpleNamespace
+
+import matplotlib.pyplot as plt
+import numpy as np
+import pytest
+import torch
+
+from ibc_tutorial import plotting
+from ibc_tutorial.plotting import agents, common, ingredients, multimodality, town
+from ibc_tutorial.toy import SideRoadWorld, TreeWorld
+
+PACKAGE = Path(plotting.__file__).parent
+
+
+def assert_labelled(fig, *, ylabel: bool = True):
+    """The figure has a title (its own, or its top axis's) and labelled axes; then close it."""
+    axes = [ax for ax in fig.axes if ax.get_visible() and ax.axison and ax.get_label() != "<colorbar>"]
+    assert fig._suptitle is not None or axes[0].get_title()
+    assert any(ax.get_xlabel() for ax in axes)
+    if ylabel:
+        assert any(ax.get_ylabel() for ax in axes)
+    plt.close(fig)
+
+
+# --------------------------------------------------------------------------- the package
+def test_show_emits_a_png_only_and_closes(monkeypatch):
+    import IPython
+    import IPython.display
+
+    fig, ax = plt.subplots()  # before the patch: pyplot asks IPython for its shell when it makes a figure
+    ax.plot([0, 1], [0, 1])
+    shown = []
+    monkeypatch.setattr(IPython, "get_ipython", lambda: object())
+    monkeypatch.setattr(IPython.display, "display", lambda obj, raw=False: shown.append((obj, raw)))
+    plotting.show(fig)
+    assert len(shown) == 1
+    obj, raw = shown[0]
+    assert raw and list(obj) == ["image/png"] and obj["image/png"].startswith(b"\x89PNG")
+    assert not plt.fignum_exists(fig.number)
+
+
+def test_show_outside_ipython_only_closes_and_save_writes_a_png(tmp_path):
+    fig, _ = plt.subplots()
+    plotting.show(fig)
+    assert not plt.fignum_exists(fig.number)
+    fig, _ = plt.subplots()
+    plotting.save(fig, tmp_path / "sub" / "f.png")
+    assert (tmp_path / "sub" / "f.png").read_bytes().startswith(b"\x89PNG")
+    with pytest.raises(ValueError, match="dpi"):
+        plotting.show(plt.figure(), dpi=0)
+
+
+def test_no_steering_label_in_the_old_convention():
+    for path in PACKAGE.glob("*.py"):
+        text = path.read_text(encoding="utf-8")
+        for old in ("+1 left", "-1 right", "−1 right", "-1 = full right", "−1 = full right"):
+            assert old not in text, f"{path.name} still says {old!r}"
+
+
+# --------------------------------------------------------------------------- common
+def test_common_figures_have_titles_and_labels():
+    x = [1, 2, 4, 8]
+    assert_labelled(common.plot_lines(x, {"a": [0.1, 0.2, 0.3, 0.4], "b": [0.4, 0.3, 0.2, 0.1]}, xlabel="samples", ylabel="rate", title="t", logx=True, logy=True))
+    assert_labelled(common.plot_lines({"a": [1, 2], "b": [1, 3, 5]}, {"a": [0, 1], "b": [1, 0, 1]}, xlabel="x", ylabel="y", title="t", markers=False))
+    fig = common.plot_bars(["cruise", "junction"], {"A": [0.5, 0.5], "B": [0.9, 0.1]}, ylabel="share", title="t",
+                           points={"A": np.full((3, 2), 0.5)}, reference={"data": [0.7, 0.3]})
+    assert [t.get_text() for t in fig.axes[0].get_xticklabels()] == ["cruise", "junction"]
+    plt.close(fig)  # bars have no x label: the categories name them
+    fig = common.plot_learning_curves(np.arange(5), {"IBC": np.random.default_rng(0).random((3, 5))}, ylabel="NLL", title="t", references={"expert": 0.5})
+    assert "mean of 3 seeds" in fig.axes[0].get_legend().get_texts()[0].get_text()
+    assert_labelled(fig)
+
+
+def test_common_helpers():
+    assert common.as_array(torch.ones(2, requires_grad=True), float).dtype == np.float64
+    fig, ax = plt.subplots()
+    assert common.figure_and_axes(ax, (1, 1)) == (fig, ax, False)
+    assert common.plot_lines([0, 1], {"a": [0, 1]}, xlabel="x", ylabel="y", title="t", ax=ax) is fig
+    plt.close(fig)
+    with pytest.raises(ValueError, match="series"):
+        common.plot_bars(["a"], {}, ylabel="y", title="t")
+
+
+# --------------------------------------------------------------------------- Part I
+def test_multimodality_figures():
+    actions = torch.linspace(-1, 1, 21)
+    energies = (actions[None, :] - torch.linspace(-0.5, 0.5, 6)[:, None]) ** 2  # (6, 21)
+    fig = multimodality.plot_energy_landscape(torch.linspace(10, 0, 6), actions, energies, path=torch.zeros(6), expert=(np.ones(3), np.zeros(3)))
+    assert fig.axes[0].get_ylabel() == common.STEER_LABEL == "steering (−1 left … +1 right)"
+    assert_labelled(fig)
+    fig = multimodality.plot_energy_curves(actions, {"near": energies[0], "far": energies[-1]}, title="t")
+    assert fig.axes[0].get_xlabel() == common.STEER_LABEL
+    assert_labelled(fig)
+    assert_labelled(multimodality.plot_command_traces(0.1, {"a": np.zeros(10), "b": np.ones(10)}))
+    assert_labelled(multimodality.plot_density_fits(torch.rand(30) * 2 - 1, actions, {"flat": torch.full((21,), 0.5)}, title="t"))
+    assert_labelled(multimodality.plot_beta_shapes([(2, 2)]))
+
+
+def test_rollout_figures_share_one_drawing():
+    tree, road = TreeWorld(), SideRoadWorld()
+    r_tree = tree.rollout(lambda obs: torch.zeros(len(obs), 1), 3, seed=0)
+    r_road = road.rollout(lambda obs: torch.full((len(obs), 1), 0.5), 3, seed=0)
+    fig = multimodality.plot_tree_closed_loop(tree, {"zero": r_tree})
+    assert len(fig.axes[0].lines) >= 3 and fig.axes[0].get_title().startswith("zero:")
+    assert_labelled(fig)
+    fig = ingredients.plot_tree_rollouts(tree, {"zero": r_tree, "again": r_tree}, max_episodes=2)
+    assert len(fig.axes[0].lines) == 2 and "collided or neither" in fig.axes[0].get_title()
+    assert_labelled(fig)
+    fig = multimodality.plot_rollout_grid(road, {"a": r_road}, title="grid", ncols=1)
+    assert fig.axes[0].get_title().startswith("a: main")
+    assert_labelled(fig)
+    assert multimodality.rollout_colors(tree, r_tree) == [multimodality.TREE_SIDE_COLORS[int(v)] for v in tree.pass_side(r_tree)]
+    with pytest.raises(ValueError, match="rollouts"):
+        multimodality.plot_side_road(road, {})
+
+
+# --------------------------------------------------------------------------- Part II
+def test_ingredients_figures():
+    axis = torch.linspace(-1, 1, 9)
+    e = axis[:, None] ** 2 + axis[None, :] ** 2  # (9, 9)
+    fig = ingredients.plot_energy_2d(e, axis, title="t", unvisited=e > 1, modes=np.zeros((1, 2)), argmin=(0.0, 0.0))
+    assert fig.axes[0].get_xlabel() == common.STEER_LABEL
+    assert_labelled(fig)
+    acts = np.random.default_rng(0).uniform(-1, 1, (20, 2))
+    assert_labelled(ingredients.plot_counter_examples(acts, np.arange(20) % 3, {"uniform": acts}))
+    assert_labelled(ingredients.plot_sigma_sweep([0.1, 0.3], np.ones((2, 3)), uniform=np.ones(3), ylabel="NLL", title="t"))
+    assert_labelled(ingredients.plot_kde_by_hand([0.0, 0.5], np.linspace(-1, 1, 11), 0.2, np.ones(11)))
+    assert_labelled(ingredients.plot_kde_bandwidths({0.1: np.ones((9, 9)), 0.2: np.ones((9, 9))}, axis, acts))
+    assert_labelled(ingredients.plot_populations_2d(e, axis, {"DFO": acts}, title="t"))
+
+
+def test_dfo_iteration_figure():
+    g = torch.Generator().manual_seed(0)
+    trace = SimpleNamespace(samples=[torch.rand(50, 1, generator=g) * 2 - 1 for _ in range(3)], sigmas=[0.3, 0.1, float("nan")], action=torch.tensor([0.2]))
+    grid = np.linspace(-1, 1, 21)
+    fig = ingredients.plot_dfo_iterations(trace, grid, grid**2, bins=10)
+    assert fig.axes[0].get_title().startswith("iteration 1") and "last" in fig.axes[2].get_title()
+    assert_labelled(fig)
+    fig, ax = plt.subplots()
+    energy_ax = ingredients.draw_dfo_iteration(ax, trace, 3, grid, grid**2, 10)
+    assert energy_ax is not ax and ax.get_xlabel() == "action y"
+    with pytest.raises(ValueError, match="it"):
+        ingredients.draw_dfo_iteration(ax, trace, 4, grid, grid**2, 10)
+    plt.close(fig)
+
+
+# --------------------------------------------------------------------------- chapters 07-09
+def test_town_figures():
+    from ibc_tutorial.driving import get_town
+
+    t = np.arange(20) * 0.1
+    fig = town.plot_light_timeline(np.zeros((20, 3), dtype=int), labels=["a", "b", "c"])
+    assert [t.get_text() for t in fig.axes[0].get_yticklabels()] == ["a", "b", "c"]
+    assert_labelled(fig, ylabel=False)  # the heads' names label the y axis
+    assert_labelled(town.plot_light_stop(t, 10 - t, np.ones(20), np.r_[np.zeros(10), 2 * np.ones(10)], gap_no_brake=10 - 2 * t))
+    fig = town.plot_action_histograms(np.zeros((10, 2)))
+    assert fig.axes[0].get_xlabel() == common.STEER_LABEL
+    assert_labelled(fig)
+    assert_labelled(town.plot_step_and_turn(t, t, t, {"left": np.c_[t, t]}, radii={"left": (0, 1, 1)}))
+    town02 = get_town("town02")
+    assert_labelled(town.plot_routes(town02, [np.c_[t, t]]))
+    fig = town.plot_bev_samples(np.zeros((2, 5, 64, 64)), np.zeros((2, 2)), np.ones((2, 3)))
+    assert fig._suptitle is not None and fig.axes[0].get_title().startswith("v 1.0")
+    plt.close(fig)
+
+
+def test_agents_figures():
+    assert agents.plot_agent_architecture().axes[0].get_title()
+    plt.close("all")
+    curves = {"bc": {0: {"epoch": [1, 2], "score": [1.0, 2.0]}, 1: {"epoch": [1, 2], "score": [2.0, 3.0]}}, "ibc": {}}
+    assert_labelled(agents.plot_training_curves(curves))
+    fig = agents.plot_loss_curves({"bc": ([1, 2], [1.0, 0.5]), "da-ibc": ([1, 2], [2.0, 1.0])})
+    assert [ax.get_title() for ax in fig.axes] == ["BC (Beta)", "DA-IBC"]
+    assert_labelled(fig)
+    steer, accel = np.linspace(-1, 1, 5), np.linspace(-1, 1, 4)
+    fig = agents.plot_energy_landscapes([("p", np.ones((4, 5)) + accel[:, None], np.zeros((3, 2)), None)], steer, accel)
+    assert common.STEER_LABEL in fig.axes[1].get_xlabel()
+    assert_labelled(fig)
