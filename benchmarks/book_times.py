@@ -6,7 +6,7 @@
 
 Each notebook runs top to bottom in a fresh kernel of this environment, on an in-memory copy:
 nothing is written back (use tools/execute_notebooks.py to store outputs). Progress bars are
-silenced as under the tests (IBC_TUTORIAL_QUIET=1). The goal is about 90 s per chapter on an
+silenced as under the tests (TQDM_DISABLE=1). The goal is about 90 s per chapter on an
 idle 2-core machine; rows above that are flagged. Times include the kernel's start.
 """
 
@@ -65,7 +65,7 @@ def main() -> int:
     parser.add_argument("--exercises", action="store_true", help="also time the exercise notebooks")
     parser.add_argument("--timeout", type=int, default=900, help="seconds allowed per cell")
     args = parser.parse_args()
-    os.environ["IBC_TUTORIAL_QUIET"] = "1"
+    os.environ["TQDM_DISABLE"] = "1"
     rows = []
     for path in notebooks(args.paths, args.exercises):
         secs, status = run(path, args.timeout)

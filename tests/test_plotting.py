@@ -10,6 +10,7 @@ import pytest
 import torch
 
 from ibc_tutorial import plotting
+from ibc_tutorial.optimizers.dfo import DFOConfig
 from ibc_tutorial.plotting import agents, common, ingredients, multimodality, town
 from ibc_tutorial.toy import SideRoadWorld, TreeWorld
 
@@ -135,10 +136,18 @@ def test_ingredients_figures():
 
 def test_dfo_iteration_figure():
     g = torch.Generator().manual_seed(0)
-    trace = SimpleNamespace(samples=[torch.rand(50, 1, generator=g) * 2 - 1 for _ in range(3)], sigmas=[0.3, 0.1, float("nan")], action=torch.tensor([0.2]))
+    samples = [torch.rand(50, 1, generator=g) * 2 - 1 for _ in range(3)]
+    trace = SimpleNamespace(samples=samples, sigmas=[0.3, 0.1, float("nan")], action=torch.tensor([0.2]),
+                            config=DFOConfig(select="sample"))
     grid = np.linspace(-1, 1, 21)
     fig = ingredients.plot_dfo_iterations(trace, grid, grid**2, bins=10)
     assert fig.axes[0].get_title().startswith("iteration 1") and "last" in fig.axes[2].get_title()
+    assert "drawn" in fig.axes[2].get_title()
+    plt.close(fig)
+    argmax_trace = SimpleNamespace(**{**vars(trace), "config": DFOConfig(select="argmax")})
+    fig = ingredients.plot_dfo_iterations(argmax_trace, grid, grid**2, bins=10)
+    assert "argmax" in fig.axes[2].get_title()  # the title follows the final choice
+    plt.close(fig)
     assert_labelled(fig)
     fig, ax = plt.subplots()
     energy_ax = ingredients.draw_dfo_iteration(ax, trace, 3, grid, grid**2, 10)

@@ -100,7 +100,7 @@ def bin_centers(n_bins: int, low: float = -1.0, high: float = 1.0) -> torch.Tens
     """Centres of ``n_bins`` equal bins dividing [low, high]: (n_bins,)."""
     check_int("n_bins", n_bins, minimum=2)
     width = (high - low) / n_bins
-    return low + width * (torch.arange(n_bins, dtype=torch.float32) + 0.5)
+    return low + width * (torch.arange(n_bins, dtype=torch.get_default_dtype()) + 0.5)
 
 
 def action_to_bin(actions: torch.Tensor, n_bins: int) -> torch.Tensor:

@@ -10,7 +10,7 @@ learns to raise the energy:
   replacement, plus Gaussian noise N(0, σ²I).
 
 Both are also available as *samplers*, callables ``sampler(actions, n_neg, generator)`` that
-``training.info_nce_objective`` calls once per minibatch with that minibatch's expert actions.
+``objectives.info_nce_objective`` calls once per minibatch with that minibatch's expert actions.
 
 **Clipping expert negatives (the paper does not say).** ``expert_negatives`` does not clip by
 default. Clipping y + ε to the bounds would put a point mass of counter-examples exactly on the
@@ -32,9 +32,9 @@ from ibc_tutorial.utils import check_int, check_positive, check_tensor
 
 
 def _bounds(low, high) -> tuple[torch.Tensor, torch.Tensor]:
-    """``low``/``high`` (numbers or length-D sequences/tensors) -> two float32 (D,) tensors."""
-    lo = torch.as_tensor(low, dtype=torch.float32).reshape(-1)
-    hi = torch.as_tensor(high, dtype=torch.float32).reshape(-1)
+    """``low``/``high`` (numbers or length-D sequences/tensors) -> two (D,) tensors of torch's default dtype."""
+    lo = torch.as_tensor(low, dtype=torch.get_default_dtype()).reshape(-1)
+    hi = torch.as_tensor(high, dtype=torch.get_default_dtype()).reshape(-1)
     if lo.numel() == 0 or hi.numel() == 0:
         raise ValueError("low and high must each hold at least one number")
     if lo.shape != hi.shape:
@@ -68,7 +68,7 @@ def uniform_negatives(
         low, high: the action bounds y_min, y_max, each of length D.
         generator: a seeded ``torch.Generator`` (None = torch's global one).
     Returns:
-        (B, N, D) float32.
+        (B, N, D) in torch's default dtype.
     """
     b = check_int("batch_size", batch_size, minimum=1)
     n = check_int("n_neg", n_neg, minimum=1)
@@ -109,7 +109,7 @@ def expert_negatives(
         generator: a seeded ``torch.Generator`` (None = torch's global one).
         low, high: optional bounds to clip to (both or neither).
     Returns:
-        (B, N, D) float32.
+        (B, N, D) in torch's default dtype.
     """
     check_tensor("expert_actions", expert_actions, ndim=2)
     m, d = expert_actions.shape
@@ -121,7 +121,7 @@ def expert_negatives(
     if (low is None) != (high is None):
         raise ValueError("low and high must be given together (to clip) or both left None (no clipping)")
     idx = torch.randint(0, m, (b, n), generator=generator)  # (B, N): with replacement
-    neg = expert_actions.to(torch.float32)[idx]  # (B, N, D)
+    neg = expert_actions.to(torch.get_default_dtype())[idx]  # (B, N, D)
     if sigma > 0:
         neg = neg + sigma * torch.randn(b, n, d, generator=generator)  # + N(0, σ²I)
     if low is not None:

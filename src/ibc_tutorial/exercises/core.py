@@ -37,7 +37,8 @@ class Feedback:
 
 
 def not_attempted(what: str = "this exercise") -> Feedback:
-    return Feedback(NOT_ATTEMPTED, f"Replace the `raise NotImplementedError` in {what} with your code, then run this cell again.")
+    return Feedback(NOT_ATTEMPTED, f"Replace the `raise NotImplementedError` in {what} with your code, run the cell that "
+                    "defines your function, then run this checker cell.")
 
 
 def correct(message: str = "Well done.") -> Feedback:

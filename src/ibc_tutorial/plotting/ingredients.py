@@ -188,7 +188,8 @@ def plot_inverse_weights(actions, weights, *, max_points: int = 4000):
 def draw_dfo_iteration(ax, trace, it: int, x, e, bins: int):
     """One iteration ``it`` (1-based) of a 1-D DFO ``trace`` on ``ax``: the population's histogram
     (share per bin), the energy ``e`` (G,) over the actions ``x`` (G,) in red on a twin axis, and on
-    the last iteration the returned action. Returns the twin (energy) axis."""
+    the last iteration the returned action, titled by how it was chosen (``trace.config.select``).
+    Returns the twin (energy) axis."""
     it = check_int("it", it, minimum=1, maximum=len(trace.samples))
     s = trace.samples[it - 1].numpy()[:, 0]  # (N,) the population's actions
     lo, hi = float(x.min()), float(x.max())
@@ -201,7 +202,8 @@ def draw_dfo_iteration(ax, trace, it: int, x, e, bins: int):
     ax2.tick_params(axis="y", colors="C3", labelsize=7)
     if it == len(trace.samples):
         ax.axvline(float(trace.action[0]), color="k", lw=2, label="returned ŷ")
-        ax.set_title(f"iteration {it} (last)\nŷ drawn from p̃", fontsize=9)
+        how = "ŷ drawn from p̃" if trace.config.select == "sample" else "ŷ = argmax p̃ (lowest energy)"
+        ax.set_title(f"iteration {it} (last)\n{how}", fontsize=9)
     else:
         ax.set_title(f"iteration {it}\nthen resample, noise σ = {trace.sigmas[it - 1]:.3g}", fontsize=9)
     ax.set_xlabel("action y")

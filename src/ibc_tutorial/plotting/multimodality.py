@@ -6,8 +6,6 @@ the side-road world) and the trajectories coloured by their outcome.
 
 from __future__ import annotations
 
-import math
-
 import matplotlib.pyplot as plt
 import numpy as np
 import torch
@@ -17,7 +15,11 @@ from ibc_tutorial.plotting.common import STEER_LABEL, TIME_LABEL, X_LABEL, Y_LAB
 from ibc_tutorial.utils import check_int
 
 TREE_SIDE_COLORS = {-1: "C0", 1: "C1", 0: "C3"}
-"""Colours of the tree chapters: passed on the left (blue), on the right (orange), collided (red)."""
+"""Colours of the tree chapters, keyed by ``TreeWorld.pass_side`` (the sign of the steering that
+takes a car there): passed on the left (-1, blue), on the right (+1, orange), collided (0, red)."""
+TREE_MODE_COLORS = {"passes left": TREE_SIDE_COLORS[-1], "passes right": TREE_SIDE_COLORS[1]}
+"""The same colours keyed by the tree experts' mode names (``TreeWorld.mode_names``), so that a
+side has one colour in every figure."""
 SIDE_ROAD_COLORS = {"main road": "C0", "side road": "C2", "off road": "C3"}
 """Colours of the side-road world: ended on the main road (blue), on the side road (green), off the road (red)."""
 
@@ -31,14 +33,15 @@ def draw_tree(ax, world) -> None:
 
 
 def draw_side_road(ax, world, x_end: float) -> None:
-    """The drivable area of the side-road world in grey, up to ``x_end`` m: the main road and the side road."""
+    """The drivable area of the side-road world in grey, up to ``x_end`` m: the main road and the side
+    road, along ``world.side_direction`` (to the right, -y)."""
     c = world.config
     w = c.road_half_width
     ax.add_patch(plt.Rectangle((-1.0, -w), x_end + 1.0, 2 * w, color="0.88", zorder=0))
-    a = math.radians(c.side_angle_deg)
-    u, nrm = np.array([math.cos(a), math.sin(a)]), np.array([-math.sin(a), math.cos(a)])
+    u = as_array(world.side_direction, float)  # (2,) along the side road, away from the branch point
+    nrm = np.array([-u[1], u[0]])  # (2,) across it
     b = np.array([c.branch_x, 0.0])
-    length = (x_end - c.branch_x) / math.cos(a) + w
+    length = (x_end - c.branch_x) / u[0] + w  # u[0] = cos of the angle between the roads
     corners = [b - w * nrm, b + w * nrm, b + w * nrm + length * u, b - w * nrm + length * u]
     ax.add_patch(Polygon(corners, closed=True, color="0.88", zorder=0))
 
@@ -130,16 +133,23 @@ def _grid_shares(world, r) -> str:
 
 
 # =========================================================================== chapter 01: the tree
+def _mode_colors(mode_names) -> list[str]:
+    """The colour of each mode: the tree's from ``TREE_MODE_COLORS``, else C0, C1, ... in order."""
+    return [TREE_MODE_COLORS.get(name, f"C{k}") for k, name in enumerate(mode_names)]
+
+
 def plot_tree_scene(world, states, modes, *, title: str = "Expert demonstrations in the tree world", max_episodes: int = 100, ax=None):
-    """Expert trajectories ``states`` (E, T+1, 3) seen from above, coloured by ``modes`` (E,):
-    0 passes on the left (blue), 1 on the right (orange); the tree as a green disc, the dashed
-    circle marks where the car's disc would touch it."""
+    """Expert trajectories ``states`` (E, T+1, 3) seen from above, coloured by ``modes`` (E,),
+    indices into ``world.mode_names`` (0 passes on the right, orange; 1 on the left, blue, as
+    in ``TREE_MODE_COLORS``); the tree as a green disc, the dashed circle marks where the car's
+    disc would touch it."""
     fig, ax, _ = figure_and_axes(ax, (9, 3.6))
     m = as_array(modes)
-    draw_tracks(ax, states, ["C0" if v == 0 else "C1" for v in m], max_episodes=max_episodes)
+    colors = _mode_colors(world.mode_names)
+    draw_tracks(ax, states, [colors[int(v)] for v in m], max_episodes=max_episodes)
     draw_tree(ax, world)
-    ax.plot([], [], color="C0", label=f"passes left ({int((m == 0).sum())})")
-    ax.plot([], [], color="C1", label=f"passes right ({int((m == 1).sum())})")
+    for mode, (name, color) in enumerate(zip(world.mode_names, colors)):
+        ax.plot([], [], color=color, label=f"{name} ({int((m == mode).sum())})")
     ax.set_aspect("equal")
     label_axes(ax, X_LABEL, Y_LABEL, title, legend=True, loc="lower left")
     return fig
@@ -147,14 +157,15 @@ def plot_tree_scene(world, states, modes, *, title: str = "Expert demonstrations
 
 def plot_actions_by_distance(world, demos, *, predictions: dict | None = None, window: tuple | None = None, title: str = "What the policy sees, and what the experts did", max_points: int = 6000):
     """Each expert sample as a dot: the observation (distance to the tree, m) against the action
-    (steering), coloured by the expert's side; optional ``predictions`` {name: (distances, actions)}
-    drawn as lines, ``window`` = (low, high) m shaded. The x axis runs towards the tree."""
+    (steering), coloured by the expert's side (``world.mode_names``, ``TREE_MODE_COLORS``);
+    optional ``predictions`` {name: (distances, actions)} drawn as lines, ``window`` = (low, high)
+    m shaded. The x axis runs towards the tree."""
     fig, ax = plt.subplots(figsize=(9, 3.8))
     d = as_array(world.physical(demos.obs)[:, 0])
     a = as_array(demos.actions[:, 0])
     m = as_array(demos.mode)
     idx = np.random.default_rng(0).permutation(len(d))[:max_points]
-    for mode, color, name in ((0, "C0", "passes left"), (1, "C1", "passes right")):
+    for mode, (name, color) in enumerate(zip(world.mode_names, _mode_colors(world.mode_names))):
         sel = idx[m[idx] == mode]
         ax.scatter(d[sel], a[sel], s=3, color=color, alpha=0.35, label=f"expert, {name}", rasterized=True)
     if window is not None:
@@ -169,11 +180,17 @@ def plot_actions_by_distance(world, demos, *, predictions: dict | None = None, w
     return fig
 
 
-def plot_action_histogram(actions, modes, *, title: str, bins: int = 40, mode_names=("passes left", "passes right")):
-    """Histogram of the actions ``actions`` (N,) in [-1, 1], stacked by the experts' ``modes`` (N,)."""
+def plot_action_histogram(actions, modes, *, title: str, bins: int = 40, mode_names=None):
+    """Histogram of the actions ``actions`` (N,) in [-1, 1], stacked by the experts' ``modes`` (N,),
+    indices into ``mode_names`` (by default the tree world's, ``TreeWorld.mode_names``)."""
+    if mode_names is None:
+        from ibc_tutorial.toy.tree import TreeWorld
+
+        mode_names = TreeWorld.mode_names
     a, m = as_array(actions), as_array(modes)
     fig, ax = plt.subplots(figsize=(6.4, 3.4))
-    ax.hist([a[m == 0], a[m == 1]], bins=check_int("bins", bins, minimum=1), range=(-1, 1), stacked=True, color=["C0", "C1"], label=list(mode_names))
+    ax.hist([a[m == k] for k in range(len(mode_names))], bins=check_int("bins", bins, minimum=1), range=(-1, 1), stacked=True,
+            color=_mode_colors(mode_names), label=list(mode_names))
     ax.axvline(float(a.mean()), color="k", ls="--", lw=1.2, label=f"mean of all ({a.mean():+.2f})")
     label_axes(ax, STEER_LABEL, "number of samples", title, legend=True)
     return fig
@@ -201,7 +218,8 @@ def plot_constant_losses(constants, losses: dict, *, minimisers: dict | None = N
 
 def plot_tree_closed_loop(world, rollouts: dict, *, title: str = "Closed-loop rollouts in the tree world", max_episodes: int = 60):
     """One panel per policy ({name: Rollouts}): trajectories from above, coloured by how they pass
-    the tree (left blue, right orange, collided red, with a cross where the car stopped)."""
+    the tree (``TREE_SIDE_COLORS``: left blue, right orange, collided red, with a cross where
+    the car stopped)."""
     n = check_panels("rollouts", rollouts)
     return rollout_figure(world, rollouts, _tree_shares, title=title, figsize=(8.5, 2.2 * n), max_episodes=max_episodes)
 

@@ -15,7 +15,7 @@ the simulator of the DA-IBC paper). Positions are in a right-handed frame, ``x``
 road and ``y`` to the left, so a positive steering command makes the heading and ``y``
 decrease.
 
-A policy is any callable ``policy(obs (B, obs_dim) float32) -> actions (B, 1)`` in [-1, 1];
+A policy is any callable ``policy(obs (B, obs_dim)) -> actions (B, 1)`` in [-1, 1];
 in the tree and side-road worlds the observation is the distance ahead to the landmark / 10 m
 (obs_dim = 1), optionally with the lateral offset (``obs_lateral=True``, obs_dim = 2).
 """

@@ -2,7 +2,7 @@
 start, the expert's controller, the batched closed-loop rollout, and the two records it
 produces (``Demonstrations`` of the expert, ``Rollouts`` of any policy).
 
-A *policy* is any callable ``policy(obs) -> actions`` with ``obs`` a float32 tensor
+A *policy* is any callable ``policy(obs) -> actions`` with ``obs`` a tensor of torch's default dtype
 (B, obs_dim) and ``actions`` a tensor (B, 1) of steering in [-1, 1], **+1 turning right and
 -1 left** (the book's convention; see ``ibc_tutorial.toy.car``). A rollout calls it once
 per step on all B episodes at once. A policy that returns NaN, the wrong shape or a value
@@ -33,7 +33,7 @@ from ibc_tutorial.toy import car
 from ibc_tutorial.utils import check_int, check_positive, check_positive_fields, check_tensor
 
 Policy = Callable[[torch.Tensor], torch.Tensor]
-"""policy(obs (B, obs_dim) float32) -> actions (B, 1) in [-1, 1], +1 = full right."""
+"""policy(obs (B, obs_dim)) -> actions (B, 1) in [-1, 1], +1 = full right."""
 
 
 @dataclass
@@ -71,9 +71,9 @@ class Demonstrations:
     """Expert data from ``world.expert_demonstrations``: M = E * T samples of E episodes of T steps."""
 
     obs: torch.Tensor
-    """(M, obs_dim) float32 observations."""
+    """(M, obs_dim) observations (torch default dtype: float32, or float64 in the toy chapters)."""
     actions: torch.Tensor
-    """(M, 1) float32 steering the expert applied (noise included), in [-1, 1], +1 = right."""
+    """(M, 1) steering the expert applied (noise included), in [-1, 1], +1 = right."""
     episode: torch.Tensor
     """(M,) int64 episode index of each sample."""
     step: torch.Tensor
@@ -82,7 +82,7 @@ class Demonstrations:
     """(M,) int64 the expert's mode in that episode (the world's ``mode_names``: tree 0 passes
     right, 1 passes left; side road 0 keeps straight, 1 takes the side road)."""
     states: torch.Tensor
-    """(E, T+1, 3) float32 [x m, y m, heading rad] of each expert episode."""
+    """(E, T+1, 3) [x m, y m, heading rad] (default dtype) of each expert episode."""
     episode_mode: torch.Tensor
     """(E,) int64 the mode of each episode."""
 
@@ -99,11 +99,11 @@ class Rollouts:
     """Closed-loop episodes of one policy from ``world.rollout``: E episodes of T steps."""
 
     states: torch.Tensor
-    """(E, T+1, 3) float32 [x m, y m, heading rad]; an episode that collided stays where it hit."""
+    """(E, T+1, 3) [x m, y m, heading rad] (default dtype); an episode that collided stays where it hit."""
     actions: torch.Tensor
-    """(E, T, 1) float32 steering the policy returned, +1 = right (after a collision: returned, not applied)."""
+    """(E, T, 1) steering the policy returned, +1 = right (after a collision: returned, not applied)."""
     obs: torch.Tensor
-    """(E, T, obs_dim) float32 observations the policy was given."""
+    """(E, T, obs_dim) observations the policy was given."""
     collided: torch.Tensor
     """(E,) bool: the episode ended in a collision (tree world: hit the tree; side road: left the road)."""
     collision_step: torch.Tensor
@@ -116,7 +116,7 @@ class Rollouts:
 
 
 def check_policy_actions(actions, batch: int) -> torch.Tensor:
-    """Return ``actions`` as float32 (B, 1), or raise ValueError saying what a policy must return."""
+    """Return ``actions`` in the default dtype (B, 1), or raise ValueError saying what a policy must return."""
     if not isinstance(actions, torch.Tensor):
         raise ValueError(f"policy must return a torch.Tensor of shape ({batch}, 1), got {type(actions).__name__}")
     if actions.shape != (batch, 1):
@@ -128,11 +128,12 @@ def check_policy_actions(actions, batch: int) -> torch.Tensor:
     if (actions.abs() > 1.0).any():
         worst = float(actions.abs().max())
         raise ValueError(f"policy must return actions in [-1, 1] (they are not clipped), got |action| up to {worst:.3g}")
-    return actions.detach().to(torch.float32)
+    return actions.detach().to(torch.get_default_dtype())
 
 
 def _as_1d(name: str, value) -> torch.Tensor:
-    t = torch.as_tensor(np.asarray(value, dtype=np.float32) if not isinstance(value, torch.Tensor) else value, dtype=torch.float32)
+    dtype = torch.get_default_dtype()
+    t = torch.as_tensor(np.asarray(value, dtype=np.float64) if not isinstance(value, torch.Tensor) else value, dtype=dtype)
     t = t.reshape(-1)
     if not torch.isfinite(t).all():
         raise ValueError(f"{name} must be finite, got {value!r}")
@@ -197,21 +198,21 @@ class ToyWorld:
         expert's path runs at away from the landmark (see ``expert_holds_start_offset``);
         subclasses may add columns (e.g. where the tree expert starts to swerve)."""
         n = len(start)
-        modes = torch.multinomial(self.mode_probs(), n, replacement=True, generator=generator).to(torch.float32)
+        modes = torch.multinomial(self.mode_probs(), n, replacement=True, generator=generator).to(torch.get_default_dtype())
         base = start[:, 1] if self.config.expert_holds_start_offset else torch.zeros(n)
         return torch.stack([modes, base], dim=1)  # (E, 2)
 
     # ------------------------------------------------------------------ observations
     def observe(self, states: torch.Tensor) -> torch.Tensor:
-        """Observation of ``states`` (..., 3) -> (..., obs_dim) float32: [distance ahead to the
+        """Observation of ``states`` (..., 3) -> (..., obs_dim) in the default dtype: [distance ahead to the
         landmark along x / obs_distance_scale, lateral offset to the right (-y) / obs_lateral_scale
         (if observed)]."""
         c = self.config
         d = (self.anchor_x - states[..., 0]) / c.obs_distance_scale
         if not c.obs_lateral:
-            return d[..., None].to(torch.float32)
+            return d[..., None].to(torch.get_default_dtype())
         right = -states[..., 1] / c.obs_lateral_scale
-        return torch.stack([d, right], dim=-1).to(torch.float32)
+        return torch.stack([d, right], dim=-1).to(torch.get_default_dtype())
 
     def physical(self, obs: torch.Tensor) -> torch.Tensor:
         """Undo the scaling of ``observe``: (..., obs_dim) -> [distance to the landmark m, lateral offset to the right m (if observed)]."""
@@ -278,7 +279,7 @@ class ToyWorld:
         obs_all = torch.empty(e, t_max, self.obs_dim)
         alive = torch.zeros(e, t_max, dtype=torch.bool)
         collision_step = torch.full((e,), -1, dtype=torch.long)
-        s = start.to(torch.float32).clone()
+        s = start.to(torch.get_default_dtype()).clone()
         states[:, 0] = s
         done = torch.zeros(e, dtype=torch.bool)
         for t in range(t_max):
@@ -311,7 +312,7 @@ class ToyWorld:
         if initial_states is None:
             start = self.initial_states(n, torch.Generator().manual_seed(seed))
         else:
-            start = check_tensor("initial_states", initial_states, shape=(n, 3)).to(torch.float32)
+            start = check_tensor("initial_states", initial_states, shape=(n, 3)).to(torch.get_default_dtype())
 
         def act(obs, _states):
             with torch.no_grad():
