@@ -23,6 +23,7 @@ from ibc_tutorial.cli import SUBCOMMANDS
 def main() -> int:
     failures = []
     names = [m.name for m in pkgutil.walk_packages(ibc_tutorial.__path__, prefix="ibc_tutorial.")]
+    names = [n for n in names if n != "ibc_tutorial.__main__"]  # running it is `python -m ibc_tutorial`
     for name in names:
         try:
             importlib.import_module(name)
