@@ -53,6 +53,13 @@ def test_resume_continues_exactly(data, tmp_path):
     b = torch.load(parts / "final.pt", weights_only=True)["model"]
     assert all(torch.equal(a[k], b[k]) for k in a)
     assert [m["loss"] for m in read_metrics(whole)] == [m["loss"] for m in read_metrics(parts)]
+    # evaluate's policy seed defaults to the agent's training seed (1 here), as replicate's final evaluation
+    reports = [tmp_path / "default.json", tmp_path / "seed1.json", tmp_path / "seed0.json"]
+    for report, extra in zip(reports, ([], ["--policy-seed", "1"], ["--policy-seed", "0"])):
+        assert cli.main(["evaluate", "--checkpoint", str(whole / "final.pt"), "--steps", "12", "--out", str(report)]
+                        + extra) == 0
+    default, seed1, seed0 = (json.loads(r.read_text()) for r in reports)
+    assert default["policy_seed"] == 1 and default["episodes"] == seed1["episodes"] and seed0["policy_seed"] == 0
 
 
 def test_resume_accepts_the_same_demonstrations_collected_again(data, tmp_path):
@@ -66,20 +73,34 @@ def test_resume_accepts_the_same_demonstrations_collected_again(data, tmp_path):
     assert [m["epoch"] for m in read_metrics(out)] == list(range(1, TINY.epochs + 1))
 
 
-def test_resume_refuses_another_data_file(data, tmp_path):
+def test_resume_refuses_another_data_file(data, tmp_path, capsys):
     out = tmp_path / "run"
     base = ["train", "--method", "bc", "--preset", "tiny", "--seed", "0", "--out", str(out)]
     assert cli.main(base + ["--data", str(data), "--epochs", "1"]) == 0
     other = tmp_path / "other.npz"
     collect(CollectConfig(routes=1, seed=5, min_minutes=0.15, max_minutes=0.2), show_progress=False).save(other)
-    with pytest.raises(SystemExit, match="another data file"):
-        cli.main(base + ["--data", str(other)])
+    assert cli.main(base + ["--data", str(other)]) == 2
+    assert "other demonstrations" in capsys.readouterr().err
+    assert cli.main(base + ["--data", str(other), "--force"]) == 0  # --force starts over on the other data
+    assert torch.load(out / "final.pt", weights_only=True)["data_sha256"] == DemoLog.load(other).checksum()
 
 
-def test_bad_arguments(data, tmp_path):
-    with pytest.raises(SystemExit, match="preset"):
-        cli.main(["train", "--method", "bc", "--data", str(data), "--preset", "huge", "--out", str(tmp_path)])
-    with pytest.raises(SystemExit, match="no demonstration file"):
-        cli.main(["train", "--method", "bc", "--data", str(tmp_path / "none.npz"), "--preset", "tiny", "--out", str(tmp_path)])
-    with pytest.raises(SystemExit, match="no checkpoint"):
-        cli.main(["evaluate", "--checkpoint", str(tmp_path / "none.pt")])
+def test_epochs_below_the_run_are_refused_and_a_finished_run_is_not_retrained(data, tmp_path, capsys):
+    out = tmp_path / "run"
+    base = ["train", "--method", "bc", "--data", str(data), "--preset", "tiny", "--seed", "0", "--out", str(out)]
+    assert cli.main(base) == 0  # 2 epochs
+    final = (out / "final.pt").read_bytes()
+    capsys.readouterr()
+    assert cli.main(base + ["--epochs", "1"]) == 2
+    assert "trained to epoch 2 already, beyond the 1 epochs" in capsys.readouterr().err
+    assert cli.main(base) == 0
+    assert "nothing to do" in capsys.readouterr().out and (out / "final.pt").read_bytes() == final
+
+
+def test_bad_arguments(data, tmp_path, capsys):
+    assert cli.main(["train", "--method", "bc", "--data", str(data), "--preset", "huge", "--out", str(tmp_path)]) == 2
+    assert cli.main(["train", "--method", "bc", "--data", str(tmp_path / "none.npz"), "--preset", "tiny",
+                     "--out", str(tmp_path)]) == 2
+    assert cli.main(["evaluate", "--checkpoint", str(tmp_path / "none.pt")]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 3 and "--preset" in err[0] and "no demonstration file" in err[1] and "no agent checkpoint" in err[2]

@@ -157,10 +157,13 @@ def test_collect_command(tmp_path, capsys):
     log = DemoLog.load(out)
     assert log.n_episodes == 2 and 240 <= len(log) <= 360
     assert "2 episodes of town02" in capsys.readouterr().out
-    with pytest.raises(SystemExit, match="max_minutes"):
-        main(["collect", "--routes", "1", "--min-minutes", "2", "--max-minutes", "1", "--out", str(out)])
-    with pytest.raises(SystemExit):
-        main(["collect", "--town", "town09", "--out", str(out)])
+    assert main(["collect", "--routes", "1", "--min-minutes", "2", "--max-minutes", "1", "--out", str(tmp_path / "e.npz")]) == 2
+    assert main(["collect", "--town", "town09", "--out", str(tmp_path / "e.npz")]) == 2
+    before = out.read_bytes()
+    assert main(["collect", "--town", "town02", "--routes", "1", "--out", str(out)]) == 2  # exists: not overwritten
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 3 and "max_minutes" in err[0] and "town09" in err[1] and "--force" in err[2]
+    assert out.read_bytes() == before
 
 
 def test_paper_sized_collection():

@@ -13,9 +13,15 @@ from ibc_tutorial.experiments.agents.results import collect_results, load_result
 SHIPPED = Path(__file__).resolve().parents[1] / "book" / "results" / "laptop"
 
 
-def test_replicate_tiny(tmp_path):
-    out = tmp_path / "rep"
+@pytest.fixture(scope="module")
+def replicated(tmp_path_factory):
+    out = tmp_path_factory.mktemp("replication") / "rep"
     assert cli.main(["replicate", "--preset", "tiny", "--out", str(out)]) == 0
+    return out
+
+
+def test_replicate_tiny(replicated):
+    out = replicated
     res = json.loads((out / "results.json").read_text())
     assert res["complete"] and res["preset"]["name"] == "tiny"
     assert set(res["table"]) == set(METHODS)
@@ -37,6 +43,23 @@ def test_replicate_tiny(tmp_path):
     assert cli.main(["replicate", "--preset", "tiny", "--out", str(out)]) == 0
     assert before == {m: (run_dir(out, m, 0) / "final_eval.json").read_text() for m in METHODS}
     assert collect_results(out, TINY)["table"] == res["table"]
+    # wall time: the sum of both invocations, each with its start and last heartbeat
+    prov2 = json.loads((out / "provenance.json").read_text())
+    assert len(prov2["invocations"]) == 2
+    assert prov2["wall_seconds"] == pytest.approx(sum(i["seconds"] for i in prov2["invocations"]), abs=0.2)
+    assert prov2["wall_seconds"] >= prov["wall_seconds"]
+
+
+def test_evaluate_defaults_are_the_replication_protocol(replicated, tmp_path):
+    """``ibc-tutorial evaluate --checkpoint final.pt`` with no other option remakes the run's final_eval.json."""
+    out = replicated
+    for method in ("bc", "da-ibc"):
+        d = run_dir(out, method, 0)
+        report = tmp_path / f"{method}.json"
+        assert cli.main(["evaluate", "--checkpoint", str(d / "final.pt"), "--out", str(report)]) == 0
+        ev = json.loads(report.read_text())
+        assert ev["routeless"] and ev["policy_seed"] == 0 and ev["steps"] == TINY.final_steps
+        assert ev["episodes"] == json.loads((d / "final_eval.json").read_text())["episodes"]
 
 
 def test_machine_description():

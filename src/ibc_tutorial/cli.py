@@ -1,12 +1,20 @@
 """The ``ibc-tutorial`` command line: every sub-command's arguments, in one place.
 
 Each sub-command's work lives in a module with a ``run(args)`` function that checks its inputs
-first, then does the work. The parser is built here; only the chosen sub-command's arguments
-are added and its module imported, so ``ibc-tutorial --version`` and ``--help`` are instant.
+and its output path first, then does the work. The parser is built here; only the chosen
+sub-command's arguments are added and its module imported, so ``ibc-tutorial --version`` and
+``--help`` are instant.
+
+**User errors** (a bad argument, a damaged or foreign file, a folder that holds other work, an
+output that cannot be written) are one line on stderr and exit code 2, never a traceback: the
+modules raise ``UserError`` (or the library's ``ValueError``, which names the argument or file),
+and ``main`` prints it. Ctrl-C prints one line too (exit code 130). ``IBC_TUTORIAL_DEBUG=1``
+shows the traceback instead, for maintainers. The checks every command shares are here:
+``check_input_file``, ``check_output_file`` and ``check_output_dir``.
 
     ibc-tutorial collect   --town town01 --routes 10 --seed 0 --out data/town01.npz
     ibc-tutorial train     --method da-ibc --data data/town01.npz --preset laptop --seed 0 --out runs/da-ibc/seed0
-    ibc-tutorial evaluate  --checkpoint runs/da-ibc/seed0/final.pt --town town02 --episodes 10 --steps 3000
+    ibc-tutorial evaluate  --checkpoint runs/da-ibc/seed0/final.pt      # the table's protocol: town02, routeless
     ibc-tutorial replicate --preset laptop --out book/results/laptop
 """
 
@@ -14,9 +22,84 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
+import tempfile
+from pathlib import Path
 
 from ibc_tutorial import __version__
+
+DEBUG_ENV = "IBC_TUTORIAL_DEBUG"
+"""Set to 1 to see the traceback of a user error (for maintainers)."""
+USER_ERROR = 2
+"""Exit code of every user error (argparse's own, for bad command lines)."""
+INTERRUPTED = 130
+"""Exit code after Ctrl-C (128 + SIGINT)."""
+
+
+class UserError(Exception):
+    """An error of the user's, not of the program: ``main`` prints its one-line message and exits with 2."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse, with its errors on one line (no usage block)."""
+
+    def error(self, message: str):
+        self.exit(USER_ERROR, f"{self.prog}: {message} (see {self.prog} --help)\n")
+
+
+# --------------------------------------------------------------------------- paths, checked before any work
+def _nearest_existing(path: Path) -> Path:
+    p = path.absolute()
+    while not p.exists() and p != p.parent:
+        p = p.parent
+    return p
+
+
+def _check_writable_dir(name: str, folder: Path, target: Path) -> None:
+    """Refuse unless ``folder`` (an existing ancestor of ``target``) is a folder we can create files in."""
+    if not folder.is_dir():
+        raise UserError(f"{name}: cannot create {target}: {folder} is a file, not a folder")
+    try:  # a real probe: os.access says yes to root even on a read-only file system
+        fd, probe = tempfile.mkstemp(dir=folder, prefix=".ibc-tutorial-probe-")
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        raise UserError(f"{name}: cannot write to {folder} ({exc.strerror or exc}): choose another location") from None
+
+
+def check_input_file(name: str, path, what: str = "file") -> Path:
+    """``path`` must be a readable file (not a folder); UserError naming the argument otherwise."""
+    path = Path(path)
+    if path.is_dir():
+        raise UserError(f"{name}: {path} is a folder, expected a {what}")
+    if not path.is_file():
+        raise UserError(f"{name}: no {what} at {path}")
+    if not os.access(path, os.R_OK):
+        raise UserError(f"{name}: {path} is not readable")
+    return path
+
+
+def check_output_file(name: str, path, *, force: bool = False) -> Path:
+    """``path`` must be a file we may write: not a folder, in a writable folder, and, unless ``force``,
+    not an existing file (nothing is overwritten unless asked)."""
+    path = Path(path)
+    if path.is_dir():
+        raise UserError(f"{name}: {path} is a folder, expected a file name")
+    if path.exists() and not force:
+        raise UserError(f"{name}: {path} exists: choose another name, or pass --force to overwrite it")
+    parent = _nearest_existing(path.parent)
+    _check_writable_dir(name, parent, path)
+    return path
+
+
+def check_output_dir(name: str, path) -> Path:
+    """``path`` must be a folder we can write in, or a path where one can be created (no file in the way)."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise UserError(f"{name}: {path} is a file, expected a folder")
+    _check_writable_dir(name, _nearest_existing(path), path)
+    return path
 
 THREADS_HELP = "torch CPU threads (default 0: torch's choice; 1 is fastest on a busy machine)"
 
@@ -34,6 +117,7 @@ def _collect_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--routes", type=int, default=d.routes, help="number of routes / episodes (default: %(default)s)")
     p.add_argument("--seed", type=int, default=d.seed, help="random seed (default: %(default)s)")
     p.add_argument("--out", required=True, help="where to write the demonstrations (.npz)")
+    p.add_argument("--force", action="store_true", help="overwrite --out if it exists")
     p.add_argument("--routeless", action="store_true", help="no fixed routes: random exits chosen on the way")
     p.add_argument("--min-minutes", type=float, default=d.min_minutes, help="shortest route (default: %(default)s)")
     p.add_argument("--max-minutes", type=float, default=d.max_minutes, help="longest route (default: %(default)s)")
@@ -45,10 +129,12 @@ def _train_arguments(p: argparse.ArgumentParser) -> None:
 
     p.add_argument("--method", required=True, choices=METHODS, help="bc (Beta), ibc or da-ibc")
     p.add_argument("--data", required=True, help="demonstrations written by 'ibc-tutorial collect'")
-    p.add_argument("--preset", default="laptop", help=f"{', '.join(PRESETS)} (default: %(default)s)")
+    p.add_argument("--preset", default="laptop", choices=PRESETS, help="settings (default: %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="training seed (default: %(default)s)")
-    p.add_argument("--out", required=True, help="folder for the checkpoints and metrics.jsonl")
+    p.add_argument("--out", required=True, help="folder for the checkpoints and metrics.jsonl; an interrupted "
+                   "run of the same settings there is resumed")
     p.add_argument("--epochs", type=int, default=None, help="override the preset's number of epochs")
+    p.add_argument("--force", action="store_true", help="start over: delete the run already in --out")
     p.add_argument("--threads", type=int, default=0, help=THREADS_HELP)
 
 
@@ -58,19 +144,28 @@ def _evaluate_arguments(p: argparse.ArgumentParser) -> None:
 
     p.add_argument("--checkpoint", required=True, help="an agent checkpoint written by 'ibc-tutorial train'")
     p.add_argument("--town", default="town02", choices=TOWNS, help="town to drive (default: %(default)s)")
-    p.add_argument("--episodes", type=int, default=10, help="episodes, run side by side (default: %(default)s)")
-    p.add_argument("--steps", type=int, default=3000, help="steps per episode, 0.1 s each (default: %(default)s)")
+    p.add_argument("--episodes", type=int, default=None,
+                   help="episodes, run side by side (default: the checkpoint preset's final_episodes, as the table)")
+    p.add_argument("--steps", type=int, default=None,
+                   help="steps per episode, 0.1 s each (default: the checkpoint preset's final_steps, as the table)")
     p.add_argument("--seed", type=int, default=EVAL_SEED, help="seed of the first episode (default: %(default)s)")
-    p.add_argument("--routeless", action="store_true", help="free driving: no route drawn for the episodes")
+    p.add_argument("--policy-seed", type=int, default=None,
+                   help="seed of the agent's DFO draws (default: the agent's training seed, as the table)")
+    routes = p.add_mutually_exclusive_group()
+    routes.add_argument("--routed", action="store_true", help="draw a route for each episode (not the book's protocol)")
+    routes.add_argument("--routeless", action="store_true", help="no route drawn, as the book's protocol (the default)")
     p.add_argument("--out", default=None, help="optional JSON file for the per-episode results")
+    p.add_argument("--force", action="store_true", help="overwrite --out if it exists")
     p.add_argument("--threads", type=int, default=0, help=THREADS_HELP)
 
 
 def _replicate_arguments(p: argparse.ArgumentParser) -> None:
     from ibc_tutorial.experiments.agents.presets import PRESETS  # deferred: loads torch
 
-    p.add_argument("--preset", default="laptop", help=f"{', '.join(PRESETS)} (default: %(default)s)")
-    p.add_argument("--out", required=True, help="folder for the data, runs, results and provenance")
+    p.add_argument("--preset", default="laptop", choices=PRESETS, help="settings (default: %(default)s)")
+    p.add_argument("--out", required=True, help="folder for the data, runs, results and provenance; an interrupted "
+                   "replication of the same preset there is resumed")
+    p.add_argument("--force", action="store_true", help="start over: delete the replication already in --out")
     p.add_argument("--keep-checkpoints", action="store_true", help="keep every agent's final.pt")
     p.add_argument("--threads", type=int, default=0,
                    help=THREADS_HELP.replace("threads", "threads per process", 1))
@@ -90,7 +185,7 @@ SUBCOMMANDS: dict[str, tuple[str, object, str]] = {
 
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     """The parser; only ``command``'s arguments are added (importing what they need)."""
-    parser = argparse.ArgumentParser(prog="ibc-tutorial", description="Implicit behavioral cloning tutorial: command line.")
+    parser = _Parser(prog="ibc-tutorial", description="Implicit behavioral cloning tutorial: command line.")
     parser.add_argument("--version", action="version", version=f"ibc-tutorial {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name, (_module, add_arguments, help_text) in SUBCOMMANDS.items():
@@ -111,12 +206,40 @@ def _command_in(argv: list[str]) -> str | None:
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser(_command_in(argv))
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # --help, --version (0), or a bad command line (2, one line: ``_Parser.error``)
+        return int(exc.code or 0)
     if args.command is None:
         parser.print_help()
         return 0
     module, _add, _help = SUBCOMMANDS[args.command]
-    return int(importlib.import_module(module).run(args) or 0)
+    debug = os.environ.get(DEBUG_ENV, "").strip().lower() not in ("", "0", "false")
+    prog = f"ibc-tutorial {args.command}"
+    try:
+        return int(importlib.import_module(module).run(args) or 0)
+    except KeyboardInterrupt:
+        if debug:
+            raise
+        resumable = args.command in ("train", "replicate")
+        print(f"{prog}: interrupted; " + ("re-run the same command to resume" if resumable else "nothing was written"),
+              file=sys.stderr)
+        return INTERRUPTED
+    except (UserError, ValueError, OSError) as exc:  # ValueError: the library's checks name the argument or file
+        if debug:
+            raise
+        print(f"{prog}: {_one_line(exc)}", file=sys.stderr)
+        return USER_ERROR
+
+
+def _one_line(exc: BaseException) -> str:
+    """The message of ``exc`` on one line; an OSError names its file and the system's reason."""
+    if isinstance(exc, OSError):
+        where = exc.filename if exc.filename is not None else ""
+        text = f"cannot access {where}: {exc.strerror or exc}" if where else f"{exc.strerror or exc}"
+    else:
+        text = str(exc) or type(exc).__name__
+    return " ".join(text.split())
 
 
 if __name__ == "__main__":

@@ -8,6 +8,9 @@ perturbations (``steer_noise``) widen the states seen; the label is always the e
 action. Routeless collection (random exits chosen on the way) is offered too.
 
     ibc-tutorial collect --town town01 --routes 10 --seed 0 --out data/town01.npz
+
+The command checks ``--out`` before driving, and never overwrites an existing file unless
+``--force`` is given.
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from ibc_tutorial.cli import check_output_file
 from ibc_tutorial.driving.dataset import DemoLog
 from ibc_tutorial.driving.env import MAX_SPEED
 from ibc_tutorial.driving.expert import Expert, ExpertConfig
@@ -130,12 +134,12 @@ def collect(config: CollectConfig = CollectConfig(), show_progress: bool | None 
 
 # ---------------------------------------------------------------------- command line
 def run(args: argparse.Namespace) -> int:
-    """``ibc-tutorial collect`` (arguments in ``ibc_tutorial.cli``): check the inputs, collect, save."""
-    try:
-        config = CollectConfig(args.town, args.routes, args.seed, args.min_minutes, args.max_minutes,
-                               args.routeless, args.steer_noise)
-    except ValueError as exc:
-        raise SystemExit(f"ibc-tutorial collect: {exc}") from None
+    """``ibc-tutorial collect`` (arguments in ``ibc_tutorial.cli``): check the inputs and ``--out``, collect, save.
+
+    Errors are raised (``ValueError``, ``cli.UserError``) for ``cli.main`` to print on one line."""
+    config = CollectConfig(args.town, args.routes, args.seed, args.min_minutes, args.max_minutes,
+                           args.routeless, args.steer_noise)
+    check_output_file("--out", args.out, force=getattr(args, "force", False))
     t0 = time.perf_counter()
     log = collect(config)
     seconds = time.perf_counter() - t0

@@ -9,7 +9,9 @@ File format (``.npz``, written atomically): the arrays of ``DemoLog`` plus ``for
 string ``FORMAT``), ``version`` (``VERSION``), ``meta`` (JSON: town, how it was collected) and
 ``checksum`` (``DemoLog.checksum``: SHA-256 of every array's dtype, shape and bytes). A file
 that is truncated, altered, of another format or of another version is refused with a
-``ValueError`` saying so.
+``ValueError`` naming it and saying so; so is one whose values could not have been recorded
+(``check_values``): non-finite or off-map poses, light codes or lane indices out of range,
+actions outside [-1, 1], incomplete meta.
 """
 
 from __future__ import annotations
@@ -25,9 +27,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from ibc_tutorial.driving.bev import HISTORY_LAGS, BEVRenderer, check_bev_size, get_raster
+from ibc_tutorial.driving.bev import HISTORY_LAGS, PAD, BEVRenderer, check_bev_size, get_raster
 from ibc_tutorial.driving.env import MAX_SPEED
-from ibc_tutorial.driving.lights import GREEN
+from ibc_tutorial.driving.lights import GREEN, RED
 from ibc_tutorial.driving.towns import TOWNS, get_town
 from ibc_tutorial.utils import atomic_write_bytes, check_choice, progress
 
@@ -168,11 +170,57 @@ class DemoLog:
         except _Refused as exc:
             raise ValueError(str(exc)) from None
         except Exception as exc:  # a damaged archive member: zlib, zip, format or JSON errors
-            raise ValueError(f"{path} is truncated or damaged and cannot be read ({type(exc).__name__}: {exc})") from None
-        log = cls(meta.pop("town"), meta=meta, **arrays)
+            raise ValueError(f"{path} is truncated or damaged and cannot be read ({type(exc).__name__}: "
+                             f"{' '.join(str(exc).split())}): collect it again") from None
+        if not isinstance(meta, dict) or not isinstance(meta.get("town"), str) or meta["town"] not in TOWNS:
+            raise ValueError(f"{path} is damaged: its meta must be a dict naming the town (one of {TOWNS})")
+        for name, (dtype, _shape) in ARRAYS.items():
+            if arrays[name].dtype != np.dtype(dtype):
+                raise ValueError(f"{path} is damaged: {name} must be {np.dtype(dtype).name}, got {arrays[name].dtype.name}")
+        try:
+            log = cls(meta.pop("town"), meta=meta, **arrays)
+        except ValueError as exc:
+            raise ValueError(f"{path} is damaged: {exc}") from None
         if log.checksum() != stored:
             raise ValueError(f"{path} is damaged: its checksum does not match its contents")
+        try:
+            log.check_values()
+        except ValueError as exc:
+            raise ValueError(f"{path} holds invalid demonstrations: {exc}: collect it again") from None
         return log
+
+    def check_values(self) -> None:
+        """ValueError unless every value could have been recorded: finite poses on the town's map (its
+        roads' extent plus the BEV's margin), speeds in [-MAX_SPEED, MAX_SPEED], actions in [-1, 1], light
+        codes 0-2, lane indices of the town, episode indices >= 0, and the meta of a collection."""
+        town = get_town(self.town)
+        x0, y0, x1, y1 = town.extent
+        if len(self) == 0:
+            raise ValueError("the log holds no samples")
+        if not np.isfinite(self.pose).all():
+            raise ValueError("pose holds NaN or inf")
+        x, y = self.pose[:, 0], self.pose[:, 1]
+        off = (x < x0 - PAD) | (x > x1 + PAD) | (y < y0 - PAD) | (y > y1 + PAD)
+        if off.any():
+            k = int(np.flatnonzero(off)[0])
+            raise ValueError(f"pose {k} ({x[k]:.1f}, {y[k]:.1f}) lies off {self.town}'s map "
+                             f"(x in [{x0 - PAD:.0f}, {x1 + PAD:.0f}], y in [{y0 - PAD:.0f}, {y1 + PAD:.0f}] m)")
+        if not np.isfinite(self.speed).all() or (np.abs(self.speed) > MAX_SPEED).any():
+            raise ValueError(f"speed must be finite and within ±{MAX_SPEED} m/s")
+        for name in ("action", "executed", "prev_action"):
+            v = getattr(self, name)
+            if not np.isfinite(v).all() or (np.abs(v) > 1.0).any():
+                raise ValueError(f"{name} must be finite and in [-1, 1]")
+        if (self.lights > RED).any():
+            raise ValueError(f"lights must be codes 0 (green), 1 (yellow) or 2 (red), got {int(self.lights.max())}")
+        if (self.lane < 0).any() or (self.lane >= len(town.lanes)).any():
+            raise ValueError(f"lane must index {self.town}'s {len(town.lanes)} lanes, got "
+                             f"{int(self.lane.min())}..{int(self.lane.max())}")
+        if (self.episode < 0).any():
+            raise ValueError("episode indices must be >= 0")
+        missing = [k for k in ("config", "episodes") if k not in self.meta]
+        if missing:
+            raise ValueError(f"its meta lacks {missing}")
 
 
 class _Refused(Exception):

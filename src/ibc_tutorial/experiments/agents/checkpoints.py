@@ -9,18 +9,23 @@ it loads with ``torch.load(..., weights_only=True)``: no pickled code runs. It h
   whole ``preset``;
 - ``data_sha256``: the SHA-256 of the demonstrations' content (``DemoLog.checksum``: every
   recorded step's state and action, not the file's bytes, which carry the time it was written);
+- ``seed``: the training seed (also the policy seed of its evaluations; absent in older files,
+  whose metrics record it);
 - ``epoch``, ``model`` (the state dict), the expert actions and DFO initial weights the agent
   acts with, and, for resuming, ``optimizer`` and ``generator`` states (``training.Trainer``)
   and the metrics so far.
 
-It is written atomically (``utils.atomic_torch_save``). ``load_checkpoint`` refuses, with a
-``ValueError`` that says why, a file that is not a checkpoint, one of another format version or
-of another package version (major.minor), and one whose architecture differs from the one asked
-for (or whose weights do not fit it).
+It is written atomically (``utils.atomic_torch_save``). ``load_checkpoint`` checks every field
+before anything uses it and refuses, with a ``ValueError`` naming the file and the field, a file
+that is truncated or not a checkpoint, one of another format or package version (major.minor),
+a missing or mistyped field, a preset that does not describe the stored architecture, weights
+that do not fit it or are not finite, expert actions outside [-1, 1], DFO weights of the wrong
+length, and, when resuming, a checkpoint without its optimiser and generator states.
 """
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import torch
@@ -43,7 +48,7 @@ def _minor(version: str) -> str:
 def save_checkpoint(path, *, method: str, preset: Preset, network: torch.nn.Module, data_sha256: str, epoch: int,
                     expert_actions: torch.Tensor, init_weights: torch.Tensor | None = None,
                     optimizer: dict | None = None, generator: torch.Tensor | None = None,
-                    metrics: list | None = None) -> Path:
+                    metrics: list | None = None, seed: int | None = None) -> Path:
     """Write an agent checkpoint atomically (see the module docstring for its contents).
 
     ``optimizer`` and ``generator`` are the states kept for resuming (``Trainer.state_dict()``'s
@@ -58,6 +63,7 @@ def save_checkpoint(path, *, method: str, preset: Preset, network: torch.nn.Modu
         "preset": preset.to_dict(),
         "data_sha256": str(data_sha256),
         "epoch": int(epoch),
+        "seed": None if seed is None else int(seed),
         "model": {k: v.detach().clone() for k, v in network.state_dict().items()},
         "expert_actions": expert_actions.detach().float().clone(),
         "init_weights": None if init_weights is None else init_weights.detach().float().clone(),
@@ -68,23 +74,106 @@ def save_checkpoint(path, *, method: str, preset: Preset, network: torch.nn.Modu
     return atomic_torch_save(ckpt, path)
 
 
-def load_checkpoint(path, *, method: str | None = None, preset: Preset | None = None) -> dict:
-    """Read a checkpoint with ``weights_only=True`` and check it.
+def _read(path: Path) -> dict:
+    """``torch.load(weights_only=True)`` with its errors as one ValueError naming the file (never torch's advice
+    to load with ``weights_only=False``: that would run code stored in the file)."""
+    if path.is_dir():
+        raise ValueError(f"{path} is a folder, expected an agent checkpoint file")
+    if not path.is_file():
+        raise ValueError(f"no checkpoint at {path}")
+    try:
+        return torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:
+        text = str(exc)
+        if "weights_only" in text or "Unsupported global" in text:
+            why = "it holds Python objects, not only tensors and plain data (refused: loading them could run code)"
+        elif "zip" in text.lower() or "central directory" in text or isinstance(exc, (EOFError, OSError)):
+            why = "it is truncated or damaged"
+        else:
+            why = f"{type(exc).__name__}: {' '.join(text.split()[:16])}"
+        raise ValueError(f"{path} is not a readable agent checkpoint ({why}): train it again") from None
+
+
+def _field(path: Path, ckpt: dict, key: str, types, what: str):
+    if key not in ckpt:
+        raise ValueError(f"{path} is damaged: it lacks the field '{key}' ({what}): train it again")
+    value = ckpt[key]
+    if not isinstance(value, types) or (isinstance(value, bool) and types is int):
+        raise ValueError(f"{path} is damaged: its field '{key}' must be {what}, got {type(value).__name__}")
+    return value
+
+
+def _check_fields(path: Path, ckpt: dict, resumable: bool) -> None:
+    """Every field's type, shape and range (see the module docstring); ValueError naming the file and field."""
+    bad = lambda msg: ValueError(f"{path} is damaged: {msg}: train it again")  # noqa: E731
+    _field(path, ckpt, "architecture", dict, "a dict")
+    preset_d = _field(path, ckpt, "preset", dict, "a dict")
+    sha = _field(path, ckpt, "data_sha256", str, "a SHA-256 hex string")
+    if not re.fullmatch(r"[0-9a-f]{64}", sha):
+        raise bad(f"data_sha256 must be 64 hex digits, got {sha[:20]!r}")
+    epoch = _field(path, ckpt, "epoch", int, "an integer")
+    if epoch < 0:
+        raise bad(f"epoch must be >= 0, got {epoch}")
+    if ckpt.get("seed") is not None and (not isinstance(ckpt["seed"], int) or isinstance(ckpt["seed"], bool)
+                                         or ckpt["seed"] < 0):
+        raise bad(f"seed must be an integer >= 0, got {ckpt['seed']!r}")
+    try:
+        preset = Preset.from_dict(preset_d)
+    except (TypeError, ValueError) as exc:
+        raise bad(f"its preset is not valid ({exc})") from None
+    if architecture(ckpt["method"], preset) != ckpt["architecture"]:
+        raise bad("its preset and its architecture disagree")
+    model = _field(path, ckpt, "model", dict, "a state dict")
+    try:
+        want = network_from_architecture(ckpt["architecture"]).state_dict()
+    except (KeyError, TypeError, ValueError) as exc:
+        raise bad(f"its architecture cannot be built ({type(exc).__name__}: {exc})") from None
+    if set(model) != set(want):
+        raise bad(f"its weights do not fit its architecture (missing {sorted(set(want) - set(model))[:3]}, "
+                  f"unexpected {sorted(set(model) - set(want))[:3]})")
+    for k, v in model.items():
+        if not isinstance(v, torch.Tensor) or v.shape != want[k].shape or v.dtype != want[k].dtype:
+            got = tuple(v.shape) if isinstance(v, torch.Tensor) else type(v).__name__
+            raise bad(f"its weights do not fit its architecture: {k} must be {tuple(want[k].shape)}, got {got}")
+        if v.is_floating_point() and not torch.isfinite(v).all():
+            raise bad(f"its weight {k} holds NaN or inf")
+    acts = _field(path, ckpt, "expert_actions", torch.Tensor, "a tensor")
+    if acts.ndim != 2 or acts.shape[1] != 2 or len(acts) < 1 or not acts.is_floating_point():
+        raise bad(f"expert_actions must be a float tensor of shape (M >= 1, 2), got {tuple(acts.shape)}")
+    if not torch.isfinite(acts).all() or acts.abs().max() > 1.0:
+        raise bad("expert_actions must be finite and in [-1, 1]")
+    w = ckpt.get("init_weights")
+    if w is not None:
+        if not isinstance(w, torch.Tensor) or w.shape != (len(acts),) or not w.is_floating_point():
+            got = tuple(w.shape) if isinstance(w, torch.Tensor) else type(w).__name__
+            raise bad(f"init_weights must be a float tensor of shape ({len(acts)},), one per expert action, got {got}")
+        if not torch.isfinite(w).all() or (w < 0).any() or not w.sum() > 0:
+            raise bad("init_weights must be finite, >= 0 and not all 0")
+    metrics = ckpt.get("metrics", [])
+    if not isinstance(metrics, list) or not all(isinstance(m, dict) for m in metrics):
+        raise bad("metrics must be a list of dicts")
+    if resumable:
+        if not isinstance(ckpt.get("optimizer"), dict) or not isinstance(ckpt.get("generator"), torch.Tensor):
+            raise ValueError(f"{path} has no optimiser and generator states (a final checkpoint?): a run resumes "
+                             "only from the last.pt its training wrote")
+        if len(metrics) < 1 or not isinstance(metrics[-1].get("epoch"), int):
+            raise bad("a resumable checkpoint must hold the metrics so far")
+
+
+def load_checkpoint(path, *, method: str | None = None, preset: Preset | None = None, resumable: bool = False) -> dict:
+    """Read a checkpoint with ``weights_only=True`` and check every field before use.
 
     Args:
         path: the file.
         method, preset: if given, the checkpoint must be of this method and of this preset's
             architecture (e.g. when resuming a run); otherwise any agent checkpoint is accepted.
+        resumable: it must hold the optimiser and generator states (a ``last.pt``).
     Raises:
-        ValueError: not a checkpoint, another format or package version, or another architecture.
+        ValueError (naming the file): truncated, not a checkpoint, another format or package
+            version, a missing, mistyped or non-finite field, or another architecture.
     """
     path = Path(path)
-    if not path.is_file():
-        raise ValueError(f"no checkpoint at {path}")
-    try:
-        ckpt = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as exc:
-        raise ValueError(f"{path} is not a readable agent checkpoint ({type(exc).__name__}: {exc})") from None
+    ckpt = _read(path)
     if not isinstance(ckpt, dict) or ckpt.get("format") != FORMAT:
         raise ValueError(f"{path} is not an ibc-tutorial agent checkpoint (no '{FORMAT}' header)")
     if ckpt.get("format_version") != FORMAT_VERSION:
@@ -93,6 +182,9 @@ def load_checkpoint(path, *, method: str | None = None, preset: Preset | None = 
     if _minor(ckpt.get("package_version", "")) != _minor(__version__):
         raise ValueError(f"{path} was written by ibc_tutorial {ckpt.get('package_version')}; this is {__version__}: "
                          "train it again with this version")
+    if ckpt.get("method") not in METHODS:
+        raise ValueError(f"{path} is damaged: its method must be one of {METHODS}, got {ckpt.get('method')!r}")
+    _check_fields(path, ckpt, resumable)
     if method is not None and ckpt["method"] != method:
         raise ValueError(f"{path} is a checkpoint of method {ckpt['method']!r}, expected {method!r}")
     if preset is not None:
@@ -101,6 +193,14 @@ def load_checkpoint(path, *, method: str | None = None, preset: Preset | None = 
             diff = {k: (ckpt["architecture"].get(k), v) for k, v in want.items() if ckpt["architecture"].get(k) != v}
             raise ValueError(f"{path} holds another architecture: (checkpoint, expected) differ in {diff}")
     return ckpt
+
+
+def training_seed(ckpt: dict) -> int | None:
+    """The seed a checkpoint's agent was trained with (its ``seed``, or, in older files, its metrics'), or None."""
+    if ckpt.get("seed") is not None:
+        return int(ckpt["seed"])
+    seeds = {m.get("seed") for m in ckpt.get("metrics", [])}
+    return next(iter(seeds)) if len(seeds) == 1 and isinstance(next(iter(seeds)), int) else None
 
 
 def network_from_checkpoint(ckpt: dict) -> torch.nn.Module:

@@ -6,7 +6,12 @@ of running episodes). Each episode is scored as the paper scores it: distance dr
 0.7 ** (red-light infractions). Episode i starts from ``reset(seed=seed + i)``, so every agent
 evaluated with the same ``seed`` meets the same starts and light phases.
 
-    ibc-tutorial evaluate --checkpoint runs/da-ibc/seed0/final.pt --town town02 --episodes 10 --steps 3000
+    ibc-tutorial evaluate --checkpoint runs/da-ibc/seed0/final.pt
+
+The command's defaults are the book's protocol, the one ``replicate`` uses for the table: town02,
+routeless episodes from ``EVAL_SEED``, the checkpoint preset's ``final_episodes`` x
+``final_steps``, and the agent's training seed as the policy seed (``--policy-seed`` changes it).
+So on the machine that made them it reproduces a run's ``final_eval.json`` episode by episode.
 """
 
 from __future__ import annotations
@@ -19,8 +24,9 @@ import numpy as np
 import torch
 
 from ibc_tutorial.driving.rollout import EpisodeResult, rollout
+from ibc_tutorial.cli import UserError, check_input_file, check_output_file
 from ibc_tutorial.experiments.agents.agent import Agent
-from ibc_tutorial.experiments.agents.checkpoints import load_agent
+from ibc_tutorial.experiments.agents.checkpoints import load_agent, training_seed
 from ibc_tutorial.utils import atomic_write_bytes, check_int
 
 EVAL_SEED = 1000
@@ -70,20 +76,31 @@ def summarize(rows: list[dict]) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
-    """``ibc-tutorial evaluate`` (arguments in ``ibc_tutorial.cli``): check the inputs, drive, print, write."""
-    try:
+    """``ibc-tutorial evaluate`` (arguments in ``ibc_tutorial.cli``): check the checkpoint and ``--out``, drive,
+    print, write. Errors are raised for ``cli.main`` to print on one line."""
+    seed = check_int("--seed", args.seed, minimum=0)
+    threads = check_int("--threads", args.threads, minimum=0)
+    if args.episodes is not None:
         check_int("--episodes", args.episodes, minimum=1)
+    if args.steps is not None:
         check_int("--steps", args.steps, minimum=1)
-        check_int("--seed", args.seed, minimum=0)
-        threads = check_int("--threads", args.threads, minimum=0)
-        agent, ckpt = load_agent(args.checkpoint)
-    except ValueError as exc:
-        raise SystemExit(f"ibc-tutorial evaluate: {exc}") from None
+    if args.policy_seed is not None:
+        check_int("--policy-seed", args.policy_seed, minimum=0)
+    if args.out:
+        check_output_file("--out", args.out, force=getattr(args, "force", False))
+    agent, ckpt = load_agent(check_input_file("--checkpoint", args.checkpoint, "agent checkpoint (.pt)"))
+    episodes = args.episodes or agent.preset.final_episodes
+    steps = args.steps or agent.preset.final_steps
+    policy_seed = args.policy_seed if args.policy_seed is not None else training_seed(ckpt)
+    if policy_seed is None:
+        raise UserError(f"{args.checkpoint} does not record its training seed: pass --policy-seed")
+    routeless = not getattr(args, "routed", False)
     if threads:
         torch.set_num_threads(threads)
-    results = evaluate_agent(agent, args.town, args.episodes, args.steps, seed=args.seed, routeless=args.routeless)
+    results = evaluate_agent(agent, args.town, episodes, steps, seed=seed, policy_seed=policy_seed, routeless=routeless)
     rows = episode_rows(results)
-    print(f"{ckpt['method']} agent (epoch {ckpt['epoch']}) in {args.town}, {args.episodes} episodes of {args.steps} steps:")
+    print(f"{ckpt['method']} agent (epoch {ckpt['epoch']}) in {args.town}, {episodes} {'routeless' if routeless else 'routed'} "
+          f"episodes of {steps} steps from seed {seed}, policy seed {policy_seed}:")
     print(f"{'episode':>8} {'seed':>6} {'steps':>6} {'distance m':>11} {'infractions':>12} {'score':>8}  end")
     for k, r in enumerate(rows):
         print(f"{k:>8} {r['seed']:>6} {r['steps']:>6} {r['distance_m']:>11.1f} {r['red_light_infractions']:>12} "
@@ -92,7 +109,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"mean score {s['score_mean']:.1f} ± {s['score_std']:.1f}, distance {s['distance_m_mean']:.1f} m, "
           f"infractions {s['red_light_infractions_mean']:.2f}")
     if args.out:
-        payload = {"checkpoint": str(args.checkpoint), "method": ckpt["method"], "town": args.town,
-                   "steps": args.steps, "summary": s, "episodes": rows}
+        payload = {"checkpoint": str(args.checkpoint), "method": ckpt["method"], "town": args.town, "steps": steps,
+                   "seed": seed, "policy_seed": policy_seed, "routeless": routeless, "summary": s, "episodes": rows}
         atomic_write_bytes(args.out, json.dumps(payload, indent=1).encode())
     return 0 if all(math.isfinite(r["score"]) for r in rows) else 1

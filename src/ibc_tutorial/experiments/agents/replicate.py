@@ -13,7 +13,10 @@ Steps (the DA-IBC paper's secs. 4.1-4.3, at the preset's scale):
 4. after every run: ``results.json``, ``PROVENANCE.md`` and ``provenance.json`` (see ``results``).
 
 Interrupted, the same command resumes: finished runs are skipped and an unfinished one resumes
-from its ``last.pt``. Checkpoints kept: ``final.pt`` of the first seed's BC and DA-IBC agents
+from its ``last.pt``. Before any work, ``check_folder`` compares the folder with the request: a
+folder holding a replication of other settings, other demonstrations or runs that do not match
+is refused (another ``--out``, or ``--force`` to start over), and so is a damaged file in it,
+named with what to do. Checkpoints kept: ``final.pt`` of the first seed's BC and DA-IBC agents
 (the rest are deleted once evaluated, to keep the shipped results small; ``--keep-checkpoints``
 keeps them all).
 """
@@ -21,34 +24,95 @@ keeps them all).
 from __future__ import annotations
 
 import argparse
-import json
 import multiprocessing
+import shutil
+import signal
 import sys
+import threading
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import asdict
 from pathlib import Path
 
 import torch
 
+from ibc_tutorial.cli import UserError, check_output_dir
 from ibc_tutorial.driving.collect import CollectConfig, collect
 from ibc_tutorial.driving.dataset import DemoDataset, DemoLog
 from ibc_tutorial.experiments.agents.checkpoints import load_agent
 from ibc_tutorial.experiments.agents.evaluate import EVAL_SEED, episode_rows, evaluate_agent, summarize
 from ibc_tutorial.experiments.agents.figures import free_driving, landscapes
-from ibc_tutorial.experiments.agents.presets import METHODS, Preset, get_preset
+from ibc_tutorial.experiments.agents.presets import METHODS, Preset, differences, get_preset
 from ibc_tutorial.experiments.agents.results import (
-    DATA, PROVENANCE, RESULTS, collect_results, finished_runs, now, preset_results, run_dir, run_name, write_json,
-    write_provenance)
-from ibc_tutorial.experiments.agents.train import train_agent
+    DATA, FREE_DRIVING, LANDSCAPES, PROVENANCE, RESULTS, collect_results, finished_runs, invocations_of, now,
+    preset_results, read_json_dict, run_dir, run_name, write_json, write_provenance)
+from ibc_tutorial.experiments.agents.train import inspect_run, train_agent
 from ibc_tutorial.kde import inverse_density_weights
 from ibc_tutorial.utils import check_int
 
 FIGURE_METHODS = ("bc", "da-ibc")
 """The agents of the first seed kept for the Fig. 5/6 analogues (their ``final.pt`` is kept too)."""
+ENTRIES = ("data", "runs", RESULTS, PROVENANCE, "PROVENANCE.md", FREE_DRIVING, LANDSCAPES)
+"""What a replication folder holds (``--force`` deletes these, and only these)."""
+HEARTBEAT_S = 30.0
+"""How often a running replication records in ``provenance.json`` that it is still running."""
 
 
 def _init_worker(threads: int) -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the main process's to handle (it stops the workers)
     torch.set_num_threads(max(1, int(threads)))
+
+
+def _collect_config(preset: Preset) -> CollectConfig:
+    return CollectConfig("town01", preset.routes, preset.collect_seed, preset.min_minutes, preset.max_minutes)
+
+
+def check_folder(out, preset: Preset) -> None:
+    """Refuse (ValueError, one line: what differs and how to proceed) a folder that holds anything but an
+    unfinished or finished replication of ``preset``: other files, another preset, other demonstrations,
+    runs of other settings or data, or a damaged file (named, with what to do)."""
+    out = Path(out)
+    if not out.exists():
+        return
+    names = {p.name for p in out.iterdir() if not p.name.startswith(".")}
+    if names and not names & {"data", "runs", RESULTS, PROVENANCE}:
+        raise ValueError(f"{out} holds other files ({', '.join(sorted(names)[:3])}), not a replication: use another --out")
+    fix = "delete it and re-run the same command to make it again"
+    stored = None
+    for name in (PROVENANCE, RESULTS):
+        if (out / name).exists():
+            d = read_json_dict(out / name, fix)
+            stored = stored if stored is not None else d.get("preset")
+    if stored is not None and stored != preset.to_dict():
+        try:
+            diff = ", ".join(sorted(differences(Preset.from_dict(stored), preset))[:5]) or "name"
+        except (TypeError, ValueError):
+            diff = "a damaged preset"
+        name = stored.get("name") if isinstance(stored, dict) else None
+        raise ValueError(f"{out} holds a replication of preset {name!r}, not {preset.name!r} (differs in {diff}): "
+                         "use another --out, or --force to start over")
+    data, checksum = out / DATA, None
+    if data.exists():
+        log = DemoLog.load(data)
+        config = log.meta.get("config")
+        if not isinstance(config, dict) or any(config.get(k) != v for k, v in asdict(_collect_config(preset)).items()
+                                               if k in ("town", "routes", "seed", "min_minutes", "max_minutes")):
+            raise ValueError(f"{data} was collected with other settings than preset {preset.name!r}'s: use another "
+                             "--out, or --force to start over")
+        checksum = log.checksum()
+    for m in METHODS:
+        for seed in preset.seeds:
+            inspect_run(run_dir(out, m, seed), m, preset, seed, checksum, data if data.exists() else None)
+
+
+def clear_folder(out) -> None:
+    """Delete a replication's entries (``ENTRIES``) from ``out``, nothing else: ``--force``."""
+    for name in ENTRIES:
+        p = Path(out) / name
+        if p.is_dir():
+            shutil.rmtree(p)
+        elif p.exists():
+            p.unlink()
 
 
 _WORKER_DATA: dict = {}
@@ -79,40 +143,75 @@ def run_one(method: str, seed: int, out, preset, *, keep_checkpoints: bool = Fal
                                        seed=EVAL_SEED, policy_seed=seed, show_progress=show_progress))
     ev = {"method": method, "seed": seed, "town": "town02", "steps": preset.final_steps, "summary": summarize(rows),
           "episodes": rows, "train_seconds": round(res.seconds, 1), "eval_seconds": round(time.perf_counter() - te, 1)}
+    write_json(d / "final_eval.json", ev)  # first: killed after this line, the run counts as finished
     (d / "last.pt").unlink(missing_ok=True)
     if not keep_checkpoints and not (seed == preset.seeds[0] and method in FIGURE_METHODS):
         (d / "final.pt").unlink(missing_ok=True)
-    write_json(d / "final_eval.json", ev)
     return ev
 
 
 def replicate(preset: Preset, out, *, command: str = "", keep_checkpoints: bool = False, workers: int = 1, log=print,
-              show_progress: bool | None = None) -> dict:
-    """Run the whole replication (see the module docstring); returns the contents of ``results.json``."""
+              show_progress: bool | None = None, force: bool = False) -> dict:
+    """Run the whole replication (see the module docstring); returns the contents of ``results.json``.
+
+    ``out`` is checked first (``check_folder``); ``force`` deletes the replication already there."""
     out = Path(out)
+    if force:
+        if out.is_dir() and any(p.name not in ENTRIES and not p.name.startswith(".") for p in out.iterdir()):
+            raise ValueError(f"{out} holds files that are not a replication's: --force deletes only a replication; "
+                             "use another --out")
+        clear_folder(out)
+    check_folder(out, preset)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     prov_file = out / PROVENANCE
-    previous = json.loads(prov_file.read_text()) if prov_file.exists() else {}
+    previous = read_json_dict(prov_file, "delete it and re-run") if prov_file.exists() else {}
     started = previous.get("started") or now()
-    wall_before = float(previous.get("wall_seconds", 0.0)) if previous.get("preset") == preset.to_dict() else 0.0
+    invocations = invocations_of(previous) + [{"started": now(), "last_seen": now(), "seconds": 0.0}]
     command = command or f"ibc-tutorial replicate --preset {preset.name} --out {out}"
     planned = [run_name(m, s) for s in preset.seeds for m in METHODS]
     res_file = out / RESULTS
-    results = json.loads(res_file.read_text()) if res_file.exists() else {}
+    results = read_json_dict(res_file, "delete it and re-run") if res_file.exists() else {}
+    lock = threading.Lock()
+
+    def heartbeat(complete: bool = False) -> None:
+        with lock:
+            invocations[-1].update(last_seen=now(), seconds=round(time.perf_counter() - t0, 1))
+            write_provenance(out, preset, started, invocations, finished_runs(out, preset), planned, command, complete)
 
     def save(complete: bool) -> None:
         results.update(collect_results(out, preset))
         results.update(preset_results(preset, complete))
         write_json(res_file, results)
-        write_provenance(out, preset, started, wall_before + time.perf_counter() - t0, finished_runs(out, preset), planned,
-                         command, complete)
+        heartbeat(complete)
 
+    stop = threading.Event()
+
+    def beat() -> None:
+        while not stop.wait(HEARTBEAT_S):
+            heartbeat()
+
+    heartbeat()
+    threading.Thread(target=beat, daemon=True, name="provenance heartbeat").start()
+    try:
+        _work(out, preset, results, save, keep_checkpoints, workers, log, show_progress)
+        save(True)
+    finally:
+        stop.set()
+        if not results.get("complete"):
+            heartbeat()  # an interrupted invocation's time counts too
+    if log:
+        log(f"replication finished in {sum(i['seconds'] for i in invocations) / 60:.1f} min; results in {out}")
+    return results
+
+
+def _work(out: Path, preset: Preset, results: dict, save, keep_checkpoints: bool, workers: int, log,
+          show_progress: bool | None) -> None:
+    """Steps 1-3 of the module docstring; ``save(False)`` after each run."""
     # 1. the demonstrations
     data = out / DATA
     if not data.exists():
-        demo = collect(CollectConfig("town01", preset.routes, preset.collect_seed, preset.min_minutes, preset.max_minutes),
-                       show_progress=show_progress)
+        demo = collect(_collect_config(preset), show_progress=show_progress)
         demo.save(data)
         if log:
             log(f"collected {len(demo)} samples in town01")
@@ -143,31 +242,38 @@ def replicate(preset: Preset, out, *, command: str = "", keep_checkpoints: bool 
             after_run(run_one(method, seed, out, preset, keep_checkpoints=keep_checkpoints, show_progress=show_progress,
                               log=log))
             figures_if_ready()
-    else:
-        ctx = multiprocessing.get_context("spawn")  # no fork after torch has started its threads
-        with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_worker,
-                                 initargs=(torch.get_num_threads(),)) as pool:
+        return
+    ctx = multiprocessing.get_context("spawn")  # no fork after torch has started its threads
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_worker,
+                             initargs=(torch.get_num_threads(),)) as pool:
+        try:
             futures = [pool.submit(run_one, m, s, str(out), preset.to_dict(), keep_checkpoints=keep_checkpoints)
                        for m, s in todo]
             for fut in as_completed(futures):
                 after_run(fut.result())
                 figures_if_ready()
-    save(True)
-    if log:
-        log(f"replication finished in {(wall_before + time.perf_counter() - t0) / 60:.1f} min; results in {out}")
-    return results
+        except KeyboardInterrupt:  # stop the workers now (their files are written atomically; the runs resume)
+            for proc in list(getattr(pool, "_processes", {}).values()):
+                proc.terminate()
+            pool.shutdown(wait=False, cancel_futures=True)
+            raise
 
 
 def run(args: argparse.Namespace) -> int:
-    """``ibc-tutorial replicate`` (arguments in ``ibc_tutorial.cli``): check the inputs, then replicate."""
-    try:
-        preset = get_preset(args.preset)
-        threads = check_int("--threads", args.threads, minimum=0)
-        workers = check_int("--workers", args.workers, minimum=1)
-    except ValueError as exc:
-        raise SystemExit(f"ibc-tutorial replicate: {exc}") from None
+    """``ibc-tutorial replicate`` (arguments in ``ibc_tutorial.cli``): check the inputs and the folder, then
+    replicate. Errors are raised for ``cli.main`` to print on one line."""
+    preset = get_preset(args.preset)
+    threads = check_int("--threads", args.threads, minimum=0)
+    workers = check_int("--workers", args.workers, minimum=1)
+    out = check_output_dir("--out", args.out)
+    force = bool(getattr(args, "force", False))
+    if not force:
+        check_folder(out, preset)  # before any work (replicate checks again after --force's deletion)
+    elif out.is_dir() and any(p.name not in ENTRIES and not p.name.startswith(".") for p in out.iterdir()):
+        raise UserError(f"{out} holds files that are not a replication's: --force deletes only a replication; "
+                        "use another --out")
     if threads:
         torch.set_num_threads(threads)
     command = "ibc-tutorial " + " ".join(sys.argv[1:]) if sys.argv and "replicate" in sys.argv else ""
-    replicate(preset, args.out, command=command, keep_checkpoints=args.keep_checkpoints, workers=workers)
+    replicate(preset, out, command=command, keep_checkpoints=args.keep_checkpoints, workers=workers, force=force)
     return 0

@@ -9,9 +9,11 @@ A replication folder (``ibc-tutorial replicate --out FOLDER``) holds
   curves, the preset and its differences from the paper's, the Fig. 5/6 summaries);
 - ``free_driving.npz`` and ``landscapes.npz``: the arrays of the Fig. 5 and Fig. 6 analogues;
 - ``provenance.json`` and ``PROVENANCE.md``: command, commit, date, machine, wall time, what is
-  finished.
+  finished. The wall time is the sum over every invocation, each recorded with its start and
+  its last heartbeat (so a killed invocation's time counts up to its last heartbeat).
 
-``load_results(folder)`` is what chapters 08-09 call.
+``load_results(folder)`` is what chapters 08-09 call. Every file is checked as it is read; a
+damaged one gives a ``ValueError`` naming it and saying how to make it again.
 """
 
 from __future__ import annotations
@@ -32,6 +34,9 @@ from ibc_tutorial.experiments.agents.evaluate import summarize
 from ibc_tutorial.experiments.agents.presets import METHODS, PAPER, Preset, differences
 from ibc_tutorial.experiments.agents.train import read_metrics
 from ibc_tutorial.utils import atomic_write_bytes
+
+EPISODE_KEYS = ("seed", "steps", "distance_m", "red_light_infractions", "score", "termination")
+"""What every episode row of a ``final_eval.json`` holds."""
 
 RESULTS = "results.json"
 """The file the chapters read."""
@@ -95,6 +100,30 @@ def write_json(path, obj) -> Path:
     return atomic_write_bytes(path, json.dumps(obj, indent=1).encode())
 
 
+def read_json_dict(path, fix: str) -> dict:
+    """A JSON file that must hold a dict; ValueError naming the file and ``fix`` (what to do) otherwise."""
+    path = Path(path)
+    try:
+        obj = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ValueError(f"{path} is damaged, not readable JSON ({type(exc).__name__}): {fix}") from None
+    if not isinstance(obj, dict):
+        raise ValueError(f"{path} is damaged: it holds a {type(obj).__name__}, not a JSON object: {fix}")
+    return obj
+
+
+def read_final_eval(path) -> dict:
+    """A run's ``final_eval.json``, checked (its summary and one row per episode with ``EPISODE_KEYS``)."""
+    fix = f"delete {Path(path).parent} and re-run the same command to train and evaluate that run again"
+    ev = read_json_dict(path, fix)
+    rows = ev.get("episodes")
+    if (not isinstance(ev.get("summary"), dict) or not isinstance(rows, list) or not rows
+            or not all(isinstance(r, dict) and all(k in r for k in EPISODE_KEYS) for r in rows)
+            or not all(isinstance(r["score"], (int, float)) for r in rows)):
+        raise ValueError(f"{path} is damaged: not a final evaluation (summary, episodes with {', '.join(EPISODE_KEYS)}): {fix}")
+    return ev
+
+
 def write_npz(path, arrays: dict) -> Path:
     """Arrays as a compressed ``.npz``, written atomically."""
     buf = io.BytesIO()
@@ -120,7 +149,7 @@ def collect_results(out, preset: Preset) -> dict:
                                              "loss": [e["loss"] for e in m]}
             f = d / "final_eval.json"
             if f.exists():
-                ev = json.loads(f.read_text())
+                ev = read_final_eval(f)
                 rows += ev["episodes"]
                 per_seed[str(seed)] = ev["summary"]
         finals[method] = per_seed
@@ -136,16 +165,30 @@ def preset_results(preset: Preset, complete: bool) -> dict:
 
 
 # ---------------------------------------------------------------------- provenance
-def write_provenance(out, preset: Preset, started: str, wall_s: float, done: list[str], planned: list[str],
+def invocations_of(prov: dict) -> list[dict]:
+    """The invocations recorded in a ``provenance.json`` dict (an older file's ``wall_seconds`` as one)."""
+    inv = prov.get("invocations")
+    if isinstance(inv, list) and all(isinstance(i, dict) and isinstance(i.get("seconds"), (int, float)) for i in inv):
+        return [dict(i) for i in inv]
+    if isinstance(prov.get("wall_seconds"), (int, float)):
+        return [{"started": prov.get("started"), "last_seen": prov.get("updated"), "seconds": prov["wall_seconds"]}]
+    return []
+
+
+def write_provenance(out, preset: Preset, started: str, invocations: list[dict], done: list[str], planned: list[str],
                      command: str, complete: bool) -> None:
-    """``provenance.json`` and ``PROVENANCE.md``: how, where and when the results were made."""
+    """``provenance.json`` and ``PROVENANCE.md``: how, where and when the results were made.
+
+    ``invocations``: one ``{"started", "last_seen", "seconds"}`` per invocation of the command; the wall
+    time is their sum."""
     out = Path(out)
-    old = json.loads((out / PROVENANCE).read_text()) if (out / PROVENANCE).exists() else {}
-    notes = list(old.get("notes", []))  # kept across resumed invocations
+    old = read_json_dict(out / PROVENANCE, "delete it and re-run") if (out / PROVENANCE).exists() else {}
+    notes = list(old.get("notes", [])) if isinstance(old.get("notes"), list) else []  # kept across invocations
+    wall_s = sum(float(i["seconds"]) for i in invocations)
     prov = {"command": command, "commit": git_commit(), "package_version": __version__, "started": started,
             "finished": now() if complete else None, "updated": now(), "wall_seconds": round(wall_s, 1),
-            "complete": complete, "runs_done": done, "runs_planned": planned, "machine": machine(),
-            "preset": preset.to_dict(), "notes": notes}
+            "invocations": invocations, "complete": complete, "runs_done": done, "runs_planned": planned,
+            "machine": machine(), "preset": preset.to_dict(), "notes": notes}
     write_json(out / PROVENANCE, prov)
     m = prov["machine"]
     lines = [
@@ -153,7 +196,7 @@ def write_provenance(out, preset: Preset, started: str, wall_s: float, done: lis
         f"- command: `{command}`",
         f"- commit: `{prov['commit']}` (ibc_tutorial {__version__})",
         f"- started: {started}; {'finished: ' + prov['finished'] if complete else 'NOT FINISHED (last update ' + prov['updated'] + ')'}",
-        f"- wall time: {wall_s / 60:.1f} min",
+        f"- wall time: {wall_s / 60:.1f} min over {len(invocations)} invocation(s)",
         f"- machine: {m['nproc']} CPUs ({m['cpu']}), {m['os']}, Python {m['python']}, torch {m['torch']} "
         f"with {m['torch_threads']} thread(s)",
         f"- runs finished: {len(done)} of {len(planned)}" + ("" if complete else f" (missing: {sorted(set(planned) - set(done))})"),
@@ -168,16 +211,22 @@ def write_provenance(out, preset: Preset, started: str, wall_s: float, done: lis
 # ---------------------------------------------------------------------- reading (the chapters)
 def load_results(out) -> dict:
     """What the chapters read from a replication folder: ``results.json`` and ``provenance.json`` as
-    dicts, ``free_driving.npz`` and ``landscapes.npz`` as dicts of arrays (empty if absent)."""
+    dicts, ``free_driving.npz`` and ``landscapes.npz`` as dicts of arrays (empty if absent).
+
+    ValueError naming the file if one is missing or damaged."""
     out = Path(out)
-    if not (out / RESULTS).exists():
+    if not (out / RESULTS).is_file():
         raise ValueError(f"no {RESULTS} in {out}: run 'ibc-tutorial replicate --out {out}' first")
-    res = {"results": json.loads((out / RESULTS).read_text()),
-           "provenance": json.loads((out / PROVENANCE).read_text()) if (out / PROVENANCE).exists() else {}}
+    fix = f"delete it and re-run 'ibc-tutorial replicate' with the same --preset and --out {out} to make it again"
+    res = {"results": read_json_dict(out / RESULTS, fix),
+           "provenance": read_json_dict(out / PROVENANCE, fix) if (out / PROVENANCE).exists() else {}}
     for key, name in (("free_driving", FREE_DRIVING), ("landscapes", LANDSCAPES)):
         if (out / name).exists():
-            with np.load(out / name) as z:
-                res[key] = {k: z[k] for k in z.files}
+            try:
+                with np.load(out / name, allow_pickle=False) as z:
+                    res[key] = {k: z[k] for k in z.files}
+            except Exception as exc:  # zip, zlib, format errors of a truncated or altered file
+                raise ValueError(f"{out / name} is truncated or damaged ({type(exc).__name__}): {fix}") from None
         else:
             res[key] = {}
     return res
