@@ -136,6 +136,27 @@ def test_initialisations_follow_their_weights():
     y_inv = initial_samples(experts, 1, DFOConfig(n_samples=20000, init="inverse-kde"), generator=g)
     y_kde = initial_samples(experts, 1, DFOConfig(n_samples=20000, init="kde"), generator=g)
     assert (y_inv > 0.35).float().mean() > 0.3 > 0.1 > (y_kde > 0.35).float().mean()
+    # plain expert draws: every expert action equally likely, so the rare cluster keeps its 10 %
+    w_exp = initial_weights(experts, DFOConfig(init="expert"))
+    assert w_exp.shape == (1000,) and torch.allclose(w_exp, torch.full((1000,), 1e-3))
+    y_exp = initial_samples(experts, 1, DFOConfig(n_samples=20000, init="expert"), generator=g)
+    assert abs(float((y_exp > 0.35).float().mean()) - 0.1) < 0.01
+
+
+def test_populations_follow_the_default_dtype():
+    experts = symmetric_experts()
+    old = torch.get_default_dtype()
+    try:
+        for dtype in (torch.float32, torch.float64):
+            torch.set_default_dtype(dtype)
+            for init in ("uniform", "expert", "inverse-kde"):
+                w = initial_weights(experts, DFOConfig(init=init))
+                assert w is None or w.dtype == dtype
+                a = dfo(two_valleys(), experts.double(), cfg(init=init),
+                        generator=torch.Generator().manual_seed(0))  # (1,)
+                assert a.dtype == dtype
+    finally:
+        torch.set_default_dtype(old)
 
 
 def test_bad_arguments_get_clear_errors():
@@ -209,7 +230,7 @@ def test_single_and_batched_forms_agree_row_by_row():
     torch.testing.assert_close(acts[:, 0], centres, atol=0.05, rtol=0)  # every row in its own valley (256 uniform samples)
 
 
-@pytest.mark.parametrize("init", ["uniform", "kde", "inverse-kde"])
+@pytest.mark.parametrize("init", ["uniform", "kde", "inverse-kde", "expert"])
 @pytest.mark.parametrize("select", ["sample", "argmax"])
 def test_trace_action_equals_dfo_with_equal_seeds(init, select):
     experts = symmetric_experts()
@@ -264,6 +285,7 @@ def test_dfo_stepper_titles_the_last_iteration_by_the_choice_made(select):
     experts = symmetric_experts()
     c = DFOConfig(n_samples=200, n_iters=3, select=select)
     widget = dfo_stepper(two_valleys(), grid, experts, c)
+    assert "expert" in widget.children[0].children[1].options  # every initialisation offered
     assert widget.children[-1].value[:4] == b"\x89PNG"
     trace = dfo_trace(two_valleys(), experts, c, generator=torch.Generator().manual_seed(0))
     fig = _dfo_iteration_figure(trace, 3, grid[:, 0].numpy(), two_valleys()(grid).numpy(), 30)

@@ -71,3 +71,30 @@ def test_road_coverage_agrees_with_a_kd_tree():
         if near:
             covered[i] = (np.abs(np.angle(np.exp(1j * (poses[near, 2] - wh[i])))) <= np.pi / 3).any()
     assert road_coverage(tw, poses) == float(covered.mean())
+
+
+def test_light_label_conflicts_counts_each_encoding():
+    from ibc_tutorial.driving.analysis import light_label_conflicts
+    from ibc_tutorial.driving.collect import CollectConfig, collect
+
+    log = collect(CollectConfig(town="town02", routes=2, seed=0, min_minutes=1.0, max_minutes=1.0),
+                  show_progress=False)
+    r = light_label_conflicts(log)
+    c = r["counts"]
+    assert sum(c.values()) == r["near"] > 0
+    assert r["conflicts"]["binary"] == c[("yellow", "go")] + c[("red", "go")] + c[("green", "stop")]
+    assert r["conflicts"]["intensity"] <= r["conflicts"]["binary"] <= r["conflicts"]["red only"] + c[("yellow", "go")]
+    assert c[("red", "stop")] > 0 and r["conflicts"]["intensity"] == 0  # never through red, never stops at green
+    with pytest.raises(ValueError):
+        light_label_conflicts(log, stop_distance=0.0)
+
+
+def test_stop_line_gaps_nan_off_approaches():
+    from ibc_tutorial.driving.analysis import stop_line_gaps
+
+    town = get_town("town02")
+    ap = town.approaches[0]
+    lane = town.lanes[ap.lane]
+    p = lane.points[-6]
+    g, light = stop_line_gaps(town, np.array([[p[0], p[1], float(np.arctan2(*lane.end[::-1] - p[::-1]))]]), [ap.lane])
+    assert light[0] == town.light_of_approach.get(ap.id, -1)

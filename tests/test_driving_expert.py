@@ -151,3 +151,21 @@ def test_batched_rollout_matches_single_episodes():
     assert all(r.score == pytest.approx(r.distance_m * 0.7 ** r.red_light_infractions) for r in results)
     with pytest.raises(ValueError, match="policy"):
         rollout("random")
+
+
+def test_pid_derivative_on_measurement_has_no_set_point_kick():
+    pid = PID(1.0, 0.0, 0.5, dt=0.1)
+    pid.step(1.0, measurement=5.0)
+    assert pid.step(2.5, measurement=5.0) == pytest.approx(2.5)  # target jumped, speed did not: no kick
+    assert pid.step(2.4, measurement=5.1) == pytest.approx(2.4 - 0.5 * 0.1 / 0.1)  # damps the motion
+
+
+def test_speed_control_is_smooth_and_the_old_one_was_not():
+    """Issue 12: no derivative kick at target switches, no throttle/brake chatter in stops."""
+    from ibc_tutorial.driving.analysis import speed_control_report
+
+    new = speed_control_report(seeds=range(2), steps=800)
+    old = speed_control_report(seeds=range(2), steps=800, config=ExpertConfig(smooth_speed_control=False))
+    assert new["switch_jump"].max() < 0.8 < 1.0 < old["switch_jump"].min()  # P step 0.5 x 1.5 only
+    assert len(new["sign_changes"]) >= 3 and new["sign_changes"].max() <= 1
+    assert np.median(old["sign_changes"]) >= 2

@@ -137,3 +137,19 @@ def test_swerve_matches_the_library_measure():
     first = int(near.float().argmax())
     y = ro.states[:, first:, 1]  # every episode reaches the section at the same step here (straight until then)
     assert torch.allclose(w.swerve(ro), solutions.ch01_swerve(y))
+
+
+def test_predict_mae_side():
+    check = ch01.check_predict_mae_side
+    assert check(solutions.ch01_predict_mae_side).status == "correct"
+    assert check(stub).status == "not attempted"
+    mistakes = {
+        "the mean": (lambda r, l: "anywhere in the gap", "like the mean"),
+        "smaller mode": (lambda r, l: "right" if r < l else ("left" if l < r else "anywhere in the gap"), "smaller mode"),
+        "no tie": (lambda r, l: "right" if r >= l else "left", "samples above and below"),
+        "tie too wide": (lambda r, l: "right" if r - l > 5 else ("left" if l - r > 5 else "anywhere in the gap"), "breaks the tie"),
+        "not an answer": (lambda r, l: "straight", "answer with one of"),
+    }
+    for fn, words in mistakes.values():
+        fb = check(fn)
+        assert fb.status == "hint" and words in fb.message, fb.message

@@ -124,3 +124,23 @@ def test_mdn_code_that_raises_gets_a_hint():
 
     fb = ch02.check_mdn_nll(broken)
     assert fb.status == "hint" and "KeyError" in fb.message
+
+
+def test_beta_can_represent():
+    check = ch02.check_beta_can_represent
+    assert check(solutions.ch02_beta_can_represent).status == "correct"
+
+    def unattempted(shape):
+        raise NotImplementedError
+
+    assert check(unattempted).status == "not attempted"
+    mistakes = {
+        "two peaks": (lambda s: True, "second derivative"),
+        "no U": (lambda s: s in ("flat", "one peak inside"), "both below 1"),
+        "no flat": (lambda s: s in ("one peak inside", "peaks at both ends"), "alpha = beta = 1"),
+        "no hump": (lambda s: s in ("flat", "peaks at both ends"), "alpha = beta = 2"),
+        "not a bool": (lambda s: "yes", "True or False"),
+    }
+    for fn, words in mistakes.values():
+        fb = check(fn)
+        assert fb.status == "hint" and words in fb.message, fb.message

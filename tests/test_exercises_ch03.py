@@ -119,3 +119,46 @@ def test_whiteness_mistakes(name):
     fb = ch03.check_whiteness(fn)
     assert fb.status == "hint" and words in fb.message, (name, fb)
     assert math.isfinite(len(fb.message))
+
+
+# --------------------------------------------------------------------------- the finding, predicted
+def test_decision_prediction_solution_is_correct_and_matches_the_data():
+    ref = ch03.decision_reference()
+    assert 0.2 < ref["mse"] < 0.5 and ref["mae"] > 0.7 and ref["argmin"] == "right"
+    assert abs(ref["sample_right"] - ch03.DECISION_RIGHT_PROB) < 0.05
+    assert ch03.check_decision_prediction(solutions.ch03_predict_decision).status == "correct"
+    exact = dict(ref)
+    assert ch03.check_decision_prediction(lambda: exact).status == "correct"
+
+
+def test_decision_prediction_stub_and_crash():
+    assert ch03.check_decision_prediction(stub).status == "not attempted"
+    fb = ch03.check_decision_prediction(raises)
+    assert fb.status == "hint" and "IndexError" in fb.message
+
+
+GOOD = {"mse": 0.35, "mae": 0.85, "argmin": "right", "sample_right": 0.7}
+DECISION_MISTAKES = {
+    "mean of the modes unweighted": ({"mse": 0.0}, "weighted"),
+    "mse as the median": ({"mse": 0.85}, "mean"),
+    "mae as the mean": ({"mae": 0.35}, "median"),
+    "mae on the minority side": ({"mae": -0.85}, "more than half"),
+    "argmin on the minority side": ({"argmin": "left"}, "most probable"),
+    "sampling always the deeper valley": ({"sample_right": 1.0}, "as often as the experts"),
+    "sampling at 50/50": ({"sample_right": 0.5}, "shares"),
+    "not a side": ({"argmin": "straight"}, '"right" or "left"'),
+    "not a number": ({"mse": "zero"}, "numbers"),
+}
+
+
+@pytest.mark.parametrize("name", list(DECISION_MISTAKES))
+def test_decision_prediction_mistakes_get_a_hint_naming_them(name):
+    change, words = DECISION_MISTAKES[name]
+    fb = ch03.check_decision_prediction(lambda: {**GOOD, **change})
+    assert fb.status == "hint", (name, fb)
+    assert words in fb.message, (name, fb.message)
+
+
+def test_decision_prediction_wrong_keys():
+    fb = ch03.check_decision_prediction(lambda: {"mse": 0.35})
+    assert fb.status == "hint" and "keys" in fb.message

@@ -52,6 +52,18 @@ SAMPLER_MISTAKES = {
     "ignores generator": (lambda a, b, n, s, g=None: _draw(a, b, n, None) + s * torch.randn(b, n, a.shape[1]), "generator"),
     "wrong order": (lambda a, b, n, s, g=None: (_draw(a, b, n, g) + s * torch.randn(b, n, a.shape[1], generator=g)).transpose(0, 1), "shape"),
     "biased noise": (lambda a, b, n, s, g=None: _draw(a, b, n, g) + s * torch.rand(b, n, a.shape[1], generator=g), "mean 0"),
+    # the right variance, the wrong shape: uniform on [−√3 σ, √3 σ], Laplace with scale σ/√2
+    "uniform noise of variance σ²": (
+        lambda a, b, n, s, g=None: _draw(a, b, n, g) + s * math.sqrt(3) * (2 * torch.rand(b, n, a.shape[1], generator=g) - 1),
+        "Gaussian shape",
+    ),
+    "Laplace noise of variance σ²": (
+        lambda a, b, n, s, g=None: _draw(a, b, n, g)
+        + s / math.sqrt(2) * torch.sign(torch.rand(b, n, a.shape[1], generator=g) - 0.5) * -torch.log(torch.rand(b, n, a.shape[1], generator=g)),
+        "Gaussian shape",
+    ),
+    "one noise value for both coordinates": (lambda a, b, n, s, g=None: _draw(a, b, n, g) + s * torch.randn(b, n, 1, generator=g), "correlated"),
+    "clipped to the box": (lambda a, b, n, s, g=None: (_draw(a, b, n, g) + s * torch.randn(b, n, a.shape[1], generator=g)).clamp(-1, 1), "do not clip"),
 }
 
 
@@ -88,3 +100,33 @@ def test_grid_nll_mistakes(name):
     fn, words = NLL_MISTAKES[name]
     fb = ch04.check_grid_nll(fn)
     assert fb.status == "hint" and words in fb.message, (name, fb)
+
+
+# --------------------------------------------------------------------------- the tilt of a DA-IBC landscape
+def _q(modes, actions, s):
+    from ibc_tutorial.kde import kde_density
+
+    return kde_density(modes, actions, s)
+
+
+SHARE_MISTAKES = {
+    "the expert's thirds": (lambda m, a, s: torch.full((len(m),), 1 / len(m)), "p(y|x)"),
+    "proportional to q": (lambda m, a, s: _q(m, a, s) / _q(m, a, s).sum(), "wrong way round"),
+    "chapter 05's bandwidth": (lambda m, a, s: (1 / _q(m, a, 0.2)) / (1 / _q(m, a, 0.2)).sum(), "bandwidth σ"),
+    "not normalised": (lambda m, a, s: 1 / _q(m, a, s), "sum to 1"),
+    "fixed sigma": (lambda m, a, s: (1 / _q(m, a, 0.1)) / (1 / _q(m, a, 0.1)).sum(), "σ = 0.3"),
+    "wrong shape": (lambda m, a, s: torch.ones(2), "shape"),
+}
+
+
+def test_predicted_shares_solution_stub_and_crash():
+    assert ch04.check_predicted_shares(solutions.ch04_predicted_shares).status == "correct"
+    assert ch04.check_predicted_shares(stub).status == "not attempted"
+    assert ch04.check_predicted_shares(raises).status == "hint"
+
+
+@pytest.mark.parametrize("name", list(SHARE_MISTAKES))
+def test_predicted_shares_mistakes(name):
+    fn, words = SHARE_MISTAKES[name]
+    fb = ch04.check_predicted_shares(fn)
+    assert fb.status == "hint" and words in fb.message, fb.message

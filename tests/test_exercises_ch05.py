@@ -89,3 +89,62 @@ def test_inverse_weights_mistakes_get_a_hint_naming_them(name):
     fb = ch05.check_inverse_weights(fn)
     assert fb.status == "hint", (name, fb)
     assert words in fb.message, (name, fb.message)
+
+
+# --------------------------------------------------------------------------- choosing a bandwidth by effective sample size
+def _table(actions, rare, candidates):
+    out = {}
+    for h in candidates:
+        w = kde.inverse_density_weights(actions, h)
+        out[h] = (float(w[rare].sum()), float(1 / (w**2).sum()))
+    return out
+
+
+def _ignore_ess(actions, rare, candidates, min_ess):
+    t = _table(actions, rare, candidates)
+    return max(candidates, key=lambda h: t[h][0])
+
+
+def _max_ess(actions, rare, candidates, min_ess):
+    t = _table(actions, rare, candidates)
+    return max(candidates, key=lambda h: t[h][1])
+
+
+def _ess_without_square(actions, rare, candidates, min_ess):
+    best, share = candidates[-1], -1.0
+    for h in candidates:
+        w = kde.inverse_density_weights(actions, h)
+        if float(1 / w.abs().max()) >= min_ess and float(w[rare].sum()) > share:  # 1/max w, not 1/Σw²: too strict
+            best, share = h, float(w[rare].sum())
+    return best
+
+
+def _smallest_passing(actions, rare, candidates, min_ess):
+    t = _table(actions, rare, candidates)
+    return min(h for h in candidates if t[h][1] >= min_ess)
+
+
+BANDWIDTH_MISTAKES = {
+    "ignores the effective sample size": (_ignore_ess, "effective sample size is only"),
+    "largest effective sample size": (_max_ess, "nearly uniform"),
+    "another ESS formula": (_ess_without_square, "nearly uniform"),
+    "the paper's h whatever the data": (lambda a, r, c, m: 0.2, "compute it as 1 / Σ w_i²"),
+    "smallest passing bandwidth": (_smallest_passing, "another candidate that passes"),
+    "index instead of bandwidth": (lambda a, r, c, m: 4, "not its index"),
+    "not a candidate": (lambda a, r, c, m: 0.25, "not one of the candidates"),
+    "not a number": (lambda a, r, c, m: "0.2", "one bandwidth"),
+    "fixed answer": (lambda a, r, c, m: 0.3, "another candidate"),
+}
+
+
+def test_choose_bandwidth_solution_stub_and_crash():
+    assert ch05.check_choose_bandwidth(solutions.ch05_choose_bandwidth).status == "correct"
+    assert ch05.check_choose_bandwidth(stub).status == "not attempted"
+    assert ch05.check_choose_bandwidth(raises).status == "hint"
+
+
+@pytest.mark.parametrize("name", list(BANDWIDTH_MISTAKES))
+def test_choose_bandwidth_mistakes(name):
+    fn, words = BANDWIDTH_MISTAKES[name]
+    fb = ch05.check_choose_bandwidth(fn)
+    assert fb.status == "hint" and words in fb.message, fb.message

@@ -1,6 +1,8 @@
 """Checkers of exercises/06_dfo_inference.ipynb: solution -> correct, stub -> not attempted,
 typical mistakes -> a hint naming the mistake, code that raises -> a hint (never an exception)."""
 
+import math
+
 import pytest
 import torch
 
@@ -25,13 +27,17 @@ def test_dfo_step_stub_and_crash():
     assert fb.status == "hint" and "ZeroDivisionError" in fb.message
 
 
-def _step(sign=-1.0, resample=True, noise="sigma", clip="clamp", use_gen=True):
+def _step(sign=-1.0, resample=True, noise="sigma", clip="clamp", use_gen=True, order="after", shape="full"):
     def fn(samples, energies, sigma, low, high, generator):
         gen = generator if use_gen else None
         p = torch.softmax(sign * energies, dim=0)
         idx = torch.multinomial(p, len(samples), replacement=True, generator=gen) if resample else torch.arange(len(samples))
         scale = {"sigma": sigma, "sigma2": sigma**2, "none": 0.0}[noise]
-        new = samples[idx] + scale * torch.randn(samples.shape, generator=gen)
+        n_shape = {"full": samples.shape, "per_sample": (len(samples), 1), "one": (1, 1)}[shape]
+        if order == "before":  # noise first, then resampling: copies of noisy samples
+            new = (samples + scale * torch.randn(n_shape, generator=gen))[idx]
+        else:
+            new = samples[idx] + scale * torch.randn(n_shape, generator=gen)
         if clip == "clamp":
             return new.clamp(low, high)
         if clip == "redraw":  # reflect out-of-bounds samples back inside
@@ -50,6 +56,9 @@ STEP_MISTAKES = {
     "no clip": (_step(clip="none"), "clip them"),
     "reflect instead of clamp": (_step(clip="redraw"), "clamped onto it"),
     "global generator": (_step(use_gen=False), "generator"),
+    "noise before resampling": (_step(order="before"), "*after* resampling"),
+    "one noise value per sample, shared by its coordinates": (_step(shape="per_sample"), "independent N(0, σ) for each coordinate"),
+    "one noise value for the whole population": (_step(shape="one"), "exact copies"),
     "wrong shape": (lambda s, e, sg, lo, hi, g: solutions.ch06_dfo_step(s, e, sg, lo, hi, g)[:, 0], "shape"),
 }
 
@@ -100,3 +109,47 @@ def test_select_action_mistakes_get_a_hint_naming_them(name):
     fb = ch06.check_select_action(fn)
     assert fb.status == "hint", (name, fb)
     assert words in fb.message, (name, fb.message)
+
+
+# --------------------------------------------------------------------------- understanding: p(y|x)^k
+def test_shallow_share_solution_is_correct_and_quotes_the_library():
+    fb = ch06.check_shallow_share(solutions.ch06_shallow_share)
+    assert fb.status == "correct" and "library" in fb.message
+
+
+def test_shallow_share_stub_and_crash():
+    assert ch06.check_shallow_share(stub).status == "not attempted"
+    assert ch06.check_shallow_share(raises).status == "hint"
+
+
+def test_the_library_measures_what_the_solution_predicts():
+    measured = ch06._measured_shallow_share(0.5, 5)
+    assert abs(measured - solutions.ch06_shallow_share(0.5, 5, 1.0)) < 0.03
+
+
+SHARE_MISTAKES = {
+    "the deeper valley's share": (lambda d, k, r: 1 - solutions.ch06_shallow_share(d, k, r), "*deeper*"),
+    "no k": (lambda d, k, r: solutions.ch06_shallow_share(d, 1, r), "each of the k rounds"),
+    "no r": (lambda d, k, r: solutions.ch06_shallow_share(d, k, 1.0), "ignores r"),
+    "not normalised": (lambda d, k, r: r * math.exp(-k * d), "normalise"),
+    "p(y|x)^(1/k)": (lambda d, k, r: solutions.ch06_shallow_share(d / k, 1, r), "measures"),
+    "exponent k·Δ but linear": (lambda d, k, r: max(0.0, 0.5 - 0.1 * k * d), "importance sampler"),
+    "a string": (lambda d, k, r: "0.3", "one number"),
+    "above 1": (lambda d, k, r: 2.0, "between 0 and 1"),
+}
+
+
+@pytest.mark.parametrize("name", list(SHARE_MISTAKES))
+def test_shallow_share_mistakes_get_a_hint_naming_them(name):
+    fn, words = SHARE_MISTAKES[name]
+    fb = ch06.check_shallow_share(fn)
+    assert fb.status == "hint", (name, fb)
+    assert words in fb.message, (name, fb.message)
+
+
+def test_shallow_share_wrong_only_for_many_rounds_quotes_the_measurement():
+    def fn(d, k, r):  # right for one round, wrong beyond
+        return solutions.ch06_shallow_share(d, 1 if k > 1 and d < 1 else k, r) if k == 1 else 0.3
+
+    fb = ch06.check_shallow_share(fn)
+    assert fb.status == "hint" and "measures" in fb.message

@@ -25,6 +25,7 @@ CHECKS = [
     (ch07.check_pid, solutions.ch07_pid_outputs),
     (ch07.check_ran_red_light, solutions.ch07_ran_red_light),
     (ch07.check_world_to_bev, solutions.ch07_world_to_bev),
+    (ch07.check_expert_stops, solutions.ch07_expert_stops),
 ]
 
 
@@ -190,3 +191,31 @@ def test_world_to_bev_mistakes(name):
     fn, words = BEV_MISTAKES[name]
     fb = ch07.check_world_to_bev(fn)
     assert fb.status == "hint" and words in fb.message
+
+
+# --------------------------------------------------------------------------- 5. will the expert stop?
+def test_expert_stops_solution_is_the_experts_rule():
+    from ibc_tutorial.driving.expert import stops_for_light
+
+    for state in (0, 1, 2):
+        for gap in np.linspace(0.2, 12.0, 25):
+            for speed in (0.0, 2.0, 4.5, 6.0, 8.0):
+                assert solutions.ch07_expert_stops(state, gap, speed) == stops_for_light(state, gap, speed)
+
+
+STOP_MISTAKES = {
+    "yellow as red": (lambda st, g, v: g <= 9.5 and st != 0, "yellow is not red"),
+    "yellow as green": (lambda st, g, v: g <= 9.5 and st == 2, "yellow is not green"),
+    "no distance limit": (lambda st, g, v: st == 2 or (st == 1 and v * v / (2 * g) <= 4.0), "distance"),
+    "full brake at yellow": (lambda st, g, v: g <= 9.5 and (st == 2 or (st == 1 and v * v / (2 * g) <= 8.0)),
+                             "compare the deceleration"),
+    "stops at green": (lambda st, g, v: g <= 9.5 and (st != 1 or v * v / (2 * g) <= 4.0), "red stops, green goes"),
+    "returns a string": (lambda st, g, v: "stop", "True or False"),
+}
+
+
+@pytest.mark.parametrize("name", list(STOP_MISTAKES))
+def test_expert_stops_mistakes(name):
+    fn, words = STOP_MISTAKES[name]
+    fb = ch07.check_expert_stops(fn)
+    assert fb.status == "hint" and words in fb.message, fb.message

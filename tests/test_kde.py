@@ -190,3 +190,77 @@ def test_normal_inputs_take_the_plain_path():
     sq = ((query[:, None, :] - data[None, :, :]) ** 2).sum(-1) / h**2  # (Q, M)
     direct = torch.exp(-0.5 * sq).sum(1) / (300 * h**2 * 2 * math.pi)
     torch.testing.assert_close(kde_density(query, data, h), direct, rtol=1e-12, atol=0)
+
+
+# ----------------------------------------------------------------------------- boundary correction
+def loop_kde_reflected(query, data, h, low, high):
+    """The reflection estimator (Schuster 1985) written out with scipy: per dimension the kernel
+    of x_d plus those of its mirror images 2 low − x_d and 2 high − x_d, multiplied over d."""
+    from scipy.stats import norm
+
+    m = len(data)
+    out = []
+    for q in query.tolist():
+        total = 0.0
+        for x in data.tolist():
+            prod = 1.0
+            for qd, xd in zip(q, x):
+                prod *= sum(norm.pdf((qd - c) / h) / h for c in (xd, 2 * low - xd, 2 * high - xd))
+            total += prod
+        out.append(total / m)
+    return torch.tensor(out, dtype=torch.float64)
+
+
+@pytest.mark.parametrize("d", [1, 2])
+def test_reflected_kde_matches_scipy_written_out(d):
+    g = torch.Generator().manual_seed(d)
+    data = torch.rand(30, d, generator=g, dtype=torch.float64) * 2 - 1
+    data[:5, -1] = -1.0  # actions exactly on the edge, as full braking is
+    query = torch.rand(12, d, generator=g, dtype=torch.float64) * 2 - 1
+    ref = loop_kde_reflected(query, data, 0.2, -1.0, 1.0)
+    out = kde_density(query, data, 0.2, bounds=(-1.0, 1.0))
+    assert torch.allclose(out, ref, rtol=1e-10, atol=0)
+    # per-dimension bounds give the same answer; far from the edges nothing changes
+    out_seq = kde_density(query, data, 0.2, bounds=([-1.0] * d, [1.0] * d))
+    assert torch.allclose(out_seq, out, rtol=1e-12, atol=0)
+    centre = torch.zeros(1, d, dtype=torch.float64)
+    assert torch.allclose(kde_density(centre, centre, 0.1, bounds=(-1.0, 1.0)), kde_density(centre, centre, 0.1), rtol=1e-9)
+    # float32 in, float32 out, as without bounds
+    assert kde_density(query.float(), data.float(), 0.2, bounds=(-1.0, 1.0)).dtype == torch.float32
+
+
+def test_reflected_kde_integrates_to_one_inside_the_box_and_plain_kde_does_not():
+    data = torch.tensor([[-1.0], [-1.0], [-0.9], [0.0], [0.95]], dtype=torch.float64)
+    x = torch.linspace(-1, 1, 20001, dtype=torch.float64)[:, None]
+    dx = 2 / 20000
+    plain = float(torch.trapezoid(kde_density(x, data, 0.2), dx=dx))
+    reflected = float(torch.trapezoid(kde_density(x, data, 0.2, bounds=(-1, 1)), dx=dx))
+    assert abs(reflected - 1) < 1e-6
+    assert plain < 0.8  # two points on the edge lose half their mass, two more lose some
+
+
+def test_reflected_weights_do_not_inflate_edge_actions():
+    # actions spread evenly over the box [-1, 1]: the true density is flat, so every action should
+    # get the same weight; the plain KDE loses the kernel mass past the edges and gives actions
+    # on an edge about twice the weight of those in the middle
+    a = torch.linspace(-1, 1, 801, dtype=torch.float64)[:, None]  # (801, 1)
+    edge = a[:, 0].abs() > 0.99  # within h/20 of an edge
+    middle = a[:, 0].abs() < 0.5
+    w_plain = inverse_density_weights(a, 0.2)
+    w_reflected = inverse_density_weights(a, 0.2, bounds=(-1.0, 1.0))
+    ratio_plain = float(w_plain[edge].mean() / w_plain[middle].mean())
+    ratio_reflected = float(w_reflected[edge].mean() / w_reflected[middle].mean())
+    assert 1.8 < ratio_plain < 2.1
+    assert abs(ratio_reflected - 1) < 0.02
+    assert abs(float(w_reflected.sum()) - 1) < 1e-12
+    # the default is unchanged: eq. 4 as the paper writes it
+    assert torch.equal(inverse_density_weights(a, 0.2, bounds=None), w_plain)
+
+
+def test_reflected_kde_bad_bounds():
+    data = torch.zeros(3, 2)
+    for bad in [(1.0, -1.0), (0.0,), (-1.0, [1.0, 1.0, 1.0]), (float("nan"), 1.0), 5]:
+        with pytest.raises(ValueError, match="bounds"):
+            kde_density(data, data, 0.2, bounds=bad)
+        with pytest.raises(ValueError, match="bounds"):
+            inverse_density_weights(data, 0.2, bounds=bad)

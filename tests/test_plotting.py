@@ -99,6 +99,12 @@ def test_multimodality_figures():
     assert_labelled(multimodality.plot_command_traces(0.1, {"a": np.zeros(10), "b": np.ones(10)}))
     assert_labelled(multimodality.plot_density_fits(torch.rand(30) * 2 - 1, actions, {"flat": torch.full((21,), 0.5)}, title="t"))
     assert_labelled(multimodality.plot_beta_shapes([(2, 2)]))
+    prev = torch.linspace(-1, 1, 5)
+    fig = multimodality.plot_response_map(prev, {"copy": prev, "zero": torch.zeros(5)}, title="t")
+    assert len(fig.axes[0].lines) == 3  # the diagonal and the two responses
+    assert_labelled(fig)
+    with pytest.raises(ValueError, match="shape"):
+        multimodality.plot_response_map(prev, {"short": torch.zeros(3)}, title="t")
 
 
 def test_rollout_figures_share_one_drawing():
@@ -115,6 +121,12 @@ def test_rollout_figures_share_one_drawing():
     assert fig.axes[0].get_title().startswith("a: main")
     assert_labelled(fig)
     assert multimodality.rollout_colors(tree, r_tree) == [multimodality.TREE_SIDE_COLORS[int(v)] for v in tree.pass_side(r_tree)]
+    # every closed-loop figure has a colour key of the outcomes
+    labels = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+    assert labels == ["ended on the main road", "ended on the side road", "left the road", "where it collided"]
+    fig = multimodality.plot_tree_closed_loop(tree, {"zero": r_tree})
+    labels = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+    assert labels[:3] == ["passed on the left", "passed on the right", "collided"]
     with pytest.raises(ValueError, match="rollouts"):
         multimodality.plot_side_road(road, {})
 
@@ -126,6 +138,8 @@ def test_ingredients_figures():
     fig = ingredients.plot_energy_2d(e, axis, title="t", unvisited=e > 1, modes=np.zeros((1, 2)), argmin=(0.0, 0.0))
     assert fig.axes[0].get_xlabel() == common.STEER_LABEL
     assert_labelled(fig)
+    # the hatching of unvisited cells has its legend entry
+    assert any("never visited" in t.get_text() for t in fig.axes[0].get_legend().get_texts())
     acts = np.random.default_rng(0).uniform(-1, 1, (20, 2))
     assert_labelled(ingredients.plot_counter_examples(acts, np.arange(20) % 3, {"uniform": acts}))
     assert_labelled(ingredients.plot_sigma_sweep([0.1, 0.3], np.ones((2, 3)), uniform=np.ones(3), ylabel="NLL", title="t"))
@@ -172,6 +186,13 @@ def test_town_figures():
     assert_labelled(town.plot_step_and_turn(t, t, t, {"left": np.c_[t, t]}, radii={"left": (0, 1, 1)}))
     town02 = get_town("town02")
     assert_labelled(town.plot_routes(town02, [np.c_[t, t]]))
+    path = np.c_[np.linspace(0, 200, 201), np.zeros(201)]  # 200 m eastwards
+    fig = town.plot_routes(town02, [path], arrow_every_m=50.0)
+    arrows = [c for c in fig.axes[0].texts if getattr(c, "arrow_patch", None) is not None]
+    assert len(arrows) == 4 and all(a.xy[0] > a.xyann[0] for a in arrows)  # pointing east
+    plt.close(fig)
+    with pytest.raises(ValueError):
+        town.plot_routes(town02, [path], arrow_every_m=0.0)
     fig = town.plot_bev_samples(np.zeros((2, 5, 64, 64)), np.zeros((2, 2)), np.ones((2, 3)))
     assert fig._suptitle is not None and fig.axes[0].get_title().startswith("v 1.0")
     plt.close(fig)

@@ -90,6 +90,30 @@ def test_lateral_observation_variant():
     assert w.expert_demonstrations(2, 0).obs.shape == (2 * w.config.horizon, 2)
 
 
+def test_previous_action_observation_variant():
+    w = TreeWorld(TreeConfig(obs_prev_action=True))
+    assert w.obs_dim == 2
+    obs = w.obs_at([10.0, 10.0], prev_action=[0.0, 0.5])
+    assert torch.allclose(obs, torch.tensor([[1.0, 0.0], [1.0, 0.5]]))
+    assert torch.allclose(w.physical(obs), torch.tensor([[10.0, 0.0], [10.0, 0.5]]))
+    with pytest.raises(ValueError, match="prev_action"):
+        w.obs_at(10.0, prev_action=1.5)
+    # with the offset too, the previous action comes last
+    both = TreeWorld(TreeConfig(obs_lateral=True, obs_prev_action=True))
+    assert both.obs_dim == 3
+    assert torch.allclose(both.obs_at(10.0, lateral=1.0, prev_action=-0.2), torch.tensor([[1.0, 0.5, -0.2]]))
+    # demonstrations record the action applied at the step before (0 at the start)
+    demos = w.expert_demonstrations(3, 0)
+    assert demos.obs.shape == (3 * w.config.horizon, 2)
+    first = demos.step == 0
+    assert (demos.obs[first, 1] == 0).all()
+    same = demos.episode[1:] == demos.episode[:-1]
+    assert torch.allclose(demos.obs[1:, 1][same], demos.actions[:-1, 0][same])
+    # and so do closed-loop rollouts: a policy that steers 0.3 sees 0.3 from the second step on
+    r = w.rollout(lambda o: torch.full((len(o), 1), 0.3), 2, seed=0)
+    assert (r.obs[:, 0, 1] == 0).all() and torch.allclose(r.obs[:, 1:, 1], torch.tensor(0.3))
+
+
 def test_bad_config_and_arguments_raise():
     with pytest.raises(ValueError, match="tree_radius"):
         TreeWorld(TreeConfig(tree_radius=0.0))

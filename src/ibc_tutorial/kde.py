@@ -15,6 +15,8 @@ This module is the only place the weights 1/ĝ are computed:
 - ``kde_density(query, data, bandwidth)``: eq. 4 with a Gaussian product kernel, normalised, in
   chunks so that tens of thousands of query and data points fit in memory.
 - ``inverse_density_weights(actions, bandwidth)``: w_i ∝ 1 / ĝ(y_i), summing to 1.
+- Both take ``bounds=(low, high)``: the reflection-corrected ĝ, which does not lose the kernel
+  mass past the edges of the action box (off by default, as the paper's eq. 4; see ``kde_density``).
 
 **Numerical range.** Sums of kernels are taken in float64 and fall back to log space
 (log-sum-exp over the kernels) wherever they would underflow, and the normalising constant
@@ -82,14 +84,52 @@ def _log_kernel_sums(q: torch.Tensor, x: torch.Tensor, h: float, chunk_elements:
     return out
 
 
-def _density64(query: torch.Tensor, data: torch.Tensor, h: float, chunk_elements: int) -> tuple[torch.Tensor, torch.Tensor]:
+def _check_bounds(bounds, d: int) -> tuple[torch.Tensor, torch.Tensor] | None:
+    """``bounds`` = None or (low, high), numbers or length-D sequences -> two (D,) float64 tensors."""
+    if bounds is None:
+        return None
+    if not isinstance(bounds, (tuple, list)) or len(bounds) != 2:
+        raise ValueError(f"bounds must be None or a pair (low, high), got {bounds!r}")
+    lo, hi = (torch.as_tensor(b, dtype=torch.float64).reshape(-1) for b in bounds)
+    lo, hi = (t.expand(d) if t.numel() == 1 else t for t in (lo, hi))
+    if lo.shape != (d,) or hi.shape != (d,):
+        raise ValueError(f"bounds must hold one number or D = {d} numbers per side, got {tuple(lo.shape)} and {tuple(hi.shape)}")
+    if not (torch.isfinite(lo).all() and torch.isfinite(hi).all() and (lo < hi).all()):
+        raise ValueError(f"bounds must be finite with low < high, got low={lo.tolist()}, high={hi.tolist()}")
+    return lo, hi
+
+
+def _reflect(data: torch.Tensor, bounds: tuple[torch.Tensor, torch.Tensor]) -> torch.Tensor:
+    """The data and their mirror images in every face of the box: (M, D) -> (3^D · M, D) float64.
+
+    Per dimension each point x_d has three images, x_d, 2 low_d − x_d and 2 high_d − x_d; the
+    product over dimensions gives 3^D images per point (the first block is the data itself).
+    """
+    x = data.detach().to(torch.float64)  # (M, D)
+    lo, hi = bounds
+    images = [x]
+    for d in range(x.shape[1]):
+        new = []
+        for img in images:
+            for edge in (lo[d], hi[d]):
+                mirrored = img.clone()
+                mirrored[:, d] = 2 * edge - img[:, d]
+                new.append(mirrored)
+        images += new
+    return torch.cat(images)  # (3^D M, D)
+
+
+def _density64(
+    query: torch.Tensor, data: torch.Tensor, h: float, chunk_elements: int, bounds: tuple[torch.Tensor, torch.Tensor] | None = None
+) -> tuple[torch.Tensor, torch.Tensor]:
     """(ĝ, log ĝ) at each query point, both (Q,) float64; see ``kde_density``."""
     # Work in units of h, centred on the data's mean (keeps the squared distances below exact
     # enough in float64 even for data far from the origin).
     centre = data.detach().to(torch.float64).mean(dim=0)  # (D,)
     q_c = query.detach().to(torch.float64) - centre  # (Q, D)
-    x_c = data.detach().to(torch.float64) - centre  # (M, D)
-    m, d = x_c.shape
+    m, d = data.shape  # M counts the data, not their mirror images
+    points = data.detach().to(torch.float64) if bounds is None else _reflect(data, bounds)  # (M or 3^D M, D)
+    x_c = points - centre
     s = _kernel_sums(q_c / h, x_c / h, chunk_elements)  # (Q,)
     log_s = torch.log(s)  # (Q,)
     bad = ~(s > 0)  # every kernel underflowed, or coordinates too large to square (NaN)
@@ -129,6 +169,7 @@ def kde_density(
     data: torch.Tensor,
     bandwidth: float = DEFAULT_BANDWIDTH,
     *,
+    bounds=None,
     chunk_elements: int = _CHUNK_ELEMENTS,
 ) -> torch.Tensor:
     """Gaussian kernel density estimate ĝ at each query point: eq. 4 of the DA-IBC paper.
@@ -139,10 +180,24 @@ def kde_density(
     action dimension, the usual multivariate form with the same bandwidth h on every axis.
     It integrates to 1 over R^D (not over the action box: mass near the bounds spills out).
 
+    **Boundary correction** (``bounds`` = (low, high), off by default). Near an edge of the
+    action box part of each kernel lies outside the box, and no data beyond the edge make up
+    for it: where the density reaches the edge, ĝ there is about half the true density (a
+    quarter in a corner), and 1/ĝ twice the weight it should be. With ``bounds`` the estimate
+    uses the reflection method (Schuster 1985, "Incorporating support constraints into
+    nonparametric estimators of densities", Communications in Statistics A 14): every data
+    point is mirrored in each face of the box, and ĝ_r(q) = 1 / (M h^D) Σ over the data and
+    their images of Π_d K((q_d − x_d) / h), for q inside the box. The spilled mass comes back
+    as the mirror image's mass inside; a density that is flat at an edge is estimated without
+    bias there, and ĝ_r integrates to 1 over the box up to the (tiny, for h much smaller than
+    the box) mass that images carry past the opposite face.
+
     Args:
         query: (Q, D) points at which to evaluate the density, Q >= 1.
         data: (M, D) the samples x_j (e.g. expert actions), M >= 1.
         bandwidth: h > 0, in the units of the data.
+        bounds: None (eq. 4 as written) or (low, high), numbers or (D,) sequences: the box of
+            the reflection correction above (the data should lie inside it).
         chunk_elements: at most this many (query, data) pairs are processed at once, so Q and M
             in the tens of thousands need only a few tens of MB.
 
@@ -154,7 +209,8 @@ def kde_density(
         (a tiny h, or many dimensions: ĝ ~ 1 / (h^D (2π)^(D/2)) at the data points).
     """
     h = _check_kde_args("query", query, data, bandwidth, chunk_elements)
-    dens, _ = _density64(query, data, h, chunk_elements)  # (Q,) float64
+    box = _check_bounds(bounds, data.shape[1])
+    dens, _ = _density64(query, data, h, chunk_elements, box)  # (Q,) float64
     dtype = query.dtype if query.is_floating_point() else torch.float32
     out = dens.to(dtype)
     if not torch.isfinite(out).all():
@@ -165,7 +221,7 @@ def kde_density(
     return out
 
 
-def inverse_density_weights(actions: torch.Tensor, bandwidth: float = DEFAULT_BANDWIDTH) -> torch.Tensor:
+def inverse_density_weights(actions: torch.Tensor, bandwidth: float = DEFAULT_BANDWIDTH, *, bounds=None) -> torch.Tensor:
     """Weights w_i ∝ 1 / ĝ(y_i) of eq. 5 of the DA-IBC paper, normalised to sum to 1.
 
     ĝ is the KDE of eq. 4 over the same actions (each action counts itself, so ĝ(y_i) > 0).
@@ -177,12 +233,16 @@ def inverse_density_weights(actions: torch.Tensor, bandwidth: float = DEFAULT_BA
     Args:
         actions: (M, D) expert actions, M >= 1.
         bandwidth: the KDE bandwidth h.
+        bounds: None (the paper's eq. 4, the default) or (low, high) of the action box, e.g.
+            (-1.0, 1.0): ĝ with the reflection correction (see ``kde_density``), so that
+            actions on and near the box's edges do not get inflated weights.
 
     Returns:
         (M,) non-negative weights summing to 1 (float32 for float32 actions).
     """
     h = _check_kde_args("actions", actions, actions, bandwidth, _CHUNK_ELEMENTS)
-    dens, log_dens = _density64(actions, actions, h, _CHUNK_ELEMENTS)  # (M,) float64
+    box = _check_bounds(bounds, actions.shape[1])
+    dens, log_dens = _density64(actions, actions, h, _CHUNK_ELEMENTS, box)  # (M,) float64
     dtype = actions.dtype if actions.is_floating_point() else torch.float32
     g = dens.to(dtype).to(torch.float64)  # (M,) ĝ(y_i) as kde_density returns it
     w = 1.0 / g

@@ -5,6 +5,8 @@
   with the normalising constant Z(x) summed over a fine grid instead of estimated from
   counter-examples (so models trained with different counter-examples compare fairly).
 - ``expert_rank``: the share of candidates an energy model ranks above the expert's action.
+- ``swerve_rate``: the share of passes of a side road with a swerve towards it, a slight swerve
+  counting half (Table 2 of the steering-EBM paper).
 """
 
 from __future__ import annotations
@@ -92,3 +94,43 @@ def expert_rank(pos_energy: torch.Tensor, cand_energy: torch.Tensor) -> torch.Te
     check_tensor("pos_energy", pos_energy, ndim=1)
     check_tensor("cand_energy", cand_energy, shape=(len(pos_energy), None))
     return (cand_energy < pos_energy[:, None]).float().mean(dim=1)
+
+
+def swerve_rate(toward_side_road, *, slight: float, clear: float, per_pass: bool = False):
+    """Swerve rate as Table 2 of the steering-EBM paper defines it: the share of passes of a side
+    road in which the car swerved towards it, "slight swerves [...] counted as half a swerve".
+
+    Each pass p contributes its peak offset towards the side road, m_p = max_t d_p(t), scored
+
+        1    if m_p >= clear            (a swerve)
+        1/2  if slight <= m_p < clear   (a slight swerve)
+        0    if m_p < slight            (no swerve),
+
+    and the rate is the mean score. The paper judged its nine passes by eye and says slight
+    swerves "are difficult to set a threshold for"; a measured trace needs the two thresholds
+    stated, so they are arguments: ``slight`` above the drift of drivers who keep straight
+    (so that noise is not a swerve), ``clear`` a movement a passenger would call a swerve.
+
+    Args:
+        toward_side_road: (P, T) one trace per pass: the lateral offset (m) towards the side road,
+            relative to where the car was when the road section began (positive = towards it);
+            NaN marks time steps outside the section (each pass needs one finite value).
+        slight: threshold (m) of a slight swerve, > 0.
+        clear: threshold (m) of a full swerve, >= slight.
+        per_pass: return the (P,) scores (0, 0.5 or 1) instead of their mean.
+    Returns:
+        a float in [0, 1], or a (P,) float array.
+    """
+    slight = check_positive("slight", slight)
+    clear = check_positive("clear", clear)
+    if clear < slight:
+        raise ValueError(f"clear must be >= slight, got clear={clear} < slight={slight}")
+    x = toward_side_road.detach().cpu().numpy() if isinstance(toward_side_road, torch.Tensor) else np.asarray(toward_side_road)
+    if x.ndim != 2 or len(x) == 0 or not np.issubdtype(x.dtype, np.number):
+        raise ValueError(f"toward_side_road must be numeric with shape (P, T), P >= 1, got shape {x.shape}")
+    x = x.astype(np.float64)
+    if np.isinf(x).any() or np.isnan(x).all(axis=1).any():
+        raise ValueError("toward_side_road must be finite, with at least one non-NaN value per pass")
+    peak = np.nanmax(x, axis=1)  # (P,)
+    score = np.where(peak >= clear, 1.0, np.where(peak >= slight, 0.5, 0.0))  # (P,)
+    return score if per_pass else float(score.mean())

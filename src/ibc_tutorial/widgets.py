@@ -16,9 +16,10 @@ import matplotlib.pyplot as plt
 import numpy as np
 import torch
 
-from ibc_tutorial.optimizers.dfo import DFOConfig, DFOTrace, dfo_trace
+from ibc_tutorial.optimizers.dfo import INITS, DFOConfig, DFOTrace, dfo_trace
 from ibc_tutorial.optimizers.grid import grid_argmin
 from ibc_tutorial.plotting import DPI
+from ibc_tutorial.plotting.ingredients import draw_dfo_iteration
 
 
 def _png(fig) -> bytes:
@@ -75,28 +76,12 @@ def energy_explorer(model, obs_fn, grid, *, values, value: float | None = None, 
 
 # =========================================================================== chapter 06: DFO iteration stepper
 def _dfo_iteration_figure(trace: DFOTrace, it: int, x: np.ndarray, e: np.ndarray, bins: int):
-    """One iteration of a 1-D ``DFOTrace``: the population's histogram and the energy curve (red)."""
-    s = trace.samples[it - 1].numpy()[:, 0]  # (N,)
-    lo, hi = float(x.min()), float(x.max())
-    counts, edges = np.histogram(s, bins=bins, range=(lo, hi))
-    share = counts / len(s)
+    """One iteration of a 1-D ``DFOTrace``, drawn by ``plotting.ingredients.draw_dfo_iteration``
+    (the one implementation, shared with the static ``plot_dfo_iterations``), with axis labels."""
     fig, ax = plt.subplots(figsize=(6.0, 3.6))
-    ax.bar(edges[:-1], share, width=edges[1] - edges[0], align="edge", color="C0", alpha=0.7, label="samples ỹ_i")
-    ax.set_ylim(0, 1.05 * max(0.25, share.max()))
-    ax.set_xlabel("action y")
+    energy_ax = draw_dfo_iteration(ax, trace, it, x, e, bins)
     ax.set_ylabel("share of samples per bin")
-    ax2 = ax.twinx()
-    ax2.plot(x, e, color="C3", lw=1.5)
-    ax2.set_ylim(e.min() - 0.5, e.min() + 1.3 * (np.percentile(e, 95) - e.min()) + 0.5)
-    ax2.tick_params(axis="y", colors="C3", labelsize=7)
-    ax2.set_ylabel("energy E(x, y) (nats, red)", color="C3")
-    if it == len(trace.samples):
-        ax.axvline(float(trace.action[0]), color="k", lw=2, label="returned ŷ")
-        how = "ŷ drawn from p̃" if trace.config.select == "sample" else "ŷ = the lowest-energy sample (argmax p̃)"
-        ax.set_title(f"iteration {it} (last)\n{how}", fontsize=9)
-    else:
-        ax.set_title(f"iteration {it}\nthen resample, noise σ = {trace.sigmas[it - 1]:.3g}", fontsize=9)
-    ax.legend(loc="upper center", fontsize=7)
+    energy_ax.set_ylabel("energy E(x, y) (nats, red)", color="C3")
     fig.suptitle(f"DFO with init = {trace.config.init}, select = {trace.config.select}")
     fig.tight_layout()
     return fig
@@ -105,7 +90,7 @@ def _dfo_iteration_figure(trace: DFOTrace, it: int, x: np.ndarray, e: np.ndarray
 def dfo_stepper(energy_fn, grid, expert_actions, config: DFOConfig = DFOConfig(n_samples=2000), *, seed: int = 0, bins: int = 60):
     """Step through Algorithm 1 (``optimizers.dfo.dfo_trace``) on a 1-D energy landscape.
 
-    Controls: the iteration shown, the initialisation ("inverse-kde", "kde", "uniform"), the final
+    Controls: the iteration shown, the initialisation (``optimizers.dfo.INITS``), the final
     choice ("sample", "argmax") and the seed. Changing the initialisation, the choice or the seed
     re-runs DFO; the slider only moves through the stored populations. The static companion is
     ``plotting.plot_dfo_iterations``.
@@ -121,7 +106,7 @@ def dfo_stepper(energy_fn, grid, expert_actions, config: DFOConfig = DFOConfig(n
     x = grid[:, 0].numpy()  # (G,)
     e = energy_fn(grid).detach().numpy()  # (G,)
     iteration = w.IntSlider(value=1, min=1, max=config.n_iters, description="iteration")
-    init = w.Dropdown(options=["inverse-kde", "kde", "uniform"], value=config.init, description="init")
+    init = w.Dropdown(options=list(INITS), value=config.init, description="init")
     select = w.Dropdown(options=["sample", "argmax"], value=config.select, description="select")
     seed_box = w.IntText(value=seed, description="seed")
     image = w.Image(format="png")

@@ -22,7 +22,7 @@ Modules, one concern each:
 from ibc_tutorial.driving.bev import CHANNELS, SUPPORTED_SIZES, BEVRenderer, get_raster, get_renderer
 from ibc_tutorial.driving.car import Car, CarConfig
 from ibc_tutorial.driving.env import ENV_IDS, DrivingEnv, EnvConfig, make_env, register_envs
-from ibc_tutorial.driving.expert import PID, Expert, ExpertConfig
+from ibc_tutorial.driving.expert import PID, Expert, ExpertConfig, stops_for_light
 from ibc_tutorial.driving.lights import GREEN, RED, YELLOW, LightSchedule, LightTiming
 from ibc_tutorial.driving.rollout import EpisodeResult, Policy, rollout
 from ibc_tutorial.driving.routes import Route, random_route

@@ -4,6 +4,10 @@ The measures of the DA-IBC paper's Fig. 5 analogue (free driving in town02, chap
 multimodal agent leaves one junction approach by different exits on different visits and so
 covers more of the town; a unimodal one always turns the same way. The inputs are the
 per-step records of ``driving.rollout(..., record_steps=True)`` (its ``EpisodeResult.trace``).
+
+And two measures of the expert's labels (chapter 07): ``light_label_conflicts`` (how often the
+BEV's light channels contradict the expert near a stop line, per encoding) and
+``speed_control_report`` (derivative kicks and throttle/brake chatter in its acceleration).
 """
 
 from __future__ import annotations
@@ -84,3 +88,129 @@ def road_coverage(town, poses: np.ndarray, radius: float = 3.0, *, chunk: int = 
         aligned = lane_dir[a:a + chunk] @ car_dir.T >= np.cos(COVERAGE_HEADING)  # (C, T): cos(heading gap) >= cos 60°
         covered[a:a + chunk] = ((d2 <= radius * radius) & aligned).any(1)
     return float(covered.mean())
+
+
+def stop_line_gaps(town, poses: np.ndarray, lanes: np.ndarray, car_half: float = 2.3) -> tuple[np.ndarray, np.ndarray]:
+    """Distance from the front bumper to the stop line of the lane being driven, and its light.
+
+    Args:
+        town: a town name or ``Town``.
+        poses: (N, 3) poses (x, y, yaw); lanes: (N,) the lane of each pose.
+        car_half: half the car's length (metres).
+
+    Returns:
+        gaps (N,) metres (NaN off a light-controlled approach lane; negative past the line) and
+        light (N,) ids of those lines (-1 where none).
+    """
+    from ibc_tutorial.driving.lights import STOP_LINE_THICKNESS
+
+    tw = _town(town)
+    poses = np.asarray(poses, dtype=float).reshape(-1, 3)
+    lanes = np.asarray(lanes).reshape(-1)
+    light = np.array([tw.light_of_approach.get(tw.approach_of_lane.get(int(ln), -1), -1) for ln in lanes], dtype=int)
+    gaps = np.full(len(poses), np.nan)
+    on = light >= 0
+    if on.any():
+        entry = np.array([tw.stop_lines[k].entry for k in light[on]])  # (M, 2)
+        d = np.array([tw.stop_lines[k].direction for k in light[on]])  # (M, 2) unit travel direction
+        front = poses[on, :2] + car_half * np.stack([np.cos(poses[on, 2]), np.sin(poses[on, 2])], axis=1)
+        gaps[on] = ((entry - STOP_LINE_THICKNESS * d - front) * d).sum(1)
+    return gaps, light
+
+
+def light_label_conflicts(log, stop_distance: float = 9.5, stopped_speed: float = 0.1) -> dict:
+    """How the expert's labels near a stop line agree with what the light channels show.
+
+    Every sample whose front bumper is within ``stop_distance`` metres before the stop line of its
+    own lane is classed by that light's state at the sample (green, yellow, red) and by what the
+    expert does on this approach from then on: ``"stop"`` if the car comes to rest
+    (speed < ``stopped_speed`` with a label that does not pull away) before leaving the lane;
+    ``"go"`` if it drives on into the junction, not braking at this sample; ``"slowing"`` if it
+    brakes now yet drives on; ``"changed"`` if the light changed between the sample and that
+    outcome (the state at the sample did not decide it). Samples of an episode that ends on the
+    approach are left out. A *conflict* of an encoding is a sample whose channel value cannot
+    tell the label apart from the opposite one:
+
+    * ``"binary"`` (red and yellow drawn alike, green not drawn): yellow or red with "go", or green
+      with "stop";
+    * ``"red only"`` (yellow not drawn): red with "go", yellow or green with "stop";
+    * ``"intensity"`` (each state its own value): red with "go" or green with "stop"; at yellow the
+      expert's choice follows from the distance and the speed (``ExpertConfig.yellow_brake``),
+      which the BEV and the state show, so it is no conflict of the channel.
+
+    Args:
+        log: a ``DemoLog`` (pose, speed, lights, lane, episode).
+
+    Returns:
+        ``{"counts": {(state, label): n}, "conflicts": {encoding: n}, "near": n}``.
+    """
+    from ibc_tutorial.driving.lights import GREEN, RED, YELLOW
+
+    stop_distance = check_positive("stop_distance", stop_distance)
+    gaps, light = stop_line_gaps(log.town, log.pose, log.lane)
+    near = np.flatnonzero((gaps > 0) & (gaps <= stop_distance))
+    resting = (log.speed < stopped_speed) & (log.action[:, 1] <= 0)  # (N,) at rest, not pulling away
+    label = {}
+    for i in near:  # walk on along the approach lane to the rest or to the junction
+        j = i
+        while not resting[j] and j + 1 < len(log) and log.episode[j + 1] == log.episode[i] \
+                and log.lane[j + 1] == log.lane[i]:
+            j += 1
+        if not resting[j] and (j + 1 == len(log) or log.episode[j + 1] != log.episode[i]):
+            continue  # the episode ends on the approach: unknown
+        if (log.lights[i:j + 1, light[i]] != log.lights[i, light[i]]).any():
+            label[i] = "changed"  # the light changed before the outcome: the sample did not decide it
+        elif resting[j]:
+            label[i] = "stop"
+        else:
+            label[i] = "go" if log.action[i, 1] >= 0 else "slowing"
+    near = np.array([i for i in near if i in label], dtype=int)
+    names = {GREEN: "green", YELLOW: "yellow", RED: "red"}
+    counts = {(s, lab): 0 for s in names.values() for lab in ("stop", "go", "slowing", "changed")}
+    for i in near:
+        counts[(names[int(log.lights[i, light[i]])], label[i])] += 1
+    c = counts
+    conflicts = {
+        "binary": c[("yellow", "go")] + c[("red", "go")] + c[("green", "stop")],
+        "red only": c[("red", "go")] + c[("yellow", "stop")] + c[("green", "stop")],
+        "intensity": c[("red", "go")] + c[("green", "stop")],
+    }
+    return {"counts": counts, "conflicts": conflicts, "near": int(len(near))}
+
+
+def speed_control_report(town: str = "town02", seeds=range(5), steps: int = 3000, config=None) -> dict:
+    """How smooth the expert's acceleration labels are, over routeless drives of ``steps`` steps.
+
+    Returns ``{"switch_jump": (S,), "sign_changes": (K,)}``: per drive, the largest change of the
+    acceleration label at a step where the target speed switches between cruise and turn speed
+    (a derivative kick shows here), and per stop for a light (a run of steps with a stop line to
+    stop at), how often the label's sign flips between throttle and brake (chatter).
+    """
+    from ibc_tutorial.driving.env import make_env
+    from ibc_tutorial.driving.expert import Expert, ExpertConfig
+
+    config = ExpertConfig() if config is None else config
+    env = make_env(town, bev_size=32, routeless=True, max_steps=steps)
+    speeds = {config.cruise_speed, config.turn_speed}
+    jumps, flips = [], []
+    for seed in seeds:
+        env.reset(seed=int(seed))
+        expert = Expert(env, config)
+        acc, target, stopping = [], [], []
+        for _ in range(steps):
+            a = expert.act()
+            acc.append(float(a[1]))
+            target.append(expert.last["target_speed"])
+            stopping.append(expert.last["stop_distance"] is not None)
+            _, _, terminated, truncated, _ = env.step(a)
+            if terminated or truncated:
+                break
+        acc, target = np.array(acc), np.array(target)  # (T,), (T,)
+        switch = [k for k in range(1, len(target)) if {target[k - 1], target[k]} == speeds]
+        jumps.append(max((abs(acc[k] - acc[k - 1]) for k in switch), default=0.0))
+        edges = np.flatnonzero(np.diff(np.r_[0, np.array(stopping, dtype=int), 0]))
+        for a0, a1 in zip(edges[::2], edges[1::2]):
+            sign = np.sign(acc[a0:a1])
+            sign = sign[sign != 0]
+            flips.append(int((np.diff(sign) != 0).sum()))
+    return {"switch_jump": np.array(jumps), "sign_changes": np.array(flips, dtype=int)}

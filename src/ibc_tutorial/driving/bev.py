@@ -5,7 +5,16 @@ The five binary channels follow the DA-IBC paper (sec. 2.1 and Fig. 1): 0 drivab
 -9 and -1 of a queue whose last entry is the current step (Roach's convention, which the
 paper's BEV comes from), i.e. 15, 8 and 0 steps ago, clamped at the episode's start. A head
 showing yellow is drawn as red: the channel answers "must the car stop here?", the question
-the expert answers too (it stops for red and yellow).
+the expert answers too (it stops for red and for a yellow it can stop for with 4 m/s^2).
+
+The encoding, measured (``driving.analysis.light_label_conflicts``, chapter 07): within 9.5 m of
+its stop line, this flag contradicts the expert's label only when the expert drives through a
+yellow it can no longer stop for (4 of about 6,700 such samples of the ten-route town01 data);
+drawing yellow as nothing would contradict its 60 yellow stops instead. The paper's Fig. 1(d)
+and Roach draw lights in every state by intensity; the planned encoding is red 1.0, yellow 0.6,
+green 0.3 in these same channels, which removes the 4. It changes the BEV from 0/1 bits to
+float levels, so it is to land together with the dataset renderer, the agents' encoder and
+retrained agents (``docs/design.md``, section *The bird's-eye view*).
 
 The 192 x 192 view covers 38.4 m at 5 px/m, heading up, with the car 40 px above the bottom
 edge. It is rendered by one gather from the town raster: every raster pixel holds a byte with

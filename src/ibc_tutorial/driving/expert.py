@@ -8,12 +8,14 @@ point trajectory and a PID controller"):
   random legal exit at each junction;
 * steering: a PID on the angle between the car's heading and the direction to a target
   waypoint ``lookahead_m`` ahead (``turn_lookahead_m`` when a turn is near);
-* speed: a PID towards ``cruise_speed`` (``turn_speed`` in and just before turns); the throttle
+* speed: a PID towards ``cruise_speed`` (``turn_speed`` in and just before turns), its
+  derivative on the measured speed so that a switch of the target gives no kick; the throttle
   is scaled by ``max(1 - |steer|, 0.25)``;
 * lights: a red or yellow stop line of its lane within ``stop_distance_m`` ahead stops the car
   before the line, braking with the constant deceleration that stops it ``stop_margin_m``
-  short of the line once that deceleration exceeds ``brake_trigger``, and holding full brake
-  there; a yellow light that it can no longer stop for (it would need more than full
+  short of the line once that deceleration exceeds ``brake_trigger`` (once begun, the stop
+  runs to its end without handing back to the PID, so it never chatters between throttle and
+  brake), and holding full brake there; a yellow light that it can no longer stop for (it would need more than full
   braking) is passed. Red lights are never passed.
 
 The action is [steer, throttle - brake] in [-1, 1]^2. Optional steering noise (short
@@ -66,6 +68,9 @@ class ExpertConfig:
     """Deceleration (m/s^2) needed to stop at the line above which braking begins."""
     yellow_brake: float = 4.0
     """At yellow, stop if this deceleration (m/s^2) suffices to stop before the line, else go on."""
+    smooth_speed_control: bool = True
+    """False: the speed control before issue 12, kept to measure the change: derivative on the
+    error (a kick when the target switches) and stops handed back to the PID (chatter)."""
     min_throttle_scale: float = 0.25
     """Throttle is scaled by max(1 - |steer|, this)."""
     steer_noise: float = 0.0
@@ -82,7 +87,13 @@ class ExpertConfig:
 
 
 class PID:
-    """A discrete PID controller: ``u = kp e + ki sum(e) dt + kd (e - e_prev) / dt``."""
+    """A discrete PID controller: ``u = kp e + ki sum(e) dt - kd (y - y_prev) / dt``.
+
+    The derivative acts on the measurement ``y`` ("derivative on measurement"), not on the
+    error: a step of the set point (the expert's target speed switching between 6 and 4.5 m/s)
+    then gives no derivative kick, while the damping of the measured motion is the same.
+    Without a measurement the derivative falls back to the error's, ``kd (e - e_prev) / dt``.
+    """
 
     def __init__(self, kp: float, ki: float, kd: float, dt: float, integral_limit: float = 10.0):
         self.kp, self.ki, self.kd, self.dt = kp, ki, kd, dt
@@ -93,12 +104,27 @@ class PID:
         self.integral = 0.0
         self.prev: float | None = None
 
-    def step(self, error: float) -> float:
-        """Controller output for the current ``error``."""
+    def step(self, error: float, measurement: float | None = None) -> float:
+        """Controller output for the current ``error`` (and the measured value it is the error of)."""
         self.integral = min(max(self.integral + error * self.dt, -self.integral_limit), self.integral_limit)
-        deriv = 0.0 if self.prev is None else (error - self.prev) / self.dt
-        self.prev = error
+        now = error if measurement is None else -measurement  # e = r - y: de/dt = -dy/dt at fixed r
+        deriv = 0.0 if self.prev is None else (now - self.prev) / self.dt
+        self.prev = now
         return self.kp * error + self.ki * self.integral + self.kd * deriv
+
+
+def stops_for_light(state: int, gap_m: float, speed: float, config: ExpertConfig = ExpertConfig()) -> bool:
+    """Whether the expert stops for its lane's light: ``state`` (0 green, 1 yellow, 2 red) with the
+    front bumper ``gap_m`` metres before the stop line at ``speed`` m/s.
+
+    Beyond ``config.stop_distance_m`` the light is not yet considered; red stops; green does
+    not; yellow stops only if ``speed^2 / (2 gap)`` <= ``config.yellow_brake`` (m/s^2).
+    """
+    if gap_m > config.stop_distance_m or state == GREEN:
+        return False
+    if state == RED:
+        return True
+    return gap_m > 0 and speed * speed / (2 * gap_m) <= config.yellow_brake
 
 
 def _sim_of(env):
@@ -139,6 +165,7 @@ class Expert:
         self._passed = 0
         self._noise_left = 0
         self._noise_value = 0.0
+        self._braking = False
         self.last: dict = {}
 
     # ------------------------------------------------------------------ path
@@ -171,6 +198,7 @@ class Expert:
         self.steer_pid.reset()
         self.speed_pid.reset()
         self._noise_left = 0
+        self._braking = False
         self._extend()
 
     def _add_stop(self, lane: int, s_end: float) -> None:
@@ -257,13 +285,17 @@ class Expert:
         if stop_d is not None:
             room = stop_d - c.stop_margin_m
             need = speed * speed / (2 * max(room, 0.05))
-            if room <= 0.5:
-                acc = -1.0
-            elif need >= c.brake_trigger:
+            smooth = c.smooth_speed_control
+            if room <= 0.5 or (smooth and self._braking and speed < 0.1):
+                acc = -1.0  # at the line, or stopped short of it: hold the brake
+            elif need >= c.brake_trigger or (smooth and self._braking):
+                self._braking = True  # once begun, the constant-deceleration stop runs to its end
                 acc = -min(need / self.max_brake, 1.0)
             else:
                 target = min(target, math.sqrt(2 * c.brake_trigger * room))
-        u = self.speed_pid.step(target - speed)
+        else:
+            self._braking = False
+        u = self.speed_pid.step(target - speed, measurement=speed if c.smooth_speed_control else None)
         if acc is None:
             acc = u if u < 0 else u * max(1.0 - abs(steer), c.min_throttle_scale)
         acc = min(max(acc, -1.0), 1.0)
@@ -279,15 +311,7 @@ class Expert:
             d = s_entry - STOP_LINE_THICKNESS - (s_car + self.car_half)
             if d > self.config.stop_distance_m:
                 return None
-            state = lights[light]
-            if state == GREEN:
-                return None
-            if state == RED:
-                return d
-            # yellow: stop if a firm (not full) brake can still stop before the line, else go on
-            if d > 0 and speed * speed / (2 * d) <= self.config.yellow_brake:
-                return d
-            return None
+            return d if stops_for_light(int(lights[light]), d, speed, self.config) else None
         return None
 
     # ------------------------------------------------------------------ noise

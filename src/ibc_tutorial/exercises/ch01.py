@@ -7,6 +7,9 @@
 - ``check_swerve(fn)``: ``fn(y (E, T)) -> (E,)``, how far each episode moved towards the side
   road, which branches off to the right (-y, as y points to the left), from its first lateral
   offset: max_t (y_0 - y_t), at least 0.
+- ``check_predict_mae_side(fn)``: ``fn(n_right, n_left) -> "right" | "left" | "anywhere in the gap"``,
+  a prediction of where the constant of least mean absolute error lies for two modes of actions
+  (a question about the chapter's finding, checked against the minimum on a grid).
 
 Steering, as everywhere in the book: +1 turns right, -1 left.
 
@@ -163,3 +166,51 @@ def check_swerve(fn) -> Feedback:
         return hint("for some episodes your value differs from the largest move towards the side road (y decreasing) since the first time step.")
 
     return run_check(check, "swerve")
+
+
+# --------------------------------------------------------------------------- 4. prediction: where the MAE lands
+MAE_ANSWERS = ("right", "left", "anywhere in the gap")
+
+
+def _mae_optimal_side(n_right: int, n_left: int) -> str:
+    """Where the constants of least mean absolute error lie for ``n_right`` actions near +0.75 and
+    ``n_left`` near -0.7, computed on a grid of constants (the library's answer to the prediction)."""
+    actions = _bimodal_actions(7, n_right, n_left).double()  # (N,)
+    grid = torch.linspace(-1, 1, 4001, dtype=torch.float64)  # (G,)
+    mae = (actions[None, :] - grid[:, None]).abs().mean(1)  # (G,)
+    best = grid[mae <= mae.min() + 1e-9]  # every constant that attains the minimum (flat to ~1e-15)
+    gap = (float(actions[actions < 0].max()), float(actions[actions > 0].min()))
+    if float(best.min()) <= gap[0] + 1e-3 and float(best.max()) >= gap[1] - 1e-3:
+        return "anywhere in the gap"
+    return "right" if float(best.mean()) > 0 else "left"
+
+
+def check_predict_mae_side(fn) -> Feedback:
+    """Check ``fn(n_right, n_left) -> one of MAE_ANSWERS``: the reader's prediction of where the
+    constant of least mean absolute error lies, for actions from two modes (right about +0.75,
+    left about -0.7) with ``n_right`` and ``n_left`` samples, against the minimum on a grid."""
+
+    def check() -> Feedback:
+        cases = [(60, 40), (30, 70), (50, 50), (51, 49), (10, 90), (80, 80)]
+        for n_right, n_left in cases:
+            answer = fn(n_right, n_left)
+            if answer not in MAE_ANSWERS:
+                return hint(f"answer with one of {MAE_ANSWERS}, got {answer!r}.")
+            truth = _mae_optimal_side(n_right, n_left)
+            if answer == truth:
+                continue
+            if truth == "anywhere in the gap":
+                return hint(f"with {n_right} actions on each side, count the samples above and below a constant in the gap: "
+                            "does moving it within the gap change the mean absolute error?")
+            if answer == "anywhere in the gap":
+                if abs(n_right - n_left) <= 2:
+                    return hint(f"for {n_right} right and {n_left} left: even one sample more on one side breaks the tie. "
+                                "The MAE's slope is (#below - #above)/N; where is it zero?")
+                return hint("you answer like the mean (the MSE's optimum) or as if the counts did not matter. "
+                            f"For {n_right} right and {n_left} left, which value has half the samples on each side?")
+            return hint(f"for {n_right} right and {n_left} left you picked the smaller mode: the median lies in the mode "
+                        "that holds more than half of the samples.")
+        return correct("A median: in the bigger mode when the counts differ, anywhere in the gap when they are equal. "
+                       "So an MAE policy follows the majority at the side road (straight on), but at the tree's near tie it is arbitrary.")
+
+    return run_check(check, "`predict_mae_side`")

@@ -4,6 +4,9 @@
   ``fn(alpha (B, D), beta (B, D), actions (B, D)) -> scalar``.
 - ``check_mdn_nll(fn)``: the mixture-density NLL of the steering-EBM paper's MDN baseline,
   ``fn(logits (B, K), means (B, K, D), stds (B, K, D), actions (B, D)) -> scalar``.
+- ``check_beta_can_represent(fn)``: ``fn(shape) -> bool`` for each shape of ``BETA_SHAPES``, a
+  prediction of what a Beta density can look like (a question about the chapter's finding,
+  checked against a search over (alpha, beta)).
 
 Each compares the reader's function with an independent reference (``torch.distributions``)
 on random inputs and, when they differ, tests the usual mistakes one by one to name the
@@ -193,3 +196,53 @@ def check_mdn_nll(fn) -> Feedback:
         return correct("Your MDN loss matches torch.distributions.MixtureSameFamily, also far from every component.")
 
     return run_check(check, "`mdn_nll`")
+
+
+# --------------------------------------------------------------------------- 3. prediction: what a Beta can represent
+BETA_SHAPES = ("flat", "one peak inside", "peaks at both ends", "two peaks inside")
+
+
+def _beta_shape_exists(shape: str) -> bool:
+    """Whether some Beta(alpha, beta) on a grid of 3600 pairs (0.05 ... 55) has ``shape``: the
+    library's answer, computed from the densities as the chapter does."""
+    conc = torch.exp(torch.linspace(-3.0, 4.0, 60, dtype=torch.float64))
+    conc = torch.cat([conc, torch.ones(1, dtype=torch.float64)])  # include alpha = beta = 1
+    a, b = torch.meshgrid(conc, conc, indexing="ij")
+    z = torch.linspace(0.001, 0.999, 2001, dtype=torch.float64)
+    logf = torch.distributions.Beta(a.reshape(-1, 1), b.reshape(-1, 1)).log_prob(z)  # (P, G)
+    mid = logf[:, 1:-1]
+    peaks = ((mid > logf[:, :-2]) & (mid > logf[:, 2:])).sum(dim=1)  # (P,) interior local maxima
+    if shape == "flat":
+        return bool(((logf.max(1).values - logf.min(1).values) < 1e-9).any())
+    if shape == "one peak inside":
+        return bool((peaks == 1).any())
+    if shape == "two peaks inside":
+        return bool((peaks >= 2).any())
+    inner_max = logf[:, 100:-100].max(1).values
+    return bool(((logf[:, 0] > inner_max) & (logf[:, -1] > inner_max)).any())  # peaks at both ends
+
+
+def check_beta_can_represent(fn) -> Feedback:
+    """Check ``fn(shape) -> bool`` for every shape in ``BETA_SHAPES``: the reader's prediction of
+    whether some Beta density on (0, 1) has that shape, against a search over (alpha, beta)."""
+
+    def check() -> Feedback:
+        for shape in BETA_SHAPES:
+            answer = fn(shape)
+            if not isinstance(answer, bool):
+                return hint(f"answer True or False for each shape, got {answer!r} for {shape!r}.")
+            truth = _beta_shape_exists(shape)
+            if answer == truth:
+                continue
+            if shape == "two peaks inside":
+                return hint("look at the second derivative of log f in the chapter: can log f be concave near one point and "
+                            "have a dip in between two peaks, with alpha and beta fixed?")
+            if shape == "peaks at both ends":
+                return hint("try alpha and beta both below 1: what does the density do near z = 0 and z = 1?")
+            if shape == "flat":
+                return hint("evaluate the density for alpha = beta = 1.")
+            return hint("try alpha = beta = 2: where is the density highest?")
+        return correct("A Beta has at most one peak inside the interval; its 'two modes' can only be the two walls of a U, "
+                       "at full lock. That is why the chapter's Beta policy is flat or U-shaped at the tree.")
+
+    return run_check(check, "`beta_can_represent`")

@@ -6,6 +6,9 @@
   ``fn(candidates (K, D), actions (B, D), temperature) -> (B, K)``.
 - ``check_whiteness(fn)``: the whiteness of eq. 2 of the steering-EBM paper,
   ``fn(commands (T,), dt) -> float``.
+- ``check_decision_prediction(fn)``: the chapter's finding, predicted (``fn() -> dict``): what an MSE and
+  an MAE regression, the argmin and the draw of an energy model command where the tree experts
+  decide, when 70 % of them pass on the right (checked against the demonstrations' statistics).
 
 Each compares the reader's function with an independent reference (``torch.nn.functional``,
 numpy) and, when they differ, tries the usual mistakes one by one to name the one made.
@@ -20,6 +23,7 @@ import torch
 import torch.nn.functional as F
 
 from ibc_tutorial.exercises.core import Feedback, correct, hint, run_check
+from ibc_tutorial.toy import TreeConfig, TreeWorld
 
 
 def _close(a, b, rtol: float = 1e-4, atol: float = 1e-4) -> bool:
@@ -179,3 +183,73 @@ def check_whiteness(fn) -> Feedback:
         return correct("Your whiteness matches eq. 2: the RMS rate of change of the command.")
 
     return run_check(check, "`whiteness`")
+
+
+# --------------------------------------------------------------------------- the finding, predicted
+DECISION_RIGHT_PROB = 0.7
+"""Share of the experts of the exercise's tree world that pass on the right."""
+DECISION_WINDOW = (8.0, 10.0)
+"""The observations (m before the tree) where the experts have just decided."""
+DECISION_KEYS = ("mse", "mae", "argmin", "sample_right")
+
+
+def decision_reference() -> dict:
+    """What the four policies command in ``DECISION_WINDOW`` of a tree world whose experts pass on
+    the right with ``DECISION_RIGHT_PROB``, computed from its demonstrations (200 episodes, seed 0):
+    the mean of the actions there (MSE's minimiser), their median (MAE's), the side of the deeper
+    valley of p(y | x) (the more frequent side), and the share of draws to the right."""
+
+    dtype = torch.get_default_dtype()
+    torch.set_default_dtype(torch.float64)  # the same reference whatever the reader's default
+    try:
+        world = TreeWorld(TreeConfig(right_prob=DECISION_RIGHT_PROB))
+        demos = world.expert_demonstrations(200, seed=0)
+        a = demos.actions[world.in_window(demos.obs, DECISION_WINDOW), 0]  # (N,)
+    finally:
+        torch.set_default_dtype(dtype)
+    right = float((a > 0).double().mean())
+    return {"mse": float(a.mean()), "mae": float(a.median()), "argmin": "right" if right > 0.5 else "left", "sample_right": right}
+
+
+def check_decision_prediction(fn) -> Feedback:
+    """Check the reader's prediction ``fn()`` = {"mse": command, "mae": command, "argmin": "right" |
+    "left", "sample_right": share} against ``decision_reference()``: commands within 0.15, the
+    share within 0.1. A stub raises NotImplementedError ("not attempted")."""
+
+    def check() -> Feedback:
+        prediction = fn()
+        if not isinstance(prediction, dict) or set(prediction) != set(DECISION_KEYS):
+            got = sorted(prediction) if isinstance(prediction, dict) else type(prediction).__name__
+            return hint(f"prediction must be a dict with the keys {list(DECISION_KEYS)}, got {got}.")
+        ref = decision_reference()
+        side = str(prediction["argmin"]).strip().lower()
+        if side not in ("right", "left"):
+            return hint('"argmin" is a side of the tree: "right" or "left".')
+        try:
+            mse, mae, share = (float(prediction[k]) for k in ("mse", "mae", "sample_right"))
+        except (TypeError, ValueError):
+            return hint('"mse" and "mae" are steering commands in [-1, 1] and "sample_right" a share in [0, 1]: give numbers.')
+        if abs(mse - ref["mse"]) > 0.15:
+            if abs(mse) < 0.1:
+                return hint("MSE regression averages the two modes, but weighted by how often each occurs: 70 % of the experts steer right, so the average is not 0.")
+            if abs(mse - ref["mae"]) <= 0.15 or abs(mse) > 0.7:
+                return hint("the minimiser of the squared error is the *mean* of the actions: a mixture of +0.9 (70 %) and −0.9 (30 %) averages to a command between the modes, on neither of them.")
+            return hint("MSE regression commands the mean of the experts' actions there; weigh the two modes (about ±0.9 in this window) by their shares.")
+        if abs(mae - ref["mae"]) > 0.15:
+            if abs(mae - ref["mse"]) <= 0.15:
+                return hint("the minimiser of the absolute error is not the mean but the *median*: with 70 % of the actions in the right mode, where does the middle one lie?")
+            if mae < 0:
+                return hint("the median lies in the mode that holds more than half of the actions: here the right one (+).")
+            return hint("MAE regression commands the median of the experts' actions: the middle one of a set where 70 % sit near +0.9.")
+        if side != ref["argmin"]:
+            return hint("the energy is −log p(y | x) up to a constant, so the deepest valley is the *most probable* action: on the side most experts take.")
+        if abs(share - ref["sample_right"]) > 0.1:
+            if share > 0.95:
+                return hint("a draw from p(y | x) does not always take the deeper valley: it takes each side as often as the experts did.")
+            return hint("drawing from p(y | x) reproduces the experts' shares: how often do they pass on the right?")
+        return correct(f"Right: MSE averages ({ref['mse']:.2f}, between the modes), MAE takes the median "
+                       f"({ref['mae']:.2f}, inside the majority mode), the argmin the deeper valley ({ref['argmin']}), "
+                       f"and drawing reproduces the shares ({ref['sample_right']:.2f} to the right). At 50/50 the "
+                       "mean is 0: straight into the tree, and a memory of the previous action does not help it.")
+
+    return run_check(check, "`predict_decision`")

@@ -4,10 +4,13 @@
   paper), ``fn(expert_actions (M, D), batch_size, n_neg, sigma, generator) -> (B, N, D)``.
 - ``check_grid_nll(fn)``: the held-out NLL of chapter 04, with Z(x) summed over a grid,
   ``fn(pos_energy (B,), grid_energy (B, G), cell_volume) -> (B,)``.
+- ``check_predicted_shares(fn)``: the chapter's finding, the tilt of a DA-IBC landscape:
+  ``fn(valid_actions (K, 2), expert_actions (M, 2), sigma) -> (K,)`` shares ∝ 1/q.
 
 The sampler is random, so its checker tests properties: the shape, draws from the given actions
 (with replacement, independently per sample), the noise's scale (mean and variance of the
-counter-examples against the expert set's plus σ²) and the use of the generator.
+counter-examples against the expert set's plus σ²), its Gaussian shape and independence per
+coordinate, no clipping to the box, and the use of the generator.
 """
 
 from __future__ import annotations
@@ -84,6 +87,27 @@ def check_expert_negatives(fn) -> Feedback:
             if ((var - (var0 + sigma**4)).abs() / (var0 + sigma**4) < 0.05).all() or ((var - (var0 + sigma)).abs() / (var0 + sigma) < 0.05).all():
                 return hint("the noise has the wrong scale: σ is the standard deviation of N(0, σ²I), so multiply standard-normal draws by σ.")
             return hint(f"the counter-examples' variance per dimension is {var.tolist()} but should be the expert set's plus σ² = {(var0 + sigma**2).tolist()}.")
+        # the noise's shape: Gaussian and independent per coordinate (one action, many draws)
+        one = torch.tensor([[0.2, -0.3]])
+        noise = (fn(one.clone(), 500, 200, sigma, _gen(5)).reshape(-1, 2).double() - one.double()) / sigma  # (100000, 2) in units of σ
+        within1 = float((noise.abs() <= 1).double().mean())  # N(0, 1): 0.683
+        within2 = float((noise.abs() <= 2).double().mean())  # N(0, 1): 0.954
+        kurtosis = float((noise**4).mean() / (noise**2).mean() ** 2)  # N(0, 1): 3
+        if abs(within1 - 0.6827) > 0.01 or abs(within2 - 0.9545) > 0.01 or abs(kurtosis - 3) > 0.15:
+            return hint(
+                f"the noise has the right variance but not the Gaussian shape: {within1:.0%} of it lies within one σ, "
+                f"where N(0, σ²) puts 68 % (its kurtosis is {kurtosis:.2f}, a Gaussian's 3). Draw it with torch.randn, times σ."
+            )
+        if abs(float(torch.corrcoef(noise.T)[0, 1])) > 0.02:
+            return hint("the noise of the two coordinates is correlated: N(0, σ²I) draws every coordinate independently.")
+        # no clipping: near the edge of the box, some counter-examples must fall outside it
+        edge = torch.tensor([[0.95, -0.95], [1.0, -1.0]])
+        near = fn(edge.clone(), 100, 50, 0.3, _gen(6)).double()  # (100, 50, 2)
+        if not (near.abs() > 1).any() or (near.abs() == 1).double().mean() > 0.01:
+            return hint(
+                "your counter-examples stay inside [-1, 1] (or pile up on its edges): do not clip them. The chapter explains why: "
+                "clipping stacks counter-examples exactly on the bounds, where the expert itself often acts."
+            )
         # reproducible with the generator
         a = fn(_EXPERT.clone(), 3, 5, 0.2, _gen(7))
         b = fn(_EXPERT.clone(), 3, 5, 0.2, _gen(7))
@@ -138,3 +162,60 @@ def _close(a, b, rtol: float = 1e-4, atol: float = 1e-4) -> bool:
     a = torch.as_tensor(a, dtype=torch.float64)
     b = torch.as_tensor(b, dtype=torch.float64)
     return a.shape == b.shape and bool(torch.isfinite(a).all()) and bool(torch.allclose(a, b, rtol=rtol, atol=atol))
+
+
+# --------------------------------------------------------------------------- the tilt of a DA-IBC landscape
+def _junction_like() -> torch.Tensor:
+    """(M, 2) expert actions shaped like the chapter's: a crowded cruise cloud and two rare turns."""
+    g = _gen(11)
+    cruise = torch.tensor([0.0, 0.35]) + 0.05 * torch.randn(300, 2, generator=g, dtype=torch.float64)
+    left = torch.tensor([-0.7, 0.1]) + 0.02 * torch.randn(30, 2, generator=g, dtype=torch.float64)
+    right = torch.tensor([0.7, 0.1]) + 0.02 * torch.randn(15, 2, generator=g, dtype=torch.float64)
+    return torch.cat([cruise, left, right])
+
+
+def _q(points: torch.Tensor, actions: torch.Tensor, bandwidth: float) -> torch.Tensor:
+    """Density of expert actions blurred by N(0, bandwidth² I) at points (K, 2) -> (K,), float64."""
+    sq = ((points.double()[:, None, :] - actions.double()[None, :, :]) ** 2).sum(-1)  # (K, M)
+    return torch.exp(-sq / (2 * bandwidth**2)).mean(1) / (2 * math.pi * bandwidth**2)
+
+
+def _normalise(v: torch.Tensor) -> torch.Tensor:
+    return v / v.sum()
+
+
+def check_predicted_shares(fn) -> Feedback:
+    """Check ``fn(valid_actions (K, 2), expert_actions (M, 2), sigma) -> (K,)``: the share of p_θ's mass
+    a DA-IBC model puts near each of K valid actions the expert takes equally often, as the
+    density-ratio argument predicts: e^(−E) ∝ p(y|x) / q(y), q the expert actions blurred by σ."""
+
+    def check() -> Feedback:
+        actions = _junction_like()
+        modes = torch.tensor([[-0.7, 0.1], [0.0, 0.35], [0.7, 0.1]], dtype=torch.float64)
+        out = fn(modes.clone(), actions.clone(), 0.1)
+        if not isinstance(out, torch.Tensor) or tuple(out.shape) != (3,):
+            return hint(f"predicted_shares must return a torch.Tensor of shape (K,) = (3,), one share per valid action, got {getattr(out, 'shape', type(out).__name__)}.")
+        out = out.detach().double()
+        if not torch.isfinite(out).all():
+            return hint("predicted_shares returned NaN or infinite values.")
+        ref = _normalise(1 / _q(modes, actions, 0.1))
+        if not _close(out, ref, rtol=1e-3, atol=1e-4):
+            if _close(out, torch.full((3,), 1 / 3, dtype=torch.float64)):
+                return hint("one third each is what the expert does, p(y|x). But the model does not learn p(y|x): with counter-examples drawn from q, InfoNCE is best served by e^(−E) ∝ p(y|x) / q(y).")
+            if _close(out, _normalise(_q(modes, actions, 0.1)), rtol=1e-3, atol=1e-4):
+                return hint("your shares grow with q: the wrong way round. A counter-example pushes the energy *up* where it lands, so where counter-examples are common the model puts *less* mass.")
+            if _close(out, _normalise(1 / _q(modes, actions, 0.2)), rtol=1e-3, atol=1e-4):
+                return hint("q is the density of the counter-examples: expert actions plus N(0, σ²I), a KDE with bandwidth σ, not chapter 05's 0.2.")
+            if _close(out / out.sum(), ref, rtol=1e-3, atol=1e-4):
+                return hint("the proportions are right; make the shares sum to 1 (they are shares of the mass near the K actions).")
+            return hint(f"your shares are {[round(v, 3) for v in out.tolist()]}: compute q at each valid action (the expert actions blurred by σ), then share ∝ 1/q.")
+        out2 = fn(modes.clone(), actions.clone(), 0.3)
+        if not isinstance(out2, torch.Tensor) or not _close(out2.detach().double(), _normalise(1 / _q(modes, actions, 0.3)), rtol=1e-3, atol=1e-4):
+            return hint("right for σ = 0.1 but not for σ = 0.3: use the σ you are given.")
+        straight = float(ref[1])
+        return correct(
+            f"Right: with these actions a DA-IBC model should put only {straight:.0%} of the mass near 'straight' on it, "
+            "against the expert's 1/3, because straight on looks like cruising, where the counter-examples crowd."
+        )
+
+    return run_check(check, "`predicted_shares`")

@@ -2,6 +2,9 @@
 
 - ``check_kde_1d(fn)``: eq. 4 of the DA-IBC paper by hand, ``fn(x (Q,), data (M,), h) -> (Q,)``.
 - ``check_inverse_weights(fn)``: the weights of eq. 5, ``fn(actions (M, D), h) -> (M,)`` summing to 1.
+- ``check_choose_bandwidth(fn)``: the chapter's finding, a bandwidth chosen by the rare share of
+  weighted minibatches under a floor on the weights' effective sample size,
+  ``fn(actions (M, D), rare (M,), candidates, min_ess) -> float``.
 
 Each compares the reader's function with an independent reference (a float64 evaluation of the
 formula) and, when they differ, tries the usual mistakes one by one to name the one made.
@@ -13,17 +16,14 @@ import math
 
 import torch
 
-from ibc_tutorial.exercises.core import Feedback, correct, hint, run_check
+from ibc_tutorial.exercises.core import Feedback, correct, hint, run_check, tensor_answer
+from ibc_tutorial.kde import inverse_density_weights
 
 
 def _tensor(out, name: str, shape: tuple) -> torch.Tensor | Feedback:
-    if not isinstance(out, torch.Tensor):
-        return hint(f"{name} must return a torch.Tensor of shape {shape}, got {type(out).__name__}.")
-    if tuple(out.shape) != shape:
-        return hint(f"{name} must return a tensor of shape {shape} (one value per point), got {tuple(out.shape)}.")
-    if not torch.isfinite(out).all():
-        return hint(f"{name} returned NaN or inf values.")
-    return out.detach().to(torch.float64)
+    """The answer as float64, or a hint (``core.tensor_answer``)."""
+    out = tensor_answer(out, name, shape, " (one value per point)")
+    return out if isinstance(out, Feedback) else out.to(torch.float64)
 
 
 def _close(a: torch.Tensor, b: torch.Tensor, rtol: float = 1e-4) -> bool:
@@ -127,3 +127,78 @@ def check_inverse_weights(fn) -> Feedback:
         return correct("Your weights are w_i ∝ 1/ĝ(y_i), summing to 1: rare actions weigh more.")
 
     return run_check(check, "`inverse_weights`")
+
+
+# --------------------------------------------------------------------------- choosing a bandwidth by effective sample size
+_CANDIDATES = (0.02, 0.05, 0.1, 0.2, 0.3, 0.5, 1.0)
+
+
+def _driving_like() -> tuple[torch.Tensor, torch.Tensor]:
+    """(M, 2) actions like the chapter's (cruising, two turns, a braking band) and (M,) bool rare."""
+    g = torch.Generator().manual_seed(5)
+    d = torch.float64
+    cruise = torch.tensor([0.0, 0.35], dtype=d) + 0.05 * torch.randn(900, 2, generator=g, dtype=d)
+    left = torch.tensor([-0.7, 0.1], dtype=d) + 0.02 * torch.randn(25, 2, generator=g, dtype=d)
+    right = torch.tensor([0.7, 0.1], dtype=d) + 0.02 * torch.randn(25, 2, generator=g, dtype=d)
+    v = torch.rand(50, 1, generator=g, dtype=d)
+    brake = torch.cat([0.02 * torch.randn(50, 1, generator=g, dtype=d), -0.2 - 0.6 * v], dim=1)
+    actions = torch.cat([cruise, left, right, brake])  # (1000, 2)
+    return actions, torch.arange(len(actions)) >= 900
+
+
+def _bandwidth_table(actions: torch.Tensor, rare: torch.Tensor) -> dict[float, tuple[float, float]]:
+    """{h: (share of rare samples in weighted minibatches, effective sample size 1/Σ w²)}."""
+
+    out = {}
+    for h in _CANDIDATES:
+        w = inverse_density_weights(actions, h).double()  # (M,) summing to 1
+        out[h] = (float(w[rare].sum()), float(1 / (w**2).sum()))
+    return out
+
+
+def _reference_choice(table: dict, min_ess: float) -> float | None:
+    ok = [h for h, (_, ess) in table.items() if ess >= min_ess]
+    return max(ok, key=lambda h: table[h][0]) if ok else None
+
+
+def check_choose_bandwidth(fn) -> Feedback:
+    """Check ``fn(actions (M, D), rare (M,) bool, candidates, min_ess) -> float``: among the candidate
+    bandwidths whose weights keep an effective sample size 1/Σ w_i² of at least ``min_ess``, the one
+    whose weighted minibatches hold the largest share of rare samples."""
+
+    def check() -> Feedback:
+        actions, rare = _driving_like()
+        table = _bandwidth_table(actions, rare)
+        for min_ess in (200.0, 160.0):
+            ref = _reference_choice(table, min_ess)
+            out = fn(actions.clone(), rare.clone(), list(_CANDIDATES), min_ess)
+            try:
+                if isinstance(out, (str, bytes)) or out is None:
+                    raise TypeError
+                h = float(out)
+            except (TypeError, ValueError, RuntimeError):
+                return hint(f"choose_bandwidth must return one bandwidth (a number from `candidates`), got {type(out).__name__}.")
+            if h not in _CANDIDATES:
+                if 0 <= h < len(_CANDIDATES) and float(h).is_integer():
+                    return hint("return the bandwidth itself, not its index in `candidates`.")
+                return hint(f"choose_bandwidth returned {h:g}, which is not one of the candidates {list(_CANDIDATES)}.")
+            if h == ref:
+                continue
+            share, ess = table[h]
+            best_any = max(_CANDIDATES, key=lambda c: table[c][0])
+            if h == best_any and ess < min_ess:
+                return hint(
+                    f"h = {h:g} brings the most rare samples into minibatches ({share:.0%}), but its weights' effective sample size is "
+                    f"only {ess:.0f} < {min_ess:.0f}: a few stray actions take over. Keep only the bandwidths whose 1/Σ w² reaches min_ess."
+                )
+            if h == max(_CANDIDATES, key=lambda c: table[c][1]):
+                return hint(f"h = {h:g} has the largest effective sample size, because its weights are nearly uniform: its minibatches hold only {share:.0%} rare samples. Among the bandwidths that pass, maximise the rare share.")
+            if ess < min_ess:
+                return hint(f"h = {h:g} has an effective sample size of {ess:.0f}, below min_ess = {min_ess:.0f}: compute it as 1 / Σ w_i² of the normalised weights.")
+            return hint(f"h = {h:g} passes the effective-sample-size test, but another candidate that passes puts more rare samples into minibatches than its {share:.0%}: compare the shares Σ_rare w_i.")
+        return correct(
+            "Right: the narrowest bandwidths let a few stray actions take over (low effective sample size), the widest make the weights "
+            "nearly uniform (few rare samples); the choice is in between, and it moves with min_ess and with the data."
+        )
+
+    return run_check(check, "`choose_bandwidth`")

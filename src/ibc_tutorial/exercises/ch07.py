@@ -6,6 +6,10 @@
   ``fn(rear_before, rear_after, entry, direction, state) -> bool``.
 - ``check_world_to_bev(fn)``: where a world point appears in the 192 x 192 BEV,
   ``fn(x, y, car_x, car_y, car_yaw) -> (row, col)``.
+- ``check_expert_stops(fn)``: the chapter's finding about the lights, as a prediction: does the
+  expert stop for its light, ``fn(state, gap_m, speed) -> bool``, checked against the library's
+  expert (``driving.expert.stops_for_light``) on situations where the binary BEV flag and the
+  expert's choice part ways.
 
 Each compares the reader's function with the library's (``ibc_tutorial.driving``) on chosen
 cases and, when they differ, tests the usual mistakes one by one to name the one that was
@@ -203,3 +207,52 @@ def check_world_to_bev(fn) -> Feedback:
         return correct("That is the BEV's geometry: the renderer applies it to all 36,864 pixels at once.")
 
     return run_check(check, "`world_to_bev`")
+
+
+# --------------------------------------------------------------------------- 5. will the expert stop?
+STOP_CASES = [  # (state, gap_m, speed): 0 green, 1 yellow, 2 red
+    (2, 5.0, 6.0), (0, 5.0, 6.0), (1, 8.0, 6.0), (1, 3.0, 6.0), (2, 12.0, 6.0), (1, 6.0, 4.5),
+    (1, 4.0, 6.0), (2, 0.5, 0.0), (1, 9.0, 3.0), (1, 12.0, 6.0), (0, 1.0, 0.5), (1, 4.5, 6.0),
+    (1, 1.5, 6.0),
+]
+
+
+def check_expert_stops(fn) -> Feedback:
+    """Check ``fn(state, gap_m, speed) -> bool``: does the expert stop for its lane's light?"""
+    from ibc_tutorial.driving.expert import ExpertConfig, stops_for_light
+
+    config = ExpertConfig()
+
+    def check() -> Feedback:
+        answers = []
+        for state, gap, speed in STOP_CASES:
+            out = fn(state, gap, speed)
+            if not isinstance(out, (bool, np.bool_)):
+                return hint(f"expert_stops must return True or False, got {type(out).__name__}.")
+            answers.append(bool(out))
+        truth = [stops_for_light(*c, config) for c in STOP_CASES]
+        wrong = [c for c, a, t in zip(STOP_CASES, answers, truth) if a != t]
+        if not wrong:
+            return correct("That is the expert's rule. The binary BEV flag shows a yellow line like a red one, yet "
+                           "at (yellow, 3 m, 6 m/s) the expert drives on: the label says go where the flag says stop.")
+        if any(s == 2 and g > config.stop_distance_m for s, g, _ in wrong):
+            return hint(f"distance: the expert considers its light only within {config.stop_distance_m} m of the line; "
+                        "a red light further away does not stop it yet.")
+        yellow = [c for c in wrong if c[0] == 1]
+        near_yellow = [k for k, c in enumerate(STOP_CASES) if c[0] == 1 and c[1] <= config.stop_distance_m]
+        if yellow and all(answers[k] for k in near_yellow) and all(c[0] == 1 for c in wrong):
+            return hint("yellow is not red: close to the line and fast, stopping would need more braking than the "
+                        f"expert allows at yellow ({config.yellow_brake} m/s^2, the deceleration v^2 / (2 gap)), "
+                        "so it drives on.")
+        if yellow and not any(answers[STOP_CASES.index(c)] for c in yellow):
+            return hint("yellow is not green either: when a firm brake still stops the car before the line, the "
+                        "expert stops.")
+        if any(c[0] == 1 for c in wrong):
+            return hint("at yellow, compare the deceleration needed to stop at the line, v^2 / (2 gap), with the "
+                        f"expert's {config.yellow_brake} m/s^2: at or below it, it stops.")
+        state, gap, speed = wrong[0]
+        yours = answers[STOP_CASES.index(wrong[0])]
+        return hint(f"for light state {state} at {gap} m and {speed} m/s your answer is {yours}: "
+                    "red stops, green goes; chapter 07's section *The expert* gives the rule.")
+
+    return run_check(check, "`expert_stops`")

@@ -6,6 +6,8 @@ import traceback
 from dataclasses import dataclass
 from typing import Callable
 
+import torch
+
 NOT_ATTEMPTED = "not attempted"
 CORRECT = "correct"
 HINT = "hint"
@@ -62,3 +64,17 @@ def run_check(check: Callable[[], Feedback], what: str = "this exercise") -> Fee
     except Exception as exc:  # the reader's code failed: tell them how, do not raise
         last = traceback.extract_tb(exc.__traceback__)[-1]
         return hint(f"your code raised {type(exc).__name__}: {exc} (line {last.lineno} of {last.name}).")
+
+
+def tensor_answer(out, name: str, shape: tuple, what: str = "") -> "torch.Tensor | Feedback":
+    """The reader's ``out`` as a finite tensor of ``shape`` (detached), or a hint saying what is wrong.
+
+    ``what`` is appended to the shape hint, e.g. "(one value per point)".
+    """
+    if not isinstance(out, torch.Tensor):
+        return hint(f"{name} must return a torch.Tensor of shape {shape}, got {type(out).__name__}.")
+    if tuple(out.shape) != shape:
+        return hint(f"{name} must return a tensor of shape {shape}{what}, got {tuple(out.shape)}.")
+    if not torch.isfinite(out).all():
+        return hint(f"{name} returned NaN or inf values.")
+    return out.detach()

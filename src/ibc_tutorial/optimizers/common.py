@@ -17,7 +17,7 @@ from collections.abc import Sequence
 
 import torch
 
-from ibc_tutorial.utils import check_choice
+from ibc_tutorial.utils import check_choice, check_tensor
 
 SELECTIONS = ("sample", "argmax")
 """Final choice: "sample" ŷ ~ Categorical({ỹ_i}, {p̃_i}) (Algorithm 1 line 14 of the DA-IBC paper)
@@ -53,9 +53,12 @@ def check_box(low, high) -> tuple[float | tuple[float, ...], float | tuple[float
 
 
 def bounds(low, high, d: int) -> tuple[torch.Tensor, torch.Tensor]:
-    """``low``/``high`` (numbers, or sequences of length D) as (D,) float32 tensors with low < high."""
-    lo = torch.as_tensor(low, dtype=torch.float32).reshape(-1)
-    hi = torch.as_tensor(high, dtype=torch.float32).reshape(-1)
+    """``low``/``high`` (numbers, or sequences of length D) as (D,) tensors with low < high.
+
+    In torch's default dtype (float32 unless a chapter sets float64), like the populations.
+    """
+    lo = torch.as_tensor(low, dtype=torch.get_default_dtype()).reshape(-1)
+    hi = torch.as_tensor(high, dtype=torch.get_default_dtype()).reshape(-1)
     for name, t in (("low", lo), ("high", hi)):
         if t.numel() not in (1, d):
             raise ValueError(f"{name} must be a number or have one entry per action dimension (D = {d}), got {t.numel()} entries")
@@ -68,12 +71,12 @@ def bounds(low, high, d: int) -> tuple[torch.Tensor, torch.Tensor]:
 
 
 def check_expert_actions(expert_actions: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor) -> torch.Tensor:
-    """(M, D) expert actions inside [lo, hi], M >= 1, as float32 without gradient."""
+    """(M, D) expert actions inside [lo, hi], M >= 1, in the default dtype, without gradient."""
     if len(expert_actions) == 0:
         raise ValueError("expert_actions must hold at least one action (M >= 1)")
     if ((expert_actions < lo) | (expert_actions > hi)).any():
         raise ValueError(f"expert_actions must lie inside [low, high] = [{lo.tolist()}, {hi.tolist()}]")
-    return expert_actions.detach().to(torch.float32)
+    return expert_actions.detach().to(torch.get_default_dtype())
 
 
 def energies(energy_fn, y: torch.Tensor) -> torch.Tensor:
@@ -84,7 +87,7 @@ def energies(energy_fn, y: torch.Tensor) -> torch.Tensor:
         raise ValueError(f"energy_fn must return one energy per candidate action, shape {tuple(y.shape[:2])}, got {got}")
     if not torch.isfinite(e).all():
         raise ValueError("energy_fn returned NaN or inf energies")
-    return e.to(torch.float32)  # (B, N)
+    return e.to(y.dtype)  # (B, N), in the populations' dtype
 
 
 def select_action(y: torch.Tensor, p: torch.Tensor, select: str, generator: torch.Generator | None) -> torch.Tensor:
@@ -108,3 +111,11 @@ def single_observation(energy_fn):
         return e[None]
 
     return batched
+
+
+def check_call(expert_actions: torch.Tensor, config, config_type: type) -> tuple[torch.Tensor, torch.Tensor]:
+    """Check the arguments every optimizer call shares; return the action box ``bounds`` (lo, hi), each (D,)."""
+    check_tensor("expert_actions", expert_actions, ndim=2)
+    if not isinstance(config, config_type):
+        raise ValueError(f"config must be a {config_type.__name__}, got {type(config).__name__}")
+    return bounds(config.low, config.high, expert_actions.shape[1])

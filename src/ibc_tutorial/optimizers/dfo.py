@@ -15,15 +15,18 @@ from typing import TYPE_CHECKING
 import torch
 
 from ibc_tutorial.kde import DEFAULT_BANDWIDTH, inverse_density_weights, kde_density
-from ibc_tutorial.optimizers.common import SELECTIONS, bounds, check_box, check_expert_actions, energies, select_action, single_observation
+from ibc_tutorial.optimizers.common import (
+    SELECTIONS, bounds, check_box, check_call, check_expert_actions, energies, select_action, single_observation,
+)
 from ibc_tutorial.utils import check_choice, check_int, check_positive, check_tensor
 
 if TYPE_CHECKING:  # type hints only: langevin imports this module
     from ibc_tutorial.optimizers.langevin import LangevinConfig
 
-INITS = ("uniform", "kde", "inverse-kde")
+INITS = ("uniform", "kde", "inverse-kde", "expert")
 """Initialisations of Algorithm 1: "uniform" (original IBC), "kde" (Algorithm 1 line 2 as printed:
-w_i ∝ KDE(y_i)) and "inverse-kde" (the DA-IBC paper's text, sec. 2.4.1: w_i = 1 / ĝ(y_i))."""
+w_i ∝ KDE(y_i)), "inverse-kde" (the DA-IBC paper's text, sec. 2.4.1: w_i = 1 / ĝ(y_i)) and
+"expert" (every expert action equally likely, w_i = 1 / M: initial samples distributed like ĝ)."""
 
 
 @dataclass(frozen=True)
@@ -49,7 +52,8 @@ class DFOConfig:
     bandwidth: float = DEFAULT_BANDWIDTH
     """h, the KDE bandwidth of the "kde" and "inverse-kde" initialisations (the paper: 0.2)."""
     init: str = "inverse-kde"
-    """Initialisation (line 2): "inverse-kde" (the paper's text), "kde" (its Algorithm 1 as printed) or "uniform" (IBC)."""
+    """Initialisation (line 2): "inverse-kde" (the paper's text), "kde" (its Algorithm 1 as printed),
+    "expert" (plain draws of expert actions, q ≈ ĝ) or "uniform" (IBC)."""
     select: str = "sample"
     """Final choice (line 14): "sample" ŷ ~ Categorical({ỹ_i}, {p̃_i}) (the paper) or "argmax" (IBC)."""
 
@@ -92,7 +96,7 @@ def initial_weights(expert_actions: torch.Tensor, config: DFOConfig | LangevinCo
     """The Categorical weights over expert actions of Algorithm 1 line 2; None for ``init="uniform"``.
 
     "kde": w_i ∝ ĝ(y_i) (the algorithm as printed), from ``kde.kde_density``; "inverse-kde":
-    w_i ∝ 1 / ĝ(y_i) (the text), ``kde.inverse_density_weights``. Computing them costs a KDE over
+    w_i ∝ 1 / ĝ(y_i) (the text), ``kde.inverse_density_weights``; "expert": w_i = 1 / M. Computing them costs a KDE over
     the M expert actions (M² kernel evaluations): closed-loop code computes them once and passes
     them to ``dfo`` as ``init_weights``.
 
@@ -100,15 +104,18 @@ def initial_weights(expert_actions: torch.Tensor, config: DFOConfig | LangevinCo
         expert_actions: (M, D) expert actions.
         config: a ``DFOConfig`` or ``LangevinConfig`` (its ``init`` and ``bandwidth`` are used).
     Returns:
-        (M,) float32 weights summing to 1, or None.
+        (M,) weights summing to 1 in the default dtype, or None.
     """
     check_tensor("expert_actions", expert_actions, ndim=2)
     if config.init == "uniform":
         return None
+    if config.init == "expert":  # each expert action equally likely: draws distributed like ĝ
+        m = len(expert_actions)
+        return torch.full((m,), 1.0 / m, dtype=torch.get_default_dtype())
     if config.init == "inverse-kde":
-        return inverse_density_weights(expert_actions, config.bandwidth).to(torch.float32)  # eqs. 4-5
+        return inverse_density_weights(expert_actions, config.bandwidth).to(torch.get_default_dtype())  # eqs. 4-5
     g = kde_density(expert_actions, expert_actions, config.bandwidth).to(torch.float64)  # (M,) ĝ(y_i), eq. 4
-    return (g / g.sum()).to(torch.float32)
+    return (g / g.sum()).to(torch.get_default_dtype())
 
 
 def initial_samples(
@@ -137,7 +144,7 @@ def initial_samples(
     check_int("n_obs", n_obs, minimum=1)
     m, d = expert_actions.shape
     lo, hi = bounds(config.low, config.high, d)  # (D,), (D,)
-    experts = check_expert_actions(expert_actions, lo, hi)  # (M, D) float32
+    experts = check_expert_actions(expert_actions, lo, hi)  # (M, D), default dtype
     n = config.n_samples
     if config.init == "uniform":
         u = torch.rand(n_obs, n, d, generator=generator)  # (B, N, D)
@@ -183,13 +190,6 @@ def _dfo_core(energy_fn, y: torch.Tensor, config: DFOConfig, lo, hi, generator, 
     return select_action(y, p, config.select, generator), rec  # line 14
 
 
-def _check_call(expert_actions: torch.Tensor, config: DFOConfig) -> tuple[torch.Tensor, torch.Tensor]:
-    check_tensor("expert_actions", expert_actions, ndim=2)
-    if not isinstance(config, DFOConfig):
-        raise ValueError(f"config must be a DFOConfig, got {type(config).__name__}")
-    return bounds(config.low, config.high, expert_actions.shape[1])
-
-
 def dfo(
     energy_fn,
     expert_actions: torch.Tensor,
@@ -218,6 +218,9 @@ def dfo(
     beside the original IBC's ``init="uniform"`` over the box. The default is the text's
     "inverse-kde": in chapter 06 it reaches the valleys of rare actions with few samples where
     "kde" misses them, and it does not bias the choice between modes towards the frequent one.
+    On trained DA-IBC models (whose exp(−E) ∝ p/ĝ) chapter 06 measures the initialisations
+    nearly tied at the paper's five rounds; with one round, ``init="expert"`` (w_i = 1/M, draws
+    distributed like ĝ) undoes the 1/ĝ tilt and reproduces the expert's choices best.
 
     **Bounds.** Noise can push samples out of [low, high]; they are clamped onto the bounds
     (Algorithm 1 line 10, as the IBC reference's ``tf.clip_by_value``), so the returned action
@@ -239,7 +242,7 @@ def dfo(
     Returns:
         (D,) the action ŷ, or (B, D) one per observation.
     """
-    lo, hi = _check_call(expert_actions, config)
+    lo, hi = check_call(expert_actions, config, DFOConfig)
     if n_obs is None:
         b, fn = 1, single_observation(energy_fn)
     else:
@@ -263,7 +266,7 @@ def dfo_trace(
     Same arguments and the same draws as ``dfo``: with equally seeded generators,
     ``dfo_trace(...).action`` equals ``dfo(...)``. For figures and widgets.
     """
-    lo, hi = _check_call(expert_actions, config)
+    lo, hi = check_call(expert_actions, config, DFOConfig)
     with torch.no_grad():
         y = initial_samples(expert_actions, 1, config, init_weights=init_weights, generator=generator)  # (1, N, D)
         action, rec = _dfo_core(single_observation(energy_fn), y, config, lo, hi, generator, record=True)
@@ -290,7 +293,7 @@ class DFOOptimizer:
     """
 
     def __init__(self, expert_actions: torch.Tensor, config: DFOConfig = DFOConfig(), *, init_weights: torch.Tensor | None = None):
-        bounds_ = _check_call(expert_actions, config)
+        bounds_ = check_call(expert_actions, config, DFOConfig)
         check_expert_actions(expert_actions, *bounds_)
         self.expert_actions, self.config = expert_actions, config
         self.init_weights = initial_weights(expert_actions, config) if init_weights is None else init_weights

@@ -26,9 +26,11 @@ from dataclasses import dataclass
 import torch
 
 from ibc_tutorial.kde import DEFAULT_BANDWIDTH
-from ibc_tutorial.optimizers.common import SELECTIONS, bounds, check_box, energies, select_action, single_observation
+from ibc_tutorial.optimizers.common import (
+    SELECTIONS, check_box, check_call, energies, select_action, single_observation,
+)
 from ibc_tutorial.optimizers.dfo import INITS, initial_samples, initial_weights
-from ibc_tutorial.utils import check_choice, check_int, check_positive, check_tensor
+from ibc_tutorial.utils import check_choice, check_int, check_positive
 
 NOISES = ("ibc", "ula")
 """The noise of a step: "ibc" ε_k · n (the IBC reference) or "ula" √ε_k · n (unadjusted Langevin)."""
@@ -142,13 +144,6 @@ def _langevin_core(energy_fn, y: torch.Tensor, config: LangevinConfig, lo, hi, g
         return select_action(y, p, c.select, generator), rec
 
 
-def _check_call(expert_actions: torch.Tensor, config: LangevinConfig) -> tuple[torch.Tensor, torch.Tensor]:
-    check_tensor("expert_actions", expert_actions, ndim=2)
-    if not isinstance(config, LangevinConfig):
-        raise ValueError(f"config must be a LangevinConfig, got {type(config).__name__}")
-    return bounds(config.low, config.high, expert_actions.shape[1])
-
-
 def langevin(
     energy_fn,
     expert_actions: torch.Tensor,
@@ -178,7 +173,7 @@ def langevin(
     Returns:
         (D,) the action ŷ, or (B, D) one per observation.
     """
-    lo, hi = _check_call(expert_actions, config)
+    lo, hi = check_call(expert_actions, config, LangevinConfig)
     if n_obs is None:
         b, fn = 1, single_observation(energy_fn)
     else:
@@ -198,7 +193,7 @@ def langevin_trace(
     generator: torch.Generator | None = None,
 ) -> LangevinTrace:
     """``langevin`` for one observation, also returning the population after every step (same draws)."""
-    lo, hi = _check_call(expert_actions, config)
+    lo, hi = check_call(expert_actions, config, LangevinConfig)
     y = initial_samples(expert_actions, 1, config, init_weights=init_weights, generator=generator)  # (1, N, D)
     action, rec = _langevin_core(single_observation(energy_fn), y, config, lo, hi, generator, record=True)
     return LangevinTrace(
@@ -216,7 +211,7 @@ class LangevinOptimizer:
 
     def __init__(self, expert_actions: torch.Tensor, config: LangevinConfig = LangevinConfig(), *,
                  init_weights: torch.Tensor | None = None):
-        _check_call(expert_actions, config)
+        check_call(expert_actions, config, LangevinConfig)
         self.expert_actions, self.config = expert_actions, config
         self.init_weights = initial_weights(expert_actions, config) if init_weights is None else init_weights
 

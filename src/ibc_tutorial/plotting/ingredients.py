@@ -90,12 +90,14 @@ def plot_energy_2d(energies, axis, *, title: str, unvisited=None, modes=None, ar
         u = as_array(unvisited, float)
         ax.contourf(x, x, u.T, levels=[0.5, 1.5], colors="none", hatches=["//"])
         ax.contour(x, x, u.T, levels=[0.5], colors="w", linewidths=0.8)
+        # a legend entry for the hatching (contourf makes none)
+        ax.add_patch(plt.Rectangle((0, 0), 0, 0, facecolor="none", edgecolor="k", hatch="//", label="never visited by a counter-example"))
     if modes is not None:
         m = as_array(modes, float)
         ax.scatter(m[:, 0], m[:, 1], s=80, facecolors="none", edgecolors="w", lw=1.5, label="expert's actions")
     if argmin is not None:
         ax.scatter([argmin[0]], [argmin[1]], marker="x", s=80, color="red", lw=2, label="argmin of E")
-    if modes is not None or argmin is not None:
+    if modes is not None or argmin is not None or unvisited is not None:
         ax.legend(loc="lower right", fontsize=8)
     label_axes(ax, STEER_LABEL, ACCEL_LABEL, title)
     return finish(fig, own)
@@ -227,7 +229,7 @@ def plot_dfo_iterations(trace, grid, energy, *, iterations=None, bins: int = 60,
     for ax, it in zip(axes[0], its):
         energy_ax = draw_dfo_iteration(ax, trace, it, x, e, bins)
     axes[0, 0].set_ylabel("share of samples per bin")
-    energy_ax.set_ylabel("energy E(x, y) (red)", color="C3")
+    energy_ax.set_ylabel("energy E(x, y) (nats, red)", color="C3")
     return finish(fig, True, title=title)
 
 

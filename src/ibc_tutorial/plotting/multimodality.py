@@ -9,6 +9,7 @@ from __future__ import annotations
 import matplotlib.pyplot as plt
 import numpy as np
 import torch
+from matplotlib.lines import Line2D
 from matplotlib.patches import Polygon
 
 from ibc_tutorial.plotting.common import STEER_LABEL, TIME_LABEL, X_LABEL, Y_LABEL, as_array, check_panels, figure_and_axes, finish, label_axes
@@ -83,12 +84,26 @@ def draw_rollouts(ax, world, rollouts, *, max_episodes: int = 60, x_end: float |
     ax.set_aspect("equal")
 
 
+def outcome_key(world, *, crosses: bool = True) -> list:
+    """Legend handles of the outcome colours of ``rollout_colors`` in ``world`` (the tree or the
+    side road), and, with ``crosses``, of the red cross where an episode collided."""
+    if hasattr(world, "pass_side"):
+        items = [("passed on the left", TREE_SIDE_COLORS[-1]), ("passed on the right", TREE_SIDE_COLORS[1]),
+                 ("collided", TREE_SIDE_COLORS[0])]
+    else:
+        items = [(f"ended on the {name}" if name != "off road" else "left the road", color) for name, color in SIDE_ROAD_COLORS.items()]
+    handles = [Line2D([], [], color=color, lw=1.5, label=label) for label, color in items]
+    if crosses:
+        handles.append(Line2D([], [], color="C3", marker="x", ls="none", ms=4, label="where it collided"))
+    return handles
+
+
 def rollout_figure(world, rollouts: dict, summary, *, title: str, figsize: tuple, ncols: int = 1, max_episodes: int = 60,
                    crosses: bool = True, alpha: float = 0.6, fontsize: float = 10, xlabel: str = X_LABEL, compressed: bool = False):
     """Closed-loop ``rollouts`` ({name: Rollouts}) of several policies, one ``draw_rollouts`` panel
     each in ``ncols`` columns, titled ``f"{name}: {summary(world, rollouts[name])}"``; empty
-    panels are hidden. ``compressed`` lays the figure out with matplotlib's compressed layout
-    instead of ``tight_layout``."""
+    panels are hidden; the colour key (``outcome_key``) sits in the first panel. ``compressed``
+    lays the figure out with matplotlib's compressed layout instead of ``tight_layout``."""
     n = check_panels("rollouts", rollouts)
     ncols = check_int("ncols", ncols, minimum=1)
     nrows = -(-n // ncols)
@@ -107,6 +122,8 @@ def rollout_figure(world, rollouts: dict, summary, *, title: str, figsize: tuple
     for ax in axes[-1]:
         if ax.axison:
             ax.set_xlabel(xlabel)
+    axes.flat[0].legend(handles=outcome_key(world, crosses=crosses), loc="upper left", fontsize=7, framealpha=0.9,
+                        title="colour: outcome", title_fontsize=7)
     return finish(fig, not compressed, title=title)
 
 
@@ -382,4 +399,27 @@ def plot_command_traces(dt: float, traces: dict, *, title: str = "Steering comma
         x = as_array(x, float).reshape(-1)
         ax.plot(np.arange(len(x)) * dt, x, color=f"C{i}", lw=1.2, label=label)
     label_axes(ax, TIME_LABEL, ylabel, title, legend=True)
+    return finish(fig, True)
+
+
+def plot_response_map(prev, responses: dict, *, title: str, xlabel: str = "previous steering (−1 left … +1 right)", ylabel: str = "next steering command (−1 left … +1 right)"):
+    """What a policy fed its previous action does with it: the next command against the previous
+    one at one observation, one line per policy, with the diagonal of a policy that copies
+    (dashed). Where a line crosses the diagonal, the command repeats itself: a fixed point.
+
+    Args:
+        prev: (N,) previous actions.
+        responses: {label: (N,) commands at those previous actions}.
+    """
+    x = as_array(prev, float).reshape(-1)
+    fig, ax = plt.subplots(figsize=(5.6, 4.2))
+    ax.plot([-1, 1], [-1, 1], "--", color="0.5", lw=1.0, label="copies the previous action")
+    for i, (label, y) in enumerate(responses.items()):
+        y = as_array(y, float).reshape(-1)
+        if y.shape != x.shape:
+            raise ValueError(f"responses[{label!r}] must have shape {x.shape}, got {y.shape}")
+        ax.plot(x, y, color=f"C{i}", lw=1.6, label=label)
+    ax.set_xlim(-1, 1)
+    ax.set_ylim(-1.05, 1.05)
+    label_axes(ax, xlabel, ylabel, title, legend=True)
     return finish(fig, True)

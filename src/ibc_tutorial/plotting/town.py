@@ -10,6 +10,7 @@ from matplotlib.colors import ListedColormap
 from ibc_tutorial.driving.bev import CHANNELS, get_raster
 from ibc_tutorial.driving.render import bev_to_rgb, draw_ego, town_rgb
 from ibc_tutorial.plotting.common import ACCEL_LABEL, STEER_LABEL, TIME_LABEL, as_array, check_panels, finish, label_axes
+from ibc_tutorial.utils import check_positive
 
 LIGHT_COLORS = ("#2ca02c", "#ffbf00", "#d62728")
 """Colours of the light states 0 green, 1 yellow, 2 red."""
@@ -144,7 +145,7 @@ def plot_bev_channels(bev, small=None, *, title: str = "The bird's-eye view of o
 def plot_drive(town, xy, actions, speed, *, dt: float = 0.1, title: str = "An expert drive", waits=None):
     """An episode on the map (colour = time) and its actions and speed against time."""
     xy, actions, speed = as_array(xy), as_array(actions), as_array(speed)  # (T, 2), (T, 2), (T,)
-    fig = plt.figure(figsize=(11, 5.0))
+    fig = plt.figure(figsize=(12, 6.0))
     gs = fig.add_gridspec(3, 2, width_ratios=[1.0, 1.25])
     ax = fig.add_subplot(gs[:, 0])
     plot_town(town, ax=ax, title=title)
@@ -155,11 +156,12 @@ def plot_drive(town, xy, actions, speed, *, dt: float = 0.1, title: str = "An ex
     for k, (name, v) in enumerate(names):
         a = fig.add_subplot(gs[k, 1])
         a.plot(t, v, lw=0.7, color=f"C{k}")
-        a.set_ylabel(name, fontsize=8)
+        a.set_ylabel(name, fontsize=11)
+        a.tick_params(labelsize=10)
         if k < 2:
             a.set_ylim(-1.05, 1.05)
             a.set_xticklabels([])
-    a.set_xlabel(TIME_LABEL)
+    a.set_xlabel(TIME_LABEL, fontsize=11)
     return finish(fig, True)
 
 
@@ -177,25 +179,39 @@ def plot_light_stop(t, gap, speed, light_states, *, gap_no_brake=None, title: st
     if gap_no_brake is not None:
         a.plot(t[: len(gap_no_brake)], gap_no_brake, "--", label="half throttle, ignoring the light")
     a.axhline(0, color="k", lw=0.8)
-    a.set_ylabel("front bumper to\nstop line (m)")
     a.set_ylim(min(-10, np.nanmin(gap)), np.nanmax(gap) + 2)
-    a.legend(fontsize=8)
-    a.set_title(title + " (background: the light's state)")
+    a.legend(fontsize=11)
+    a.set_title(title + " (background: the light's state)", fontsize=12)
     b.plot(t, speed, color="C2")
-    b.set_ylabel("speed (m/s)")
-    b.set_xlabel(TIME_LABEL)
+    b.set_ylabel("speed (m/s)", fontsize=12)
+    b.set_xlabel(TIME_LABEL, fontsize=12)
+    a.set_ylabel("front bumper to\nstop line (m)", fontsize=12)
+    for ax in (a, b):
+        ax.tick_params(labelsize=11)
     return finish(fig, True)
 
 
-def plot_routes(town, routes_xy, *, title: str = "The demonstration routes"):
-    """Each route's path on the map in its own colour, its start marked."""
-    fig, ax = _map_figure(town, (7.5, 6.4), title)
+def plot_routes(town, routes_xy, *, title: str = "The demonstration routes", arrow_every_m: float = 40.0):
+    """Each route's path on the map in its own colour, its start marked, with an arrow for the
+    direction of travel every ``arrow_every_m`` metres along it."""
+    arrow_every_m = check_positive("arrow_every_m", arrow_every_m)
+    fig, ax = _map_figure(town, (8.5, 7.0), title)
     cmap = plt.get_cmap("tab10")
     for k, xy in enumerate(routes_xy):
         xy = as_array(xy)  # (T, 2)
-        ax.plot(xy[:, 0], xy[:, 1], color=cmap(k % 10), lw=1.6, alpha=0.8, label=f"route {k}")
-        ax.plot(xy[0, 0], xy[0, 1], "o", color=cmap(k % 10), ms=6, mec="k")
-    ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.0, 0.5))
+        color = cmap(k % 10)
+        ax.plot(xy[:, 0], xy[:, 1], color=color, lw=1.8, alpha=0.85, label=f"route {k}")
+        ax.plot(xy[0, 0], xy[0, 1], "o", color=color, ms=7, mec="k")
+        step = np.linalg.norm(np.diff(xy, axis=0), axis=1)  # (T-1,) metres per step
+        s = np.r_[0.0, np.cumsum(step)]  # (T,) arc length
+        for d in np.arange(arrow_every_m / 2, s[-1] - 1.0, arrow_every_m):
+            i = int(np.searchsorted(s, d))
+            j = int(np.searchsorted(s, d + 1.0))  # a point about a metre further on
+            if j < len(xy) and i < j:
+                ax.annotate("", xy=xy[j], xytext=xy[i],
+                            arrowprops=dict(arrowstyle="-|>", color=color, lw=1.2, mutation_scale=14))
+    ax.legend(fontsize=10, loc="center left", bbox_to_anchor=(1.0, 0.5),
+              title="arrows: direction\nof travel", title_fontsize=9)
     return finish(fig, True)
 
 
@@ -230,8 +246,8 @@ def plot_exit_counts(town, counts: dict, *, title: str = "Exits taken at each ju
 def plot_bev_samples(bevs, actions, states, *, title: str = "Samples of the Dataset, rendered on demand"):
     """A row of BEVs (N, 5, S, S) with their state and the expert's action."""
     n = check_panels("bevs", bevs)
-    fig, axes = plt.subplots(1, n, figsize=(2.3 * n, 2.9), squeeze=False)
+    fig, axes = plt.subplots(1, n, figsize=(2.6 * n, 3.4), squeeze=False)
     for ax, bev, a, s in zip(axes[0], bevs, actions, states):
         draw_bev(ax, bev)
-        ax.set_title(f"v {s[0]:.1f} m/s\nsteer {a[0]:+.2f}, acc {a[1]:+.2f}", fontsize=8)
+        ax.set_title(f"v {s[0]:.1f} m/s\nsteer {a[0]:+.2f}, acc {a[1]:+.2f}", fontsize=11)
     return finish(fig, True, title=title)

@@ -139,10 +139,17 @@ class SideRoadWorld(ToyWorld):
 
         Measuring from the episode's own offset there (not from y = 0) separates the swerve from
         a car that merely drives a little off-centre all along."""
+        trace = self.swerve_traces(rollouts)  # (E, T+1), NaN before the section
+        dev = torch.nan_to_num(trace, nan=0.0).max(dim=1).values.clamp_min(0.0)  # never got there: 0
+        return torch.where(self.stayed_on_main_road(rollouts), dev, torch.full_like(dev, float("nan")))
+
+    def swerve_traces(self, rollouts: Rollouts) -> torch.Tensor:
+        """(E, T+1) float: each episode's offset (m) towards the side road (to the right, -y) from
+        ``swerve_from`` m before the branch point on, relative to where it was there: y at the
+        section's first state minus y; NaN before the section. The input of
+        ``ibc_tutorial.metrics.swerve_rate``; ``swerve`` is its largest value."""
         s = rollouts.states  # (E, T+1, 3)
         near = s[:, :, 0] >= self.config.branch_x - self.config.swerve_from  # (E, T+1)
         first = near.float().argmax(dim=1)  # first state of the section (0 if it is never reached)
         y0 = s[torch.arange(len(s)), first, 1]  # (E,)
-        y = torch.where(near, s[:, :, 1], torch.full_like(s[:, :, 1], float("inf")))
-        dev = (y0 - y.min(dim=1).values).clamp_min(0.0)  # an episode that never got there counts 0
-        return torch.where(self.stayed_on_main_road(rollouts), dev, torch.full_like(dev, float("nan")))
+        return torch.where(near, y0[:, None] - s[:, :, 1], torch.full_like(s[:, :, 1], float("nan")))

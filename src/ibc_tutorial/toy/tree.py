@@ -16,10 +16,9 @@ left and right with equal frequency in the training data, behavioral cloning wit
 unimodal policy and no high-level navigation commands would average the training
 trajectories and drive straight into the tree."
 
-Why not also observe the lateral offset (``TreeConfig(obs_lateral=True)`` does)? Then the
-offset reveals the side a car has started to take, and a smooth regression can learn to
-"keep going the way it is already going", so its closed-loop behaviour depends on its own
-small fitting asymmetries rather than on the averaging the chapter is about.
+``TreeConfig(obs_lateral=True)`` also observes the lateral offset, which reveals the side a car
+has started to take; chapter 01 shows that regression then passes the tree, and explains why the
+crash needs both an averaging loss and the distance-only observation.
 
 A collision is the car's disc (``car_radius``) overlapping the tree's (``tree_radius``),
 checked along each step's segment (``ibc_tutorial.toy.car.segment_circle_contact``).

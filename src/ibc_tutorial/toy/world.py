@@ -64,6 +64,12 @@ class ToyConfig:
     """Whether the observation includes the lateral offset (else it is the distance alone)."""
     obs_lateral_scale: float = 2.0
     """Observations divide the lateral offset (m, to the right of the centre line: -y) by this."""
+    obs_prev_action: bool = False
+    """Whether the observation ends with the steering applied at the previous step (0 at the
+    start): the memory the DA-IBC agent has, whose state includes its previous action (sec. 3.1
+    of the DA-IBC paper). The car's heading is that action (``heading = -heading_max * steer``,
+    see ``ibc_tutorial.toy.car``), so it is read off the state; expert demonstrations record it
+    like every other observation."""
 
 
 @dataclass
@@ -144,10 +150,12 @@ class ToyWorld:
     """Base class of ``TreeWorld`` and ``SideRoadWorld``: subclasses give the landmark's x
     (``anchor_x``), the expert's reference path, the mode probabilities and the collision test.
 
-    The observation is ``[distance ahead to the landmark along x, lateral offset]`` divided
-    by ``obs_distance_scale`` and ``obs_lateral_scale`` (the lateral offset only when
-    ``config.obs_lateral``), and nothing about the expert's plan. The heading is not observed:
-    it is the last action (see ``ibc_tutorial.toy.car``).
+    The observation is ``[distance ahead to the landmark along x, lateral offset, previous
+    action]``: the distance divided by ``obs_distance_scale``, the lateral offset (only when
+    ``config.obs_lateral``) by ``obs_lateral_scale``, and the steering applied at the previous
+    step (only when ``config.obs_prev_action``; 0 at the start), and nothing about the expert's
+    plan. The heading is the last action (see ``ibc_tutorial.toy.car``), so the previous action
+    is read off the state's heading.
 
     The *lateral offset* (observed, and the ``lateral`` argument of ``states_at`` / ``obs_at``)
     is measured **to the right** of the centre line, -y, signed like the steering: a car at a
@@ -171,8 +179,9 @@ class ToyWorld:
 
     @property
     def obs_dim(self) -> int:
-        """2 ([distance, lateral offset]) or 1 ([distance]) when ``config.obs_lateral`` is False."""
-        return 2 if self.config.obs_lateral else 1
+        """1 ([distance]), plus 1 with ``config.obs_lateral`` (the lateral offset), plus 1 with
+        ``config.obs_prev_action`` (the previous action)."""
+        return 1 + int(self.config.obs_lateral) + int(self.config.obs_prev_action)
 
     # ------------------------------------------------------------------ to implement
     @property
@@ -206,33 +215,41 @@ class ToyWorld:
     def observe(self, states: torch.Tensor) -> torch.Tensor:
         """Observation of ``states`` (..., 3) -> (..., obs_dim) in the default dtype: [distance ahead to the
         landmark along x / obs_distance_scale, lateral offset to the right (-y) / obs_lateral_scale
-        (if observed)]."""
+        (if observed), previous action = -heading / heading_max (if observed)]."""
         c = self.config
-        d = (self.anchor_x - states[..., 0]) / c.obs_distance_scale
-        if not c.obs_lateral:
-            return d[..., None].to(torch.get_default_dtype())
-        right = -states[..., 1] / c.obs_lateral_scale
-        return torch.stack([d, right], dim=-1).to(torch.get_default_dtype())
+        parts = [(self.anchor_x - states[..., 0]) / c.obs_distance_scale]
+        if c.obs_lateral:
+            parts.append(-states[..., 1] / c.obs_lateral_scale)
+        if c.obs_prev_action:
+            parts.append(-states[..., 2] / c.heading_max)  # the steering that set this heading
+        return torch.stack(parts, dim=-1).to(torch.get_default_dtype())
 
     def physical(self, obs: torch.Tensor) -> torch.Tensor:
-        """Undo the scaling of ``observe``: (..., obs_dim) -> [distance to the landmark m, lateral offset to the right m (if observed)]."""
+        """Undo the scaling of ``observe``: (..., obs_dim) -> [distance to the landmark m, lateral
+        offset to the right m (if observed), previous action (if observed, unscaled)]."""
         check_tensor("obs", obs)
         if obs.ndim == 0 or obs.shape[-1] != self.obs_dim:
             raise ValueError(f"obs must end in dimension {self.obs_dim}, got shape {tuple(obs.shape)}")
         c = self.config
-        return obs * torch.tensor([c.obs_distance_scale, c.obs_lateral_scale][: self.obs_dim], dtype=obs.dtype)
+        scale = [c.obs_distance_scale] + [c.obs_lateral_scale] * c.obs_lateral + [1.0] * c.obs_prev_action
+        return obs * torch.tensor(scale, dtype=obs.dtype)
 
-    def states_at(self, distance, lateral=0.0) -> torch.Tensor:
+    def states_at(self, distance, lateral=0.0, prev_action=0.0) -> torch.Tensor:
         """States (N, 3) at ``distance`` m before the landmark (along x) and ``lateral`` m to the
-        right of the centre line (y = -lateral), heading straight ahead; numbers or 1-D sequences
-        (broadcast together)."""
-        d, right = torch.broadcast_tensors(_as_1d("distance", distance), _as_1d("lateral", lateral))
-        return torch.stack([self.anchor_x - d, -right, torch.zeros_like(d)], dim=-1)  # (N, 3)
+        right of the centre line (y = -lateral), with the heading that steering ``prev_action``
+        (in [-1, 1]) gives, straight ahead by default; numbers or 1-D sequences (broadcast together)."""
+        prev = _as_1d("prev_action", prev_action)
+        if (prev.abs() > 1).any():
+            raise ValueError(f"prev_action must be in [-1, 1], got {prev_action!r}")
+        d, right, prev = torch.broadcast_tensors(_as_1d("distance", distance), _as_1d("lateral", lateral), prev)
+        heading = -self.config.heading_max * prev
+        return torch.stack([self.anchor_x - d, -right, heading], dim=-1)  # (N, 3)
 
-    def obs_at(self, distance, lateral=0.0) -> torch.Tensor:
+    def obs_at(self, distance, lateral=0.0, prev_action=0.0) -> torch.Tensor:
         """Observations (N, obs_dim) ``distance`` m before the landmark, ``lateral`` m to the right
-        of the centre line (on it by default): e.g. to plot a policy's action there."""
-        return self.observe(self.states_at(distance, lateral))
+        of the centre line (on it by default), after steering ``prev_action`` (0 by default):
+        e.g. to plot a policy's action there."""
+        return self.observe(self.states_at(distance, lateral, prev_action))
 
     def in_window(self, obs: torch.Tensor, distance: tuple[float, float], max_abs_lateral: float = 0.5) -> torch.Tensor:
         """(M,) bool: which observations ``obs`` (M, obs_dim) lie ``distance`` = (low, high) m
