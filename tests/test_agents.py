@@ -13,7 +13,7 @@ from ibc_tutorial.policies import BEVStateEncoder, BetaPolicy, EnergyModel, Obse
 
 def _obs(b, size, seed=0):
     g = torch.Generator().manual_seed(seed)
-    return {"bev": torch.randint(0, 2, (b, 5, size, size), generator=g, dtype=torch.uint8),
+    return {"bev": torch.randint(0, 2, (b, 5, size, size), generator=g).float(),
             "state": torch.rand(b, 3, generator=g) * torch.tensor([15.0, 2.0, 2.0]) - torch.tensor([0.0, 1.0, 1.0])}
 
 
@@ -103,8 +103,8 @@ def test_presets():
 
 
 def test_to_tensor_obs_from_numpy():
-    o = to_tensor_obs({"bev": np.zeros((2, 5, 8, 8), np.uint8), "state": np.zeros((2, 3), np.float64)})
-    assert o["bev"].dtype == torch.uint8 and o["state"].dtype == torch.float32
+    o = to_tensor_obs({"bev": np.zeros((2, 5, 8, 8), np.float32), "state": np.zeros((2, 3), np.float64)})
+    assert o["bev"].dtype == torch.float32 and o["state"].dtype == torch.float32
 
 
 def test_the_network_is_built_from_its_architecture():

@@ -33,7 +33,7 @@ def test_round_trip(saved):
     for k, v in net.state_dict().items():
         assert torch.equal(agent.network.state_dict()[k], v)
     assert torch.equal(agent.expert_actions, actions)
-    obs = {"bev": torch.randint(0, 2, (2, 5, 32, 32), dtype=torch.uint8), "state": torch.rand(2, 3)}
+    obs = {"bev": torch.randint(0, 2, (2, 5, 32, 32)).float(), "state": torch.rand(2, 3)}
     assert torch.allclose(agent.network.energy(obs, actions[:5]), net.energy(obs, actions[:5]))
 
 

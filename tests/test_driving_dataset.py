@@ -96,13 +96,13 @@ def _arrays(log):
 def test_dataset_samples(small_log):
     ds = DemoDataset(small_log, bev_size=64)
     obs, action = ds[10]
-    assert obs["bev"].shape == (5, 64, 64) and obs["bev"].dtype == torch.uint8
+    assert obs["bev"].shape == (5, 64, 64) and obs["bev"].dtype == torch.float32
     assert obs["state"].shape == (3,) and obs["state"].dtype == torch.float32
     assert action.shape == (2,) and action.dtype == torch.float32
     assert torch.equal(action, torch.from_numpy(small_log.action[10]))
-    f = DemoDataset(small_log, bev_size=192, float_bev=True)[10][0]["bev"]
+    f = DemoDataset(small_log, bev_size=192)[10][0]["bev"]
     assert f.dtype == torch.float32 and f.shape == (5, 192, 192)
-    assert torch.equal(torch.nn.functional.max_pool2d(f[None], 3)[0], obs["bev"].float())
+    assert torch.equal(torch.nn.functional.max_pool2d(f[None], 3)[0], obs["bev"])
     loader = torch.utils.data.DataLoader(ds, batch_size=16, shuffle=True, generator=torch.Generator().manual_seed(0))
     (bobs, bact) = next(iter(loader))
     assert bobs["bev"].shape == (16, 5, 64, 64) and bobs["state"].shape == (16, 3) and bact.shape == (16, 2)

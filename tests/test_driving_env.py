@@ -35,7 +35,9 @@ def test_registered_ids_and_reimport_is_silent():
 def test_observation_and_info():
     env = make_env("town02", bev_size=64)
     obs, info = env.reset(seed=3)
-    assert obs["bev"].dtype == np.uint8 and set(np.unique(obs["bev"])) <= {0, 1}
+    assert obs["bev"].dtype == np.float32 and set(np.unique(obs["bev"][:2])) <= {0, 1}
+    assert set(np.unique(obs["bev"][2:])) <= {0.0, np.float32(0.3), np.float32(0.6), 1.0}  # light levels
+    assert env.observation_space.contains(obs)
     assert obs["state"].dtype == np.float32 and obs["state"].shape == (3,)
     assert obs["bev"][0, 40 // 3 + 64 - 64 // 3 * 3 - 1:, :].any()  # road under and around the car
     total = 0.0

@@ -142,7 +142,7 @@ def test_batched_rollout_matches_single_episodes():
 
     def straight(obs):
         seen.append(obs["bev"].shape[0])
-        assert obs["bev"].dtype == np.uint8 and obs["state"].shape == (obs["bev"].shape[0], 3)
+        assert obs["bev"].dtype == np.float32 and obs["state"].shape == (obs["bev"].shape[0], 3)
         return np.tile([0.4, 2.0], (len(obs["state"]), 1))  # clipped to [-1, 1]
 
     results = rollout(straight, town="town02", episodes=4, steps=300, bev_size=32)

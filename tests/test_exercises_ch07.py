@@ -72,7 +72,7 @@ def test_world_to_bev_solution_is_the_renderers():
     e, d = np.array(line.entry), np.array(line.direction)
     x, y = e - 12 * d + 0.7 * np.array([d[1], -d[0]])
     yaw = math.atan2(d[1], d[0]) + 0.2
-    red = np.ones((3, town.n_lights), dtype=bool)
+    red = np.full((3, town.n_lights), 2, dtype=np.uint8)  # every light red
     bev = r.render(x, y, yaw, red)
     centre = e - 0.6 * d  # the middle of the stop line
     row, col = solutions.ch07_world_to_bev(*centre, x, y, yaw)

@@ -1,10 +1,13 @@
 """``ibc-tutorial replicate`` wired end to end on the tiny preset."""
 
 import json
+import re
+import subprocess
 
 from pathlib import Path
 
 import pytest
+import torch
 
 from ibc_tutorial import cli
 from ibc_tutorial.experiments.agents.presets import LAPTOP, METHODS, TINY
@@ -24,7 +27,9 @@ def test_replicate_tiny(replicated):
     out = replicated
     res = json.loads((out / "results.json").read_text())
     assert res["complete"] and res["preset"]["name"] == "tiny"
-    assert set(res["table"]) == set(METHODS)
+    assert set(res["table"]) == set(METHODS) | {"expert"} and set(res["heldout"]) == set(METHODS) | {"expert"}
+    assert res["table"]["expert"]["episodes"] == TINY.final_episodes
+    assert res["heldout"]["bc"]["episodes"] == TINY.heldout_episodes * len(TINY.seeds)
     for m in METHODS:
         t = res["table"][m]
         assert t["episodes"] == TINY.final_episodes * len(TINY.seeds) and t["agents"] == len(TINY.seeds)
@@ -32,9 +37,14 @@ def test_replicate_tiny(replicated):
     assert set(res["free_driving"]) == {"bc", "da-ibc"}
     assert 0.0 <= res["free_driving"]["bc"]["coverage_all"] <= 1.0
     assert (out / "free_driving.npz").exists() and (out / "landscapes.npz").exists()
-    # only the first seed's BC and DA-IBC checkpoints are kept; no optimiser states
-    assert (run_dir(out, "bc", 0) / "final.pt").exists() and (run_dir(out, "da-ibc", 0) / "final.pt").exists()
-    assert not (run_dir(out, "ibc", 0) / "final.pt").exists() and not list(out.glob("runs/*/*/last.pt"))
+    # every agent is kept, its weights in float16; no optimiser states
+    for m in METHODS:
+        ckpt = torch.load(run_dir(out, m, 0) / "final.pt", weights_only=True)
+        assert ckpt["optimizer"] is None and all(v.dtype == torch.float16 for v in ckpt["model"].values()
+                                                 if v.is_floating_point())
+        held = json.loads((run_dir(out, m, 0) / "heldout_eval.json").read_text())
+        assert held["start_seed"] != json.loads((run_dir(out, m, 0) / "final_eval.json").read_text())["start_seed"]
+    assert not list(out.glob("runs/*/*/last.pt"))
     prov = json.loads((out / "provenance.json").read_text())
     assert prov["complete"] and prov["runs_done"] == prov["runs_planned"] and prov["machine"]["nproc"] >= 1
     assert "replicate --preset tiny" in prov["command"] and "wall time" in (out / "PROVENANCE.md").read_text()
@@ -53,7 +63,7 @@ def test_replicate_tiny(replicated):
 def test_evaluate_defaults_are_the_replication_protocol(replicated, tmp_path):
     """``ibc-tutorial evaluate --checkpoint final.pt`` with no other option remakes the run's final_eval.json."""
     out = replicated
-    for method in ("bc", "da-ibc"):
+    for method in METHODS:
         d = run_dir(out, method, 0)
         report = tmp_path / f"{method}.json"
         assert cli.main(["evaluate", "--checkpoint", str(d / "final.pt"), "--out", str(report)]) == 0
@@ -73,6 +83,18 @@ def test_the_shipped_results_load():
     shipped = load_results(SHIPPED)
     res = shipped["results"]
     assert res["preset"] == LAPTOP.to_dict() and res["complete"]
-    assert shipped["provenance"]["complete"] and set(res["table"]) == set(METHODS)
+    assert shipped["provenance"]["complete"] and set(res["table"]) == set(METHODS) | {"expert"}
     assert shipped["free_driving"] and "junction_energy" in shipped["landscapes"]
     assert collect_results(SHIPPED, LAPTOP)["table"] == res["table"]  # the aggregation reads the shipped runs alike
+
+
+def test_the_shipped_results_are_a_clean_run_of_an_ancestor_commit():
+    """PROVENANCE's commit has no uncommitted changes and is an ancestor of the commit that ships it."""
+    root = SHIPPED.parents[2]
+    prov = json.loads((SHIPPED / "provenance.json").read_text())
+    commit = prov["commit"]
+    assert "uncommitted" not in commit and re.fullmatch(r"[0-9a-f]{40}", commit), commit
+    if not (root / ".git").exists():
+        pytest.skip("not a git checkout: the ancestry cannot be read")
+    ancestor = subprocess.run(["git", "-C", str(root), "merge-base", "--is-ancestor", commit, "HEAD"])
+    assert ancestor.returncode == 0, f"the shipped results' commit {commit} is not an ancestor of HEAD"

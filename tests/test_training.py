@@ -192,3 +192,36 @@ def test_trainer_refuses_a_foreign_state():
         trainer.load_state_dict({"model": model.state_dict()})
     with pytest.raises(ValueError, match=r"state\['step'\] must be <="):
         trainer.load_state_dict(dict(trainer.state_dict(), step=6))
+
+
+def test_cosine_schedule_decays_and_resumes_bit_identically():
+    data = bimodal_data(200)
+    config = TrainConfig(steps=60, batch_size=16, log_every=20, seed=4, lr=1e-2, lr_schedule="cosine")
+    whole = small_model(seed=5)
+    train(whole, info_nce_objective(whole, ExpertSampler(0.1), 8), data, config)
+    constant = small_model(seed=5)
+    train(constant, info_nce_objective(constant, ExpertSampler(0.1), 8), data,
+          TrainConfig(**{**config.__dict__, "lr_schedule": "constant"}))
+    assert not all(torch.equal(a, b) for a, b in zip(_params(whole), _params(constant)))  # the schedule acts
+
+    class Killed(Exception):
+        pass
+
+    first = small_model(seed=5)
+    trainer = Trainer(first, info_nce_objective(first, ExpertSampler(0.1), 8), data, config)
+    saved = {}
+
+    def kill_after_first_log(step, loss):
+        saved.update(trainer.state_dict())
+        raise Killed
+
+    with pytest.raises(Killed):
+        trainer.run(callback=kill_after_first_log)
+    assert saved["step"] == 20
+    second = small_model(seed=99)
+    train(second, info_nce_objective(second, ExpertSampler(0.1), 8), data, config, state=saved)
+    assert all(torch.equal(a, b) for a, b in zip(_params(whole), _params(second)))
+    assert trainer.learning_rate(0) == 1e-2 and trainer.learning_rate(30) == pytest.approx(5e-3)
+    assert 0 < trainer.learning_rate(59) < 1e-4
+    with pytest.raises(ValueError, match="lr_schedule"):
+        Trainer(first, info_nce_objective(first, ExpertSampler(0.1), 8), data, TrainConfig(lr_schedule="step"))

@@ -166,7 +166,6 @@ def _replicate_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", required=True, help="folder for the data, runs, results and provenance; an interrupted "
                    "replication of the same preset there is resumed")
     p.add_argument("--force", action="store_true", help="start over: delete the replication already in --out")
-    p.add_argument("--keep-checkpoints", action="store_true", help="keep every agent's final.pt")
     p.add_argument("--threads", type=int, default=0,
                    help=THREADS_HELP.replace("threads", "threads per process", 1))
     p.add_argument("--workers", type=int, default=1, help="training runs in parallel processes (default: %(default)s)")

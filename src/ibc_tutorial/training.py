@@ -20,12 +20,13 @@ interrupted run resumes bit for bit as if it had not stopped. ``train`` is the o
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping, Protocol, runtime_checkable
 
 import torch
 
-from ibc_tutorial.utils import check_int, check_positive, check_tensor, progress
+from ibc_tutorial.utils import check_choice, check_int, check_positive, check_tensor, progress
 
 Objective = Callable[[Any, torch.Generator], torch.Tensor]
 """``objective(batch, generator) -> scalar loss``: what ``train`` minimises (see ``ibc_tutorial.objectives``)."""
@@ -62,6 +63,10 @@ class TensorData:
         return {k: v[indices] for k, v in self.data.items()}  # each (B, ...)
 
 
+LR_SCHEDULES = ("constant", "cosine")
+"""Learning-rate schedules ``TrainConfig.lr_schedule`` accepts."""
+
+
 @dataclass
 class TrainConfig:
     """Settings of one training run."""
@@ -72,6 +77,8 @@ class TrainConfig:
     """Samples per minibatch (the DA-IBC paper uses 128)."""
     lr: float = 1e-3
     """Adam learning rate (the paper uses 1e-5 on its much larger dataset)."""
+    lr_schedule: str = "constant"
+    """"constant", or "cosine": the rate at step t is lr * (1 + cos(pi t / steps)) / 2, from lr down to 0."""
     weight_decay: float = 0.0
     """Adam weight decay."""
     seed: int = 0
@@ -135,6 +142,7 @@ class Trainer:
         check_int("config.batch_size", config.batch_size, minimum=1)
         check_int("config.log_every", config.log_every, minimum=1)
         check_positive("config.lr", config.lr)
+        check_choice("config.lr_schedule", config.lr_schedule, LR_SCHEDULES)
         if not callable(objective):
             raise ValueError(f"objective must be callable, got {type(objective).__name__}")
         self.data = as_minibatches(data)
@@ -149,6 +157,13 @@ class Trainer:
         self.step = 0
         """Gradient steps taken so far (over every call to ``run``)."""
         self._running, self._count = 0.0, 0  # loss sum and steps since the last log point
+
+    def learning_rate(self, step: int) -> float:
+        """The step size of gradient step ``step`` (0-based) under ``config.lr_schedule``."""
+        c = self.config
+        if c.lr_schedule == "cosine":
+            return c.lr * 0.5 * (1.0 + math.cos(math.pi * step / c.steps))
+        return c.lr
 
     def state_dict(self) -> dict:
         """Everything needed to continue exactly: model, Adam, generator, step, running loss (plain data)."""
@@ -190,6 +205,8 @@ class Trainer:
                 raise ValueError(f"the objective must return a finite scalar, got {loss.detach()!r} at step {step}")
             self.optimizer.zero_grad(set_to_none=True)
             loss.backward()
+            for group in self.optimizer.param_groups:
+                group["lr"] = self.learning_rate(step - 1)
             self.optimizer.step()
             self.step = step
             self._running += float(loss.detach())

@@ -1,33 +1,36 @@
 """The bird's-eye view: the town rasterised once, then cropped and rotated around the car per step.
 
-The five binary channels follow the DA-IBC paper (sec. 2.1 and Fig. 1): 0 drivable area,
-1 lane boundaries (road edges and centre lines), 2-4 red stop lines at history indices -16,
--9 and -1 of a queue whose last entry is the current step (Roach's convention, which the
-paper's BEV comes from), i.e. 15, 8 and 0 steps ago, clamped at the episode's start. A head
-showing yellow is drawn as red: the channel answers "must the car stop here?", the question
-the expert answers too (it stops for red and for a yellow it can stop for with 4 m/s^2).
+The five channels follow the DA-IBC paper (sec. 2.1 and Fig. 1): 0 drivable area and
+1 lane boundaries (road edges and centre lines), both 0/1; 2-4 the traffic lights' stop lines at
+history indices -16, -9 and -1 of a queue whose last entry is the current step (Roach's
+convention, which the paper's BEV comes from), i.e. 15, 8 and 0 steps ago, clamped at the
+episode's start. As in the paper's Fig. 1(d) and in Roach, a stop line is drawn in every state,
+by intensity: **red 1.0, yellow 0.6, green 0.3** (``LIGHT_LEVELS``), 0 where there is no line.
 
-The encoding, measured (``driving.analysis.light_label_conflicts``, chapter 07): within 9.5 m of
-its stop line, this flag contradicts the expert's label only when the expert drives through a
-yellow it can no longer stop for (4 of about 6,700 such samples of the ten-route town01 data);
-drawing yellow as nothing would contradict its 60 yellow stops instead. The paper's Fig. 1(d)
-and Roach draw lights in every state by intensity; the planned encoding is red 1.0, yellow 0.6,
-green 0.3 in these same channels, which removes the 4. It changes the BEV from 0/1 bits to
-float levels, so it is to land together with the dataset renderer, the agents' encoder and
-retrained agents (``docs/design.md``, section *The bird's-eye view*).
+Why intensities rather than one "must stop" flag, measured (``driving.analysis.light_label_conflicts``,
+chapter 07): within 9.5 m of its stop line the expert stops for red, drives on at green, and at
+yellow stops only if 4 m/s^2 of braking suffice. A 0/1 flag that draws yellow as red contradicts
+the expert's label whenever it drives through a late yellow (4 of about 6,700 such samples of the
+ten-route town01 data); a flag that leaves yellow out contradicts its 60 yellow stops. With a level
+per state no label contradicts what the view shows: at yellow, the speed and the line's distance
+in the same observation decide.
 
 The 192 x 192 view covers 38.4 m at 5 px/m, heading up, with the car 40 px above the bottom
 edge. It is rendered by one gather from the town raster: every raster pixel holds a byte with
 bit 0 = drivable, bit 1 = lane boundary and bits 2-7 = 1 + the id of the stop line drawn
 there (0 for none); a 256-entry lookup table, built per step from the light states, turns a
-gathered byte into the five BEV bits. Smaller views (96, 64, 48, 32) cover the same field by
-OR-pooling blocks of the 192 view, which keeps the thin lines (max-pooling binary images).
+gathered byte into the *packed* view byte: bits 0-1 the two road channels and three 2-bit
+fields (bits 2-3, 4-5, 6-7) the light code of channels 2-4 (0 no line, 1 green, 2 yellow,
+3 red). Smaller views (96, 64, 48, 32) cover the same field by pooling blocks of the 192 view:
+OR for the road bits and the maximum for the light codes, which keeps the thin lines (max-pooling)
+and shows the most urgent state where two lines share a block. ``unpack`` turns packed bytes into
+the float32 channels the networks see.
 """
 
 from __future__ import annotations
 
 import math
-from functools import lru_cache, reduce
+from functools import lru_cache
 
 import numpy as np
 
@@ -44,8 +47,24 @@ EGO_ROW = FULL_SIZE - 40
 """Row (from the top) of the car's centre in the 192 view: 40 px above the bottom edge."""
 SUPPORTED_SIZES = (192, 96, 64, 48, 32)
 """BEV sizes offered: 192 and the same field OR-pooled by 2, 3, 4 and 6."""
-CHANNELS = ("drivable area", "lane boundaries", "red lights t-16", "red lights t-9", "red lights t-1")
+CHANNELS = ("drivable area", "lane boundaries", "lights t-16", "lights t-9", "lights t-1")
 """Names of the five channels, in order."""
+LIGHT_LEVELS = (0.3, 0.6, 1.0)
+"""Value of a stop line in channels 2-4 by light state: green 0.3, yellow 0.6, red 1.0 (0 = no line)."""
+LIGHT_SHIFTS = (2, 4, 6)
+"""Bit offsets of the 2-bit light codes of channels 2, 3, 4 in a packed view byte."""
+
+
+def _unpack_table() -> np.ndarray:
+    """(5, 256) float32: the value of each channel for every packed byte."""
+    byte = np.arange(256)
+    levels = np.array((0.0,) + LIGHT_LEVELS, dtype=np.float32)  # by light code 0 none, 1 green, 2 yellow, 3 red
+    rows = [byte & 1, (byte >> 1) & 1] + [levels[(byte >> shift) & 3] for shift in LIGHT_SHIFTS]
+    return np.stack(rows).astype(np.float32)
+
+
+UNPACK_TABLE = _unpack_table()
+"""(5, 256) float32 lookup from a packed view byte to the five channel values."""
 HISTORY_LAGS = (15, 8, 0)
 """Steps back of channels 2, 3, 4: history indices -16, -9, -1 with -1 the current step."""
 LINE_HALF_WIDTH = 0.2
@@ -194,15 +213,23 @@ class BEVRenderer:
         self._r = right * res  # (192,)
         self._reach = float(np.hypot(np.abs(self._f).max(), np.abs(self._r).max())) + 2  # pixels from the car
         self._low = np.arange(256, dtype=np.uint8) & 3  # bits 0-1 of every byte
-        self._shifts = np.arange(5, dtype=np.uint8)[:, None, None]
-        n = raster.town.n_lights
-        self._n_lights = n
+        self._n_lights = raster.town.n_lights
 
-    def _lut(self, red: np.ndarray) -> np.ndarray:
-        """256-entry table from raster byte to BEV bits, for red flags (3, L) at the three lags."""
-        red = np.asarray(red, dtype=np.uint8).reshape(3, self._n_lights)
+    def check_lights(self, lights, batch: int | None = None) -> np.ndarray:
+        """``lights`` as uint8 (3, L), or (batch, 3, L): light states 0 green, 1 yellow, 2 red."""
+        want = (3, self._n_lights) if batch is None else (batch, 3, self._n_lights)
+        arr = np.asarray(lights)
+        if arr.shape != want or arr.dtype.kind not in "iu" or (arr.size and (arr.min() < 0 or arr.max() > 2)):
+            raise ValueError(f"lights must be light states (0 green, 1 yellow, 2 red) of shape {want}, got "
+                             f"{arr.dtype} of shape {arr.shape}")
+        return arr.astype(np.uint8, copy=False)
+
+    def _lut(self, lights: np.ndarray) -> np.ndarray:
+        """256-entry table from raster byte to packed view byte, for light states (3, L) at the three lags."""
+        code = lights.astype(np.uint8) + 1  # (3, L): 1 green, 2 yellow, 3 red
         ids = np.zeros(64, dtype=np.uint8)
-        ids[1:self._n_lights + 1] = (red[0] << 2) | (red[1] << 3) | (red[2] << 4)
+        ids[1:self._n_lights + 1] = ((code[0] << LIGHT_SHIFTS[0]) | (code[1] << LIGHT_SHIFTS[1])
+                                     | (code[2] << LIGHT_SHIFTS[2]))
         return self._low | ids[np.arange(256) >> 2]
 
     def _indices(self, x: float, y: float, yaw: float) -> np.ndarray:
@@ -229,45 +256,52 @@ class BEVRenderer:
         idx += col.astype(np.int32)
         return idx
 
-    def packed(self, x: float, y: float, yaw: float, red: np.ndarray) -> np.ndarray:
-        """(S, S) uint8 with the five channels as bits 0-4 (cheap to store; see ``unpack``)."""
-        bits = self._lut(red).take(self.raster.code.ravel().take(self._indices(x, y, yaw)))  # (192, 192)
-        return self._pool(bits)
+    def packed(self, x: float, y: float, yaw: float, lights: np.ndarray) -> np.ndarray:
+        """(S, S) uint8 packed view, one byte per pixel (cheap to store; see the module docstring and ``unpack``)."""
+        lights = self.check_lights(lights)
+        return self._pool(self._lut(lights).take(self.raster.code.ravel().take(self._indices(x, y, yaw))))
 
-    def _pool(self, bits: np.ndarray) -> np.ndarray:
+    def _pool(self, codes: np.ndarray) -> np.ndarray:
+        """(..., 192, 192) packed bytes -> (..., S, S): OR of the road bits, maximum of each light code."""
         k = self.pool
         if k == 1:
-            return bits
+            return codes
         s = self.size
-        b = bits.reshape(*bits.shape[:-2], s, k, s, k)
-        b = reduce(np.bitwise_or, (b[..., i, :, :] for i in range(k)))  # (..., S, S, k)
-        return reduce(np.bitwise_or, (b[..., i] for i in range(k)))  # (..., S, S)
-
-    def unpack(self, packed: np.ndarray) -> np.ndarray:
-        """(..., S, S) packed bytes -> (..., 5, S, S) uint8 channels of 0/1."""
-        return (packed[..., None, :, :] >> self._shifts) & 1
-
-    def render(self, x: float, y: float, yaw: float, red: np.ndarray) -> np.ndarray:
-        """(5, S, S) uint8 BEV of a car at (x, y) heading ``yaw``.
-
-        Args:
-            red: (3, L) booleans: which stop lines show red (or yellow) at the lags of channels
-                2, 3 and 4 (``HISTORY_LAGS`` steps ago).
-        """
-        return self.unpack(self.packed(x, y, yaw, red))
-
-    def packed_batch(self, poses: np.ndarray, red: np.ndarray) -> np.ndarray:
-        """(B, S, S) packed views of poses (B, 3) = (x, y, yaw) with red flags (B, 3, L)."""
-        poses = np.asarray(poses, dtype=float).reshape(-1, 3)
-        red = np.asarray(red, dtype=bool).reshape(len(poses), 3, self._n_lights)
-        out = np.empty((len(poses), self.size, self.size), dtype=np.uint8)
-        for b in range(len(poses)):
-            out[b] = self.packed(poses[b, 0], poses[b, 1], poses[b, 2], red[b])
+        b = codes.reshape(*codes.shape[:-2], s, k, s, k)  # (..., S, k, S, k)
+        out = np.bitwise_or.reduce(np.bitwise_or.reduce(b & 3, axis=-1), axis=-2)  # (..., S, S) road bits
+        for shift in LIGHT_SHIFTS:
+            out |= ((b >> shift) & 3).max(axis=(-3, -1)) << shift
         return out
 
-    def render_batch(self, poses: np.ndarray, red: np.ndarray) -> np.ndarray:
-        """(B, 5, S, S) BEVs of poses (B, 3) = (x, y, yaw) with red flags (B, 3, L)."""
-        return self.unpack(self.packed_batch(poses, red))
+    def unpack(self, packed: np.ndarray) -> np.ndarray:
+        """(..., S, S) packed bytes -> (..., 5, S, S) float32 channels: road 0/1, lights 0/0.3/0.6/1."""
+        packed = np.asarray(packed, dtype=np.uint8)
+        out = np.empty(packed.shape[:-2] + (5,) + packed.shape[-2:], dtype=np.float32)
+        for c in range(5):
+            out[..., c, :, :] = UNPACK_TABLE[c].take(packed)
+        return out
+
+    def render(self, x: float, y: float, yaw: float, lights: np.ndarray) -> np.ndarray:
+        """(5, S, S) float32 BEV of a car at (x, y) heading ``yaw``.
+
+        Args:
+            lights: (3, L) light states (0 green, 1 yellow, 2 red) of every stop line at the lags of
+                channels 2, 3 and 4 (``HISTORY_LAGS`` steps ago), e.g. ``DrivingSim.light_history()``.
+        """
+        return self.unpack(self.packed(x, y, yaw, lights))
+
+    def packed_batch(self, poses: np.ndarray, lights: np.ndarray) -> np.ndarray:
+        """(B, S, S) packed views of poses (B, 3) = (x, y, yaw) with light states (B, 3, L)."""
+        poses = np.asarray(poses, dtype=float).reshape(-1, 3)
+        lights = self.check_lights(lights, batch=len(poses))
+        out = np.empty((len(poses), self.size, self.size), dtype=np.uint8)
+        for b in range(len(poses)):
+            out[b] = self.packed(poses[b, 0], poses[b, 1], poses[b, 2], lights[b])
+        return out
+
+    def render_batch(self, poses: np.ndarray, lights: np.ndarray) -> np.ndarray:
+        """(B, 5, S, S) float32 BEVs of poses (B, 3) = (x, y, yaw) with light states (B, 3, L)."""
+        return self.unpack(self.packed_batch(poses, lights))
 
 
 def get_renderer(town_name: str, size: int = FULL_SIZE) -> BEVRenderer:

@@ -29,7 +29,7 @@ import torch
 
 from ibc_tutorial.driving.bev import HISTORY_LAGS, PAD, BEVRenderer, check_bev_size, get_raster
 from ibc_tutorial.driving.env import MAX_SPEED
-from ibc_tutorial.driving.lights import GREEN, RED
+from ibc_tutorial.driving.lights import RED
 from ibc_tutorial.driving.towns import TOWNS, get_town
 from ibc_tutorial.utils import atomic_write_bytes, check_choice, progress
 
@@ -112,9 +112,9 @@ class DemoLog:
         back = np.minimum(np.array(HISTORY_LAGS)[None, :], self.step[index][:, None])  # (B, 3)
         return index[:, None] - back
 
-    def stop_flags(self, index: np.ndarray) -> np.ndarray:
-        """(B, 3, L) which stop lines were red or yellow at the BEV's three history lags."""
-        return self.lights[self.history_rows(index)] != GREEN
+    def light_history(self, index: np.ndarray) -> np.ndarray:
+        """(B, 3, L) uint8 light states (0 green, 1 yellow, 2 red) at the BEV's three history lags."""
+        return self.lights[self.history_rows(index)]
 
     def episodes(self) -> list[slice]:
         """The rows of each episode, in order."""
@@ -250,7 +250,7 @@ def exit_counts(log: DemoLog) -> dict[int, Counter]:
 
 
 class DemoDataset(torch.utils.data.Dataset):
-    """Samples ``({"bev": (5, S, S), "state": (3,)}, action (2,))`` of a demonstration log.
+    """Samples ``({"bev": (5, S, S) float32, "state": (3,)}, action (2,))`` of a demonstration log.
 
     The BEV is rendered on demand from the stored pose and light states, exactly as the
     environment renders its observation (so a sample equals what the env showed the expert).
@@ -258,16 +258,14 @@ class DemoDataset(torch.utils.data.Dataset):
     Args:
         source: a ``DemoLog`` or the path of a file written by ``DemoLog.save``.
         bev_size: side of the rendered BEV (one of ``bev.SUPPORTED_SIZES``).
-        float_bev: return the BEV as float32 0./1. instead of uint8 0/1.
         cache: render every sample once, now, and keep the views packed one byte per pixel
             (N x S x S bytes: 86 MB for the paper-sized dataset at 64 x 64, 775 MB at 192), so
             that later epochs only unpack them.
     """
 
-    def __init__(self, source, bev_size: int = 192, float_bev: bool = False, cache: bool = False):
+    def __init__(self, source, bev_size: int = 192, cache: bool = False):
         self.log = source if isinstance(source, DemoLog) else DemoLog.load(source)
         self.bev_size = check_bev_size(bev_size)
-        self.float_bev = bool(float_bev)
         self.renderer = BEVRenderer(get_raster(self.log.town), self.bev_size)
         self.states = torch.from_numpy(self.log.states())  # (N, 3) float32
         self.actions = torch.from_numpy(self.log.action.copy())  # (N, 2) float32
@@ -276,20 +274,19 @@ class DemoDataset(torch.utils.data.Dataset):
             packed = np.empty((len(self.log), self.bev_size, self.bev_size), dtype=np.uint8)  # (N, S, S)
             for a in progress(range(0, len(self.log), 512), desc="rendering BEVs"):
                 idx = np.arange(a, min(a + 512, len(self.log)))
-                packed[idx] = self.renderer.packed_batch(self.log.pose[idx], self.log.stop_flags(idx))
+                packed[idx] = self.renderer.packed_batch(self.log.pose[idx], self.log.light_history(idx))
             self._packed = packed
 
     def _packed_of(self, index: np.ndarray) -> np.ndarray:
         if self._packed is not None:
             return self._packed[index]
-        return self.renderer.packed_batch(self.log.pose[index], self.log.stop_flags(index))
+        return self.renderer.packed_batch(self.log.pose[index], self.log.light_history(index))
 
     def __len__(self) -> int:
         return len(self.log)
 
     def _bev(self, packed: np.ndarray) -> torch.Tensor:
-        bev = torch.from_numpy(self.renderer.unpack(packed))
-        return bev.float() if self.float_bev else bev
+        return torch.from_numpy(self.renderer.unpack(packed))  # (..., 5, S, S) float32
 
     def __getitem__(self, i):
         n = len(self)

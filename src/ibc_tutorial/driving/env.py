@@ -1,6 +1,7 @@
 """The Gymnasium environment: drive a town from the bird's-eye view, as the DA-IBC paper's agents do.
 
-Observation (the paper's sec. 3.1): ``{"bev": uint8 (5, S, S) of 0/1, "state": float32 (3,)}``
+Observation (the paper's sec. 3.1): ``{"bev": float32 (5, S, S), "state": float32 (3,)}``: the BEV's
+road channels are 0/1 and its light channels 0.3 / 0.6 / 1.0 for green / yellow / red (``driving.bev``),
 with state = [speed in m/s, previous steer, previous acceleration]. Action: ``Box(-1, 1, (2,))``
 = [steer, acceleration (negative brakes)], at 10 Hz. **Steering sign, the whole book's: +1 turns
 right, -1 turns left** (CARLA's convention; the world frame is right-handed, so a right turn
@@ -78,7 +79,7 @@ class DrivingEnv(gymnasium.Env):
         self._full_renderer = self.renderer if c.bev_size == 192 else BEVRenderer(get_raster(c.town), 192)
         S = c.bev_size
         self.observation_space = spaces.Dict({
-            "bev": spaces.Box(0, 1, (5, S, S), dtype=np.uint8),
+            "bev": spaces.Box(0.0, 1.0, (5, S, S), dtype=np.float32),
             "state": spaces.Box(np.array([0.0, -1.0, -1.0], dtype=np.float32),
                                 np.array([MAX_SPEED, 1.0, 1.0], dtype=np.float32), dtype=np.float32),
         })
@@ -138,7 +139,7 @@ class DrivingEnv(gymnasium.Env):
         from ibc_tutorial.driving.render import bev_to_rgb, draw_ego
 
         x, y, yaw = self.sim.car.pose
-        return draw_ego(bev_to_rgb(self._full_renderer.render(x, y, yaw, self.sim.stop_flags())), self.sim.car.config)
+        return draw_ego(bev_to_rgb(self._full_renderer.render(x, y, yaw, self.sim.light_history())), self.sim.car.config)
 
     # ------------------------------------------------------------------ helpers
     @staticmethod
@@ -168,7 +169,7 @@ class DrivingEnv(gymnasium.Env):
 
     def _observation(self) -> dict:
         x, y, yaw = self.sim.car.pose
-        bev = self.renderer.render(x, y, yaw, self.sim.stop_flags())
+        bev = self.renderer.render(x, y, yaw, self.sim.light_history())
         steer, acc = self.sim.prev_action
         state = np.array([min(self.sim.car.speed, MAX_SPEED), steer, acc], dtype=np.float32)
         return {"bev": bev, "state": state}

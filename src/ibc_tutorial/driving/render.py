@@ -4,31 +4,40 @@ from __future__ import annotations
 
 import numpy as np
 
-from ibc_tutorial.driving.bev import EGO_ROW, FULL_SIZE, PIXELS_PER_METRE, TownRaster
+from ibc_tutorial.driving.bev import EGO_ROW, FULL_SIZE, LIGHT_LEVELS, PIXELS_PER_METRE, TownRaster
 from ibc_tutorial.driving.car import CarConfig
 
-BEV_COLOURS = np.array([
+ROAD_COLOURS = np.array([
     [80, 80, 80],     # drivable area: grey
     [255, 255, 255],  # lane boundaries: white
-    [110, 0, 0],      # red lights t-16: dark red
-    [180, 20, 20],    # red lights t-9
-    [255, 40, 40],    # red lights t-1: bright red
 ], dtype=np.uint8)
-"""Colour of each BEV channel; later channels are painted over earlier ones."""
+"""Colour of the two road channels (0/1)."""
+LIGHT_COLOURS = np.array([
+    [40, 200, 60],    # green (level 0.3)
+    [255, 200, 0],    # yellow (level 0.6)
+    [255, 40, 40],    # red (level 1.0)
+], dtype=np.uint8)
+"""Colour of a stop line by the light level of its channel (``bev.LIGHT_LEVELS``)."""
+LAG_BRIGHTNESS = (0.45, 0.7, 1.0)
+"""Light channels 2, 3, 4 (15, 8 and 0 steps ago) are drawn this bright: the newest on top, brightest."""
 BACKGROUND = np.array([0, 0, 0], dtype=np.uint8)
 EGO_COLOUR = np.array([0, 200, 255], dtype=np.uint8)
 BUILDING_COLOUR = np.array([150, 110, 60], dtype=np.uint8)
 
 
 def bev_to_rgb(bev: np.ndarray) -> np.ndarray:
-    """(5, S, S) BEV of 0/1 -> (S, S, 3) uint8 picture, each channel in its ``BEV_COLOURS``."""
+    """(5, S, S) BEV -> (S, S, 3) uint8 picture: road channels in ``ROAD_COLOURS``, stop lines in the colour
+    of their light (``LIGHT_COLOURS``), older channels dimmer and painted first."""
     bev = np.asarray(bev)
     if bev.ndim != 3 or bev.shape[0] != 5:
         raise ValueError(f"bev must have shape (5, S, S), got {bev.shape}")
     img = np.empty(bev.shape[1:] + (3,), dtype=np.uint8)
     img[:] = BACKGROUND
-    for ch in range(5):
-        img[bev[ch] > 0] = BEV_COLOURS[ch]
+    for ch in range(2):
+        img[bev[ch] > 0] = ROAD_COLOURS[ch]
+    for ch, bright in zip(range(2, 5), LAG_BRIGHTNESS):
+        for colour, level in zip(LIGHT_COLOURS, LIGHT_LEVELS):
+            img[np.isclose(bev[ch], level, atol=0.05)] = (colour * bright).astype(np.uint8)
     return img
 
 

@@ -27,11 +27,12 @@ import numpy as np
 
 from ibc_tutorial.driving.env import DrivingEnv, make_env
 from ibc_tutorial.driving.expert import Expert
+from ibc_tutorial.driving.lights import GREEN
 from ibc_tutorial.utils import check_int, progress
 
 Policy = Callable[[dict[str, np.ndarray]], np.ndarray]
 """A closed-loop policy, the one form every driving policy of the book takes:
-``policy({"bev": uint8 (B, 5, S, S), "state": float32 (B, 3)}) -> actions (B, 2)`` on numpy
+``policy({"bev": float32 (B, 5, S, S), "state": float32 (B, 3)}) -> actions (B, 2)`` on numpy
 batches (B = the episodes still running), actions (steer, acceleration) in [-1, 1]
 (``experiments.agents.Agent.policy(seed)`` makes one from a trained agent)."""
 
@@ -82,7 +83,7 @@ class _Trace:
         red, dist = False, float("inf")
         if ap is not None and ap in tw.light_of_approach:
             light = tw.light_of_approach[ap]
-            red = bool(self.env.sim.stop_flags()[2, light])  # red or yellow now
+            red = bool(self.env.sim.light_history()[2, light] != GREEN)  # red or yellow now
             dist = float(np.hypot(*(np.asarray(tw.stop_lines[light].entry) - (x, y))))
         r["pose"].append((x, y, yaw))
         r["speed"].append(info["speed"])
@@ -142,7 +143,7 @@ def rollout(policy: Policy | str, town: str = "town02", episodes: int = 10, step
         if experts is not None:
             actions = np.stack([experts[i].act() for i in active])  # (B, 2)
         else:
-            batch = {"bev": np.stack([obs[i]["bev"] for i in active]),  # (B, 5, S, S) uint8
+            batch = {"bev": np.stack([obs[i]["bev"] for i in active]),  # (B, 5, S, S) float32
                      "state": np.stack([obs[i]["state"] for i in active])}  # (B, 3) float32
             actions = np.asarray(policy(batch), dtype=np.float64).reshape(len(active), 2)
             with np.errstate(invalid="ignore"):

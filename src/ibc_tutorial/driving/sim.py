@@ -15,7 +15,7 @@ import pymunk
 
 from ibc_tutorial.driving.bev import HISTORY_LAGS, get_raster
 from ibc_tutorial.driving.car import BUILDING_COLLISION_TYPE, CAR_COLLISION_TYPE, Car, CarConfig
-from ibc_tutorial.driving.lights import GREEN, LightSchedule, LightTiming, RedLightMonitor
+from ibc_tutorial.driving.lights import LightSchedule, LightTiming, RedLightMonitor
 from ibc_tutorial.driving.routes import random_start
 from ibc_tutorial.driving.towns import get_town
 
@@ -133,11 +133,11 @@ class DrivingSim:
         """Light states (L,) at step ``t`` of this episode (or (T, L) for T steps)."""
         return self._table[np.asarray(t) % len(self._table)]
 
-    def stop_flags(self, t: int | None = None) -> np.ndarray:
-        """(3, L) which heads are not green (red or yellow) at the BEV's three history lags."""
+    def light_history(self, t: int | None = None) -> np.ndarray:
+        """(3, L) uint8 light states (0 green, 1 yellow, 2 red) at the BEV's three history lags."""
         t = self.t if t is None else t
         steps = np.maximum(t - self._lags, 0) % len(self._table)  # clamped at the episode start
-        return self._table[steps] != GREEN
+        return self._table[steps]
 
     def info(self) -> dict:
         """What ``env.step`` reports in ``info``."""

@@ -61,7 +61,7 @@ def _conv_out(size: int, n: int) -> int:
 class BEVStateEncoder(ObservationEncoder):
     """Dict observations ``{"bev": (B, 5, S, S), "state": (B, 3)}`` -> z (B, 2 * embed_dim): the DA-IBC paper's Fig. 2.
 
-    The BEV (uint8 0/1 or float) goes through ``len(channels)`` 3x3 stride-2 convolutions with
+    The BEV (float32: road channels 0/1, light channels 0.3 / 0.6 / 1.0) goes through ``len(channels)`` 3x3 stride-2 convolutions with
     ReLU, then a linear layer to ``embed_dim`` (the paper's 256-d BEV embedding); the state
     (speed in m/s, previous steer, previous acceleration) through a two-layer MLP to
     ``embed_dim`` (the paper's 256-d state embedding). z is their concatenation (sec. 3.3).

@@ -75,7 +75,7 @@ def build_network(method: str, preset: Preset) -> nn.Module:
 
 
 def to_tensor_obs(obs) -> dict[str, torch.Tensor]:
-    """Numpy or torch ``{"bev", "state"}`` batches -> torch tensors (uint8 BEV, float32 state)."""
+    """Numpy or torch ``{"bev", "state"}`` batches -> torch tensors (float32 BEV and state)."""
     bev, state = obs["bev"], obs["state"]
     bev = torch.from_numpy(np.ascontiguousarray(bev)) if isinstance(bev, np.ndarray) else bev
     state = torch.from_numpy(np.asarray(state, dtype=np.float32)) if isinstance(state, np.ndarray) else state.float()

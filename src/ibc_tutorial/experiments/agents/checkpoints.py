@@ -11,7 +11,7 @@ it loads with ``torch.load(..., weights_only=True)``: no pickled code runs. It h
   recorded step's state and action, not the file's bytes, which carry the time it was written);
 - ``seed``: the training seed (also the policy seed of its evaluations; absent in older files,
   whose metrics record it);
-- ``epoch``, ``model`` (the state dict), the expert actions and DFO initial weights the agent
+- ``epoch``, ``model`` (the state dict; float16 in a ``final.pt``), the expert actions and DFO initial weights the agent
   acts with, and, for resuming, ``optimizer`` and ``generator`` states (``training.Trainer``)
   and the metrics so far.
 
@@ -37,8 +37,9 @@ from ibc_tutorial.utils import atomic_torch_save, check_choice
 
 FORMAT = "ibc_tutorial.agent"
 """The ``format`` entry of every agent checkpoint."""
-FORMAT_VERSION = 1
-"""The layout version of the checkpoint dict; another one is refused."""
+FORMAT_VERSION = 2
+"""The layout version of the checkpoint dict; another one is refused. 2: the BEV draws lights by intensity
+(red 1.0, yellow 0.6, green 0.3; version 1 agents saw a 0/1 "must stop" flag and cannot be fed version 2 views)."""
 
 
 def _minor(version: str) -> str:
@@ -48,8 +49,11 @@ def _minor(version: str) -> str:
 def save_checkpoint(path, *, method: str, preset: Preset, network: torch.nn.Module, data_sha256: str, epoch: int,
                     expert_actions: torch.Tensor, init_weights: torch.Tensor | None = None,
                     optimizer: dict | None = None, generator: torch.Tensor | None = None,
-                    metrics: list | None = None, seed: int | None = None) -> Path:
+                    metrics: list | None = None, seed: int | None = None, half: bool = False) -> Path:
     """Write an agent checkpoint atomically (see the module docstring for its contents).
+
+    ``half`` stores the network's floating-point weights as float16 (a final checkpoint: half the
+    size; ``train.round_to_half`` rounds the network first, so nothing is lost that it used).
 
     ``optimizer`` and ``generator`` are the states kept for resuming (``Trainer.state_dict()``'s
     ``"optimizer"`` and ``"generator"``), or None in a final checkpoint.
@@ -64,7 +68,8 @@ def save_checkpoint(path, *, method: str, preset: Preset, network: torch.nn.Modu
         "data_sha256": str(data_sha256),
         "epoch": int(epoch),
         "seed": None if seed is None else int(seed),
-        "model": {k: v.detach().clone() for k, v in network.state_dict().items()},
+        "model": {k: v.detach().half() if half and v.is_floating_point() else v.detach().clone()
+                  for k, v in network.state_dict().items()},
         "expert_actions": expert_actions.detach().float().clone(),
         "init_weights": None if init_weights is None else init_weights.detach().float().clone(),
         "optimizer": optimizer,
@@ -132,7 +137,9 @@ def _check_fields(path: Path, ckpt: dict, resumable: bool) -> None:
         raise bad(f"its weights do not fit its architecture (missing {sorted(set(want) - set(model))[:3]}, "
                   f"unexpected {sorted(set(model) - set(want))[:3]})")
     for k, v in model.items():
-        if not isinstance(v, torch.Tensor) or v.shape != want[k].shape or v.dtype != want[k].dtype:
+        dtype_ok = isinstance(v, torch.Tensor) and (v.dtype == want[k].dtype or (
+            v.dtype == torch.float16 and want[k].dtype == torch.float32))  # a final checkpoint's float16 weights
+        if not dtype_ok or v.shape != want[k].shape:
             got = tuple(v.shape) if isinstance(v, torch.Tensor) else type(v).__name__
             raise bad(f"its weights do not fit its architecture: {k} must be {tuple(want[k].shape)}, got {got}")
         if v.is_floating_point() and not torch.isfinite(v).all():

@@ -31,6 +31,9 @@ from ibc_tutorial.utils import atomic_write_bytes, check_int
 
 EVAL_SEED = 1000
 """Seed of the first evaluation episode (the training routes use seeds from 0: kept apart)."""
+HELDOUT_SEED = 30000
+"""Seed of the first episode of the second, held-out evaluation (``Preset.heldout_episodes``): starts that no
+setting of the book was chosen on, to check that the table's numbers are not a property of its ten starts."""
 
 EXPERT_BEV_SIZE = 64
 """BEV size of the environments when the PID expert drives (it does not look at the BEV)."""

@@ -7,7 +7,9 @@ Steps (the DA-IBC paper's secs. 4.1-4.3, at the preset's scale):
 1. collect the expert's demonstrations in town01 (``data/town01.npz``);
 2. for each seed, for each method (bc, ibc, da-ibc): train an agent (``train.train_agent``), with
    its periodic town02 evaluations (the Fig. 4 curve), then its final evaluation: the preset's
-   ``final_episodes`` batched episodes of ``final_steps`` steps in town02 (the table);
+   ``final_episodes`` batched episodes of ``final_steps`` steps in town02 (the table), and a second
+   one of ``heldout_episodes`` from other starts (``evaluate.HELDOUT_SEED``: ``heldout_eval.json``);
+   the PID expert drives both sets of starts too (``runs/expert/``), the table's reference row;
 3. once the first seed's BC and DA-IBC agents are done: free driving in town02 (the Fig. 5
    analogue) and DA-IBC's energy landscapes (the Fig. 6 analogue), see ``figures``;
 4. after every run: ``results.json``, ``PROVENANCE.md`` and ``provenance.json`` (see ``results``).
@@ -16,9 +18,9 @@ Interrupted, the same command resumes: finished runs are skipped and an unfinish
 from its ``last.pt``. Before any work, ``check_folder`` compares the folder with the request: a
 folder holding a replication of other settings, other demonstrations or runs that do not match
 is refused (another ``--out``, or ``--force`` to start over), and so is a damaged file in it,
-named with what to do. Checkpoints kept: ``final.pt`` of the first seed's BC and DA-IBC agents
-(the rest are deleted once evaluated, to keep the shipped results small; ``--keep-checkpoints``
-keeps them all).
+named with what to do. Every agent's ``final.pt`` is kept (its weights in float16: about 1 MB
+each), so that any agent of the table can be evaluated again; ``last.pt`` is deleted once a run
+is finished.
 """
 
 from __future__ import annotations
@@ -40,11 +42,11 @@ from ibc_tutorial.cli import UserError, check_output_dir
 from ibc_tutorial.driving.collect import CollectConfig, collect
 from ibc_tutorial.driving.dataset import DemoDataset, DemoLog
 from ibc_tutorial.experiments.agents.checkpoints import load_agent
-from ibc_tutorial.experiments.agents.evaluate import EVAL_SEED, episode_rows, evaluate_agent, summarize
+from ibc_tutorial.experiments.agents.evaluate import EVAL_SEED, HELDOUT_SEED, episode_rows, evaluate_agent, summarize
 from ibc_tutorial.experiments.agents.figures import free_driving, landscapes
 from ibc_tutorial.experiments.agents.presets import METHODS, Preset, differences, get_preset
 from ibc_tutorial.experiments.agents.results import (
-    DATA, FREE_DRIVING, LANDSCAPES, PROVENANCE, RESULTS, collect_results, finished_runs, invocations_of, now,
+    DATA, FREE_DRIVING, LANDSCAPES, PROVENANCE, RESULTS, collect_results, expert_dir, finished_runs, invocations_of, now,
     preset_results, read_json_dict, run_dir, run_name, write_json, write_provenance)
 from ibc_tutorial.experiments.agents.train import inspect_run, train_agent
 from ibc_tutorial.kde import inverse_density_weights
@@ -128,8 +130,23 @@ def _dataset(data: Path, preset: Preset) -> tuple[DemoDataset, torch.Tensor]:
     return _WORKER_DATA[key]
 
 
-def run_one(method: str, seed: int, out, preset, *, keep_checkpoints: bool = False, show_progress: bool | None = False,
-            log=print) -> dict:
+def final_evaluations(agent, out_dir: Path, preset: Preset, policy_seed: int, show_progress: bool | None = False,
+                      extra: dict | None = None) -> dict:
+    """The table's evaluation (``final_eval.json``) and the held-out one (``heldout_eval.json``) of an agent
+    (an ``Agent`` or "expert") into ``out_dir``; returns the first."""
+    evals = {}
+    for name, seed, episodes in (("heldout_eval.json", HELDOUT_SEED, preset.heldout_episodes),
+                                 ("final_eval.json", EVAL_SEED, preset.final_episodes)):
+        te = time.perf_counter()
+        rows = episode_rows(evaluate_agent(agent, "town02", episodes, preset.final_steps, seed=seed,
+                                           policy_seed=policy_seed, show_progress=show_progress))
+        evals[name] = dict(extra or {}, town="town02", steps=preset.final_steps, start_seed=seed, summary=summarize(rows),
+                           episodes=rows, eval_seconds=round(time.perf_counter() - te, 1))
+        write_json(out_dir / name, evals[name])  # final_eval.json last: once it exists, the run counts as finished
+    return evals["final_eval.json"]
+
+
+def run_one(method: str, seed: int, out, preset, *, show_progress: bool | None = False, log=print) -> dict:
     """Train one agent, evaluate it finally in town02 and write its ``final_eval.json``; returns that dict."""
     preset = preset if isinstance(preset, Preset) else Preset.from_dict(preset)
     out = Path(out)
@@ -138,19 +155,24 @@ def run_one(method: str, seed: int, out, preset, *, keep_checkpoints: bool = Fal
     d = run_dir(out, method, seed)
     res = train_agent(method, data, preset, seed, d, dataset=dataset, sample_probs=probs, show_progress=show_progress,
                       log=log)
-    te = time.perf_counter()
-    rows = episode_rows(evaluate_agent(res.agent, "town02", preset.final_episodes, preset.final_steps,
-                                       seed=EVAL_SEED, policy_seed=seed, show_progress=show_progress))
-    ev = {"method": method, "seed": seed, "town": "town02", "steps": preset.final_steps, "summary": summarize(rows),
-          "episodes": rows, "train_seconds": round(res.seconds, 1), "eval_seconds": round(time.perf_counter() - te, 1)}
-    write_json(d / "final_eval.json", ev)  # first: killed after this line, the run counts as finished
+    ev = final_evaluations(res.agent, d, preset, seed, show_progress,
+                           extra={"method": method, "seed": seed, "train_seconds": round(res.seconds, 1)})
     (d / "last.pt").unlink(missing_ok=True)
-    if not keep_checkpoints and not (seed == preset.seeds[0] and method in FIGURE_METHODS):
-        (d / "final.pt").unlink(missing_ok=True)
     return ev
 
 
-def replicate(preset: Preset, out, *, command: str = "", keep_checkpoints: bool = False, workers: int = 1, log=print,
+def expert_row(out: Path, preset: Preset, log=print) -> None:
+    """The PID expert on the same starts as the agents (``runs/expert/``), unless already there."""
+    d = expert_dir(out)
+    if (d / "final_eval.json").exists():
+        return
+    d.mkdir(parents=True, exist_ok=True)
+    ev = final_evaluations("expert", d, preset, 0, extra={"method": "expert"})
+    if log:
+        log(f"expert: town02 score {ev['summary']['score_mean']:.1f} ± {ev['summary']['score_std']:.1f}")
+
+
+def replicate(preset: Preset, out, *, command: str = "", workers: int = 1, log=print,
               show_progress: bool | None = None, force: bool = False) -> dict:
     """Run the whole replication (see the module docstring); returns the contents of ``results.json``.
 
@@ -194,7 +216,7 @@ def replicate(preset: Preset, out, *, command: str = "", keep_checkpoints: bool 
     heartbeat()
     threading.Thread(target=beat, daemon=True, name="provenance heartbeat").start()
     try:
-        _work(out, preset, results, save, keep_checkpoints, workers, log, show_progress)
+        _work(out, preset, results, save, workers, log, show_progress)
         save(True)
     finally:
         stop.set()
@@ -205,8 +227,7 @@ def replicate(preset: Preset, out, *, command: str = "", keep_checkpoints: bool 
     return results
 
 
-def _work(out: Path, preset: Preset, results: dict, save, keep_checkpoints: bool, workers: int, log,
-          show_progress: bool | None) -> None:
+def _work(out: Path, preset: Preset, results: dict, save, workers: int, log, show_progress: bool | None) -> None:
     """Steps 1-3 of the module docstring; ``save(False)`` after each run."""
     # 1. the demonstrations
     data = out / DATA
@@ -238,17 +259,19 @@ def _work(out: Path, preset: Preset, results: dict, save, keep_checkpoints: bool
 
     figures_if_ready()
     if workers <= 1:
+        expert_row(out, preset, log)
+        save(False)
         for method, seed in todo:
-            after_run(run_one(method, seed, out, preset, keep_checkpoints=keep_checkpoints, show_progress=show_progress,
-                              log=log))
+            after_run(run_one(method, seed, out, preset, show_progress=show_progress, log=log))
             figures_if_ready()
         return
     ctx = multiprocessing.get_context("spawn")  # no fork after torch has started its threads
     with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_worker,
                              initargs=(torch.get_num_threads(),)) as pool:
         try:
-            futures = [pool.submit(run_one, m, s, str(out), preset.to_dict(), keep_checkpoints=keep_checkpoints)
-                       for m, s in todo]
+            futures = [pool.submit(run_one, m, s, str(out), preset.to_dict()) for m, s in todo]
+            expert_row(out, preset, log)  # here, while the workers train
+            save(False)
             for fut in as_completed(futures):
                 after_run(fut.result())
                 figures_if_ready()
@@ -275,5 +298,5 @@ def run(args: argparse.Namespace) -> int:
     if threads:
         torch.set_num_threads(threads)
     command = "ibc-tutorial " + " ".join(sys.argv[1:]) if sys.argv and "replicate" in sys.argv else ""
-    replicate(preset, out, command=command, keep_checkpoints=args.keep_checkpoints, workers=workers, force=force)
+    replicate(preset, out, command=command, workers=workers, force=force)
     return 0

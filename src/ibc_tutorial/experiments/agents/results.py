@@ -4,7 +4,8 @@ A replication folder (``ibc-tutorial replicate --out FOLDER``) holds
 
 - ``data/town01.npz``: the demonstrations;
 - ``runs/<method>/seed<k>/``: one training run each (``metrics.jsonl``, ``final_eval.json``,
-  and ``final.pt`` for the agents kept);
+  ``heldout_eval.json`` and the agent, ``final.pt``);
+- ``runs/expert/``: the PID expert's ``final_eval.json`` and ``heldout_eval.json`` on the same starts;
 - ``results.json``: everything the chapters read (the table, the per-seed finals, the Fig. 4
   curves, the preset and its differences from the paper's, the Fig. 5/6 summaries);
 - ``free_driving.npz`` and ``landscapes.npz``: the arrays of the Fig. 5 and Fig. 6 analogues;
@@ -85,6 +86,11 @@ def run_dir(out, method: str, seed: int) -> Path:
     return Path(out) / "runs" / method / f"seed{seed}"
 
 
+def expert_dir(out) -> Path:
+    """Folder of the PID expert's evaluations on the agents' starts (the table's reference row)."""
+    return Path(out) / "runs" / "expert"
+
+
 def run_name(method: str, seed: int) -> str:
     """How a run is named in the provenance: ``method/seed<k>``."""
     return f"{method}/seed{seed}"
@@ -135,9 +141,9 @@ def write_npz(path, arrays: dict) -> Path:
 def collect_results(out, preset: Preset) -> dict:
     """Read every finished run under ``out`` into the table, per-seed finals and curves of ``results.json``."""
     out = Path(out)
-    table, curves, finals = {}, {}, {}
+    table, curves, finals, heldout = {}, {}, {}, {}
     for method in METHODS:
-        rows, per_seed = [], {}
+        rows, per_seed, held = [], {}, []
         curves[method] = {}
         for seed in preset.seeds:
             d = run_dir(out, method, seed)
@@ -152,10 +158,18 @@ def collect_results(out, preset: Preset) -> dict:
                 ev = read_final_eval(f)
                 rows += ev["episodes"]
                 per_seed[str(seed)] = ev["summary"]
+                if (d / "heldout_eval.json").exists():
+                    held += read_final_eval(d / "heldout_eval.json")["episodes"]
         finals[method] = per_seed
         if rows:
             table[method] = dict(summarize(rows), agents=len(per_seed))  # episodes of every seed pooled
-    return {"table": table, "final_per_seed": finals, "curves": curves}
+        if held:
+            heldout[method] = dict(summarize(held), agents=len(per_seed))
+    e = expert_dir(out)
+    for name, into in (("final_eval.json", table), ("heldout_eval.json", heldout)):
+        if (e / name).exists():
+            into["expert"] = dict(summarize(read_final_eval(e / name)["episodes"]), agents=1)
+    return {"table": table, "heldout": heldout, "final_per_seed": finals, "curves": curves}
 
 
 def preset_results(preset: Preset, complete: bool) -> dict:

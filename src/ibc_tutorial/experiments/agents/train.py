@@ -200,6 +200,19 @@ def objective_for(method: str, network: torch.nn.Module, preset: Preset) -> Obje
     return info_nce_objective(network, sampler, preset.n_neg)  # eq. 2
 
 
+@torch.no_grad()
+def round_to_half(network: torch.nn.Module) -> None:
+    """Round every floating-point weight to the nearest float16 value, in place (kept as float32).
+
+    A final checkpoint stores its weights in float16 (half the file: every agent of a replication
+    can then be shipped); rounding before the final evaluation makes the evaluated agent exactly
+    the shipped one, so ``ibc-tutorial evaluate`` on ``final.pt`` reproduces ``final_eval.json``.
+    """
+    for value in network.state_dict().values():
+        if value.is_floating_point():
+            value.copy_(value.half().float())
+
+
 def steps_per_epoch(n_samples: int, batch_size: int) -> int:
     """Minibatches in one epoch: ceil(M / batch_size)."""
     return max(1, math.ceil(n_samples / batch_size))
@@ -264,7 +277,8 @@ def train_agent(method: str, data, preset: Preset, seed: int, out, *, dataset: D
     agent = Agent(method, network, preset, actions, init_weights=sample_probs if method == "da-ibc" else None)
     n_steps = steps_per_epoch(len(dataset), preset.batch_size)
     epochs = preset.epochs  # inspect_run refused a run already beyond it
-    config = TrainConfig(steps=epochs * n_steps, batch_size=preset.batch_size, lr=preset.lr, seed=seed,
+    config = TrainConfig(steps=epochs * n_steps, batch_size=preset.batch_size, lr=preset.lr,
+                         lr_schedule=preset.lr_schedule, seed=seed,
                          log_every=preset.eval_every * n_steps, progress=show_progress, desc=f"{method} seed {seed}")
     trainer = Trainer(network, objective_for(method, network, preset), DemoBatches(dataset), config,
                       sample_probs=sample_probs)
@@ -296,9 +310,11 @@ def train_agent(method: str, data, preset: Preset, seed: int, out, *, dataset: D
     if trainer.step < config.steps:
         trainer.run(callback=evaluate_and_save)
     network.eval()
+    round_to_half(network)  # the agent evaluated is the one final.pt ships (weights in float16)
     final_epoch = metrics[-1]["epoch"] if metrics else preset.epochs
     save_checkpoint(out / "final.pt", method=method, preset=preset, network=network, data_sha256=data_hash,
-                    epoch=final_epoch, expert_actions=actions, init_weights=agent.init_weights, metrics=metrics, seed=seed)
+                    epoch=final_epoch, expert_actions=actions, init_weights=agent.init_weights, metrics=metrics, seed=seed,
+                    half=True)
     return RunResult(out, metrics, agent, time.perf_counter() - t0, ckpt["epoch"] if ckpt else 0)
 
 
