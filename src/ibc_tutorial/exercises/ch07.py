@@ -233,8 +233,9 @@ def check_expert_stops(fn) -> Feedback:
         truth = [stops_for_light(*c, config) for c in STOP_CASES]
         wrong = [c for c, a, t in zip(STOP_CASES, answers, truth) if a != t]
         if not wrong:
-            return correct("That is the expert's rule. The binary BEV flag shows a yellow line like a red one, yet "
-                           "at (yellow, 3 m, 6 m/s) the expert drives on: the label says go where the flag says stop.")
+            return correct("That is the expert's rule. A one-bit 'must stop' flag would draw a yellow line like a red "
+                           "one, yet at (yellow, 3 m, 6 m/s) the expert drives on: that is why the BEV draws yellow "
+                           "at its own level, 0.6, and lets distance and speed decide.")
         if any(s == 2 and g > config.stop_distance_m for s, g, _ in wrong):
             return hint(f"distance: the expert considers its light only within {config.stop_distance_m} m of the line; "
                         "a red light further away does not stop it yet.")
