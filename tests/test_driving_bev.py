@@ -124,3 +124,15 @@ def test_bad_sizes_are_refused():
         get_renderer("town01", 100)
     with pytest.raises(ValueError, match="bev_size"):
         get_renderer("town01", 64.0)
+
+
+def test_the_flag_encoding_draws_red_and_yellow_alike_and_green_not():
+    lights = np.random.default_rng(1).integers(0, 3, (3, 36)).astype(np.uint8)
+    pose = (88.0 + 2, 100.0, math.pi / 2)
+    by_state = get_renderer("town01", 64).render(*pose, lights)
+    flag = get_renderer("town01", 64, light_encoding="flag").render(*pose, lights)
+    assert np.array_equal(flag[:2], by_state[:2])
+    assert set(np.unique(flag[2:])) <= {0.0, 1.0}
+    assert np.array_equal(flag[2:] == 1.0, by_state[2:] >= np.float32(0.6))  # red or yellow
+    with pytest.raises(ValueError, match="light_encoding"):
+        get_renderer("town01", 64, light_encoding="bits")

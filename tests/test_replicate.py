@@ -10,7 +10,9 @@ import pytest
 import torch
 
 from ibc_tutorial import cli
-from ibc_tutorial.experiments.agents.presets import LAPTOP, METHODS, TINY
+from ibc_tutorial.experiments.agents.ablations import ABLATION_SEEDS, ablation_preset
+from ibc_tutorial.experiments.agents.checkpoints import load_agent
+from ibc_tutorial.experiments.agents.presets import LAPTOP, METHODS, TINY, Preset
 from ibc_tutorial.experiments.agents.results import collect_results, load_results, machine, run_dir
 
 SHIPPED = Path(__file__).resolve().parents[1] / "book" / "results" / "laptop"
@@ -82,7 +84,7 @@ def test_the_shipped_results_load():
         pytest.skip("no shipped results")
     shipped = load_results(SHIPPED)
     res = shipped["results"]
-    assert res["preset"] == LAPTOP.to_dict() and res["complete"]
+    assert Preset.from_dict(res["preset"]) == LAPTOP and res["complete"]
     assert shipped["provenance"]["complete"] and set(res["table"]) == set(METHODS) | {"expert"}
     assert shipped["free_driving"] and "junction_energy" in shipped["landscapes"]
     assert collect_results(SHIPPED, LAPTOP)["table"] == res["table"]  # the aggregation reads the shipped runs alike
@@ -98,3 +100,18 @@ def test_the_shipped_results_are_a_clean_run_of_an_ancestor_commit():
         pytest.skip("not a git checkout: the ancestry cannot be read")
     ancestor = subprocess.run(["git", "-C", str(root), "merge-base", "--is-ancestor", commit, "HEAD"])
     assert ancestor.returncode == 0, f"the shipped results' commit {commit} is not an ancestor of HEAD"
+
+
+def test_an_ablation_is_a_smaller_replication_of_a_variant(tmp_path):
+    out = tmp_path / "flag"
+    assert cli.main(["replicate", "--preset", "tiny", "--ablation", "flag-lights", "--out", str(out)]) == 0
+    res = json.loads((out / "results.json").read_text())
+    preset = Preset.from_dict(res["preset"])
+    assert preset == ablation_preset(TINY, "flag-lights") and preset.light_encoding == "flag"
+    assert set(res["table"]) == {"bc", "da-ibc", "expert"} and not res["heldout"] and "free_driving" not in res
+    assert len(res["final_per_seed"]["bc"]) == len(ABLATION_SEEDS)
+    agent, ckpt = load_agent(run_dir(out, "da-ibc", 0) / "final.pt")
+    assert agent.preset.light_encoding == "flag"
+    assert cli.main(["replicate", "--preset", "tiny", "--out", str(out)]) == 2  # the folder holds another preset
+    with pytest.raises(ValueError, match="ablation"):
+        ablation_preset(TINY, "no-such-thing")

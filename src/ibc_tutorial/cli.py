@@ -102,6 +102,8 @@ def check_output_dir(name: str, path) -> Path:
     return path
 
 THREADS_HELP = "torch CPU threads (default 0: torch's choice; 1 is fastest on a busy machine)"
+DEVICE_HELP = ("where the networks run: cpu, cuda, cuda:N or mps (default: %(default)s; the random draws stay on "
+               "the CPU's seeded generators)")
 
 # The argument functions below import their defaults and choices from the modules that own them,
 # inside the function: those modules load torch and the simulator, and only the chosen
@@ -136,6 +138,7 @@ def _train_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--epochs", type=int, default=None, help="override the preset's number of epochs")
     p.add_argument("--force", action="store_true", help="start over: delete the run already in --out")
     p.add_argument("--threads", type=int, default=0, help=THREADS_HELP)
+    p.add_argument("--device", default="cpu", help=DEVICE_HELP)
 
 
 def _evaluate_arguments(p: argparse.ArgumentParser) -> None:
@@ -157,10 +160,12 @@ def _evaluate_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", default=None, help="optional JSON file for the per-episode results")
     p.add_argument("--force", action="store_true", help="overwrite --out if it exists")
     p.add_argument("--threads", type=int, default=0, help=THREADS_HELP)
+    p.add_argument("--device", default="cpu", help=DEVICE_HELP)
 
 
 def _replicate_arguments(p: argparse.ArgumentParser) -> None:
-    from ibc_tutorial.experiments.agents.presets import PRESETS  # deferred: loads torch
+    from ibc_tutorial.experiments.agents.ablations import ABLATIONS  # deferred: loads torch
+    from ibc_tutorial.experiments.agents.presets import PRESETS
 
     p.add_argument("--preset", default="laptop", choices=PRESETS, help="settings (default: %(default)s)")
     p.add_argument("--out", required=True, help="folder for the data, runs, results and provenance; an interrupted "
@@ -169,6 +174,9 @@ def _replicate_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--threads", type=int, default=0,
                    help=THREADS_HELP.replace("threads", "threads per process", 1))
     p.add_argument("--workers", type=int, default=1, help="training runs in parallel processes (default: %(default)s)")
+    p.add_argument("--ablation", default=None, choices=ABLATIONS,
+                   help="replicate a variant of the preset instead (chapter 08's ablations; BC and DA-IBC, 3 seeds)")
+    p.add_argument("--device", default="cpu", help=DEVICE_HELP + "; every worker uses it")
 
 
 # name -> (module with ``run(args)``, function adding the arguments, help)

@@ -28,7 +28,7 @@ from typing import Protocol, Sequence
 
 import torch
 
-from ibc_tutorial.utils import check_int, check_positive, check_tensor
+from ibc_tutorial.utils import check_int, check_positive, check_tensor, draw_device
 
 
 def _bounds(low, high) -> tuple[torch.Tensor, torch.Tensor]:
@@ -57,6 +57,8 @@ def uniform_negatives(
     low: float | Sequence[float] | torch.Tensor,
     high: float | Sequence[float] | torch.Tensor,
     generator: torch.Generator | None = None,
+    *,
+    device: torch.device | str | None = None,
 ) -> torch.Tensor:
     """Counter-examples uniform in the box [low, high]: the original IBC's sampler.
 
@@ -67,14 +69,17 @@ def uniform_negatives(
         n_neg: N, counter-examples per sample.
         low, high: the action bounds y_min, y_max, each of length D.
         generator: a seeded ``torch.Generator`` (None = torch's global one).
+        device: where the result goes (default: the generator's, the CPU). The draws are made on the generator's
+            device (``utils.draw_device``) and moved: the same numbers on every device.
     Returns:
-        (B, N, D) in torch's default dtype.
+        (B, N, D) in torch's default dtype, on ``device``.
     """
     b = check_int("batch_size", batch_size, minimum=1)
     n = check_int("n_neg", n_neg, minimum=1)
     lo, hi = _bounds(low, high)
-    u = torch.rand(b, n, len(lo), generator=generator)  # (B, N, D) in [0, 1)
-    return lo + (hi - lo) * u  # (B, N, D)
+    u = torch.rand(b, n, len(lo), generator=generator, device=draw_device(generator))  # (B, N, D) in [0, 1)
+    device = u.device if device is None else torch.device(device)
+    return lo.to(device) + (hi - lo).to(device) * u.to(device)  # (B, N, D)
 
 
 def expert_negatives(
@@ -109,7 +114,8 @@ def expert_negatives(
         generator: a seeded ``torch.Generator`` (None = torch's global one).
         low, high: optional bounds to clip to (both or neither).
     Returns:
-        (B, N, D) in torch's default dtype.
+        (B, N, D) in torch's default dtype, on ``expert_actions``' device (the draws are made on the
+        generator's device, ``utils.draw_device``, and moved: the same numbers on every device).
     """
     check_tensor("expert_actions", expert_actions, ndim=2)
     m, d = expert_actions.shape
@@ -120,15 +126,16 @@ def expert_negatives(
     sigma = check_positive("sigma", sigma, allow_zero=True)
     if (low is None) != (high is None):
         raise ValueError("low and high must be given together (to clip) or both left None (no clipping)")
-    idx = torch.randint(0, m, (b, n), generator=generator)  # (B, N): with replacement
-    neg = expert_actions.to(torch.get_default_dtype())[idx]  # (B, N, D)
+    device, where = expert_actions.device, draw_device(generator)
+    idx = torch.randint(0, m, (b, n), generator=generator, device=where)  # (B, N): with replacement
+    neg = expert_actions.to(torch.get_default_dtype())[idx.to(device)]  # (B, N, D)
     if sigma > 0:
-        neg = neg + sigma * torch.randn(b, n, d, generator=generator)  # + N(0, σ²I)
+        neg = neg + sigma * torch.randn(b, n, d, generator=generator, device=where).to(device)  # + N(0, σ²I)
     if low is not None:
         lo, hi = _bounds(low, high)
         if len(lo) != d:
             raise ValueError(f"low and high must have length D = {d}, got {len(lo)}")
-        neg = torch.clamp(neg, lo, hi)  # (B, N, D), per-dimension bounds (D,)
+        neg = torch.clamp(neg, lo.to(device), hi.to(device))  # (B, N, D), per-dimension bounds (D,)
     return neg  # (B, N, D)
 
 
@@ -154,7 +161,7 @@ class UniformSampler:
             low, high = low.expand(actions.shape[1]), high.expand(actions.shape[1])
         if len(low) != actions.shape[1]:
             raise ValueError(f"actions must have D = {len(low)} columns to match the bounds, got shape {tuple(actions.shape)}")
-        return uniform_negatives(len(actions), n_neg, low, high, generator)
+        return uniform_negatives(len(actions), n_neg, low, high, generator, device=actions.device)
 
     def __repr__(self) -> str:
         return f"UniformSampler(low={self.low.tolist()}, high={self.high.tolist()})"

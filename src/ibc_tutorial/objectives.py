@@ -116,7 +116,7 @@ def grid_objective(
     def energies_of(obs, actions: torch.Tensor) -> torch.Tensor:
         z = model.embed(obs)  # (B, E), once per observation
         e_gt = model.energy_from_embedding(z, actions[:, None, :])  # (B, 1)
-        e_grid = model.energy_from_embedding(z, grid)  # (B, G), grid shared by the batch
+        e_grid = model.energy_from_embedding(z, grid.to(z.device))  # (B, G), grid shared by the batch
         return torch.cat([e_gt, e_grid], dim=1)  # (B, 1 + G)
 
     def cross_entropy(energies: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
@@ -124,7 +124,8 @@ def grid_objective(
             targets = torch.zeros_like(energies)
             targets[:, 0] = 1.0  # one-hot on the ground truth
         else:
-            candidates = torch.cat([actions[:, None, :], grid.expand(len(actions), -1, -1)], dim=1)  # (B, 1 + G, D)
+            g = grid.to(actions.device).expand(len(actions), -1, -1)  # (B, G, D), on the batch's device
+            candidates = torch.cat([actions[:, None, :], g], dim=1)  # (B, 1 + G, D)
             targets = soft_targets(candidates, actions, temperature)  # (B, 1 + G), eq. 5
         return grid_cross_entropy(energies, targets)  # eq. 3
 

@@ -1,4 +1,4 @@
-"""Small shared helpers: seeding, quiet mode, argument checks, atomic writes."""
+"""Small shared helpers: seeding, quiet mode, argument checks, devices, atomic writes."""
 
 from __future__ import annotations
 
@@ -111,6 +111,48 @@ def check_tensor(name: str, x, *, ndim: int | None = None, shape: tuple | None =
     if finite and x.is_floating_point() and not torch.isfinite(x).all():
         raise ValueError(f"{name} must be finite, got NaN or inf")
     return x
+
+
+# --------------------------------------------------------------------------- devices
+DEVICE_TYPES = ("cpu", "cuda", "mps")
+"""Device types ``check_device`` accepts: the CPU, an NVIDIA GPU (``cuda`` or ``cuda:N``), Apple's ``mps``."""
+
+
+def check_device(name: str, device) -> torch.device:
+    """Return ``device`` (a name such as "cpu", "cuda", "cuda:1", "mps", or a ``torch.device``) as a
+    ``torch.device`` that exists on this machine; ValueError naming ``name`` otherwise: a name that is not
+    a torch device, a type other than ``DEVICE_TYPES``, CUDA or MPS unavailable, a GPU index beyond the
+    GPUs present."""
+    if isinstance(device, torch.device):
+        dev = device
+    elif isinstance(device, str):
+        try:
+            dev = torch.device(device)
+        except (RuntimeError, ValueError):
+            raise ValueError(f"{name} must be a torch device name such as 'cpu', 'cuda', 'cuda:1' or 'mps', "
+                             f"got {device!r}") from None
+    else:
+        raise ValueError(f"{name} must be a device name such as 'cpu' or 'cuda', got {device!r}")
+    if dev.type not in DEVICE_TYPES:
+        raise ValueError(f"{name} must be one of {DEVICE_TYPES} (cuda:N for the N-th GPU), got {device!r}")
+    if dev.type == "cuda":
+        if not torch.cuda.is_available():
+            why = (f"this torch, {torch.__version__}, is built without CUDA: install a CUDA build of torch"
+                   if torch.version.cuda is None else "no CUDA GPU is visible")
+            raise ValueError(f"{name} {device!r}: CUDA is not available on this machine ({why}), or use {name} cpu")
+        n = torch.cuda.device_count()
+        if dev.index is not None and dev.index >= n:
+            raise ValueError(f"{name} {device!r}: this machine has {n} CUDA GPU(s), cuda:0 to cuda:{n - 1}")
+    if dev.type == "mps" and not torch.backends.mps.is_available():
+        raise ValueError(f"{name} {device!r}: Apple's MPS is not available on this machine: use {name} cpu")
+    return dev
+
+
+def draw_device(generator: torch.Generator | None) -> torch.device:
+    """Where random draws with ``generator`` are made: its own device (the CPU for None, torch's global
+    generator). Library code draws there and then moves the result (``.to(device)``) to the tensors it
+    works with, so a run on a GPU draws the same numbers from the same seeded CPU generator as on the CPU."""
+    return generator.device if generator is not None else torch.device("cpu")
 
 
 # --------------------------------------------------------------------------- files

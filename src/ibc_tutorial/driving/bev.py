@@ -51,6 +51,9 @@ CHANNELS = ("drivable area", "lane boundaries", "lights t-16", "lights t-9", "li
 """Names of the five channels, in order."""
 LIGHT_LEVELS = (0.3, 0.6, 1.0)
 """Value of a stop line in channels 2-4 by light state: green 0.3, yellow 0.6, red 1.0 (0 = no line)."""
+LIGHT_ENCODINGS = ("intensity", "flag")
+"""How the light channels draw a stop line: "intensity" (by state: red 1.0, yellow 0.6, green 0.3; the book's), or
+"flag" (one "must stop" bit: red and yellow 1.0, green not drawn; kept for chapter 08's ablation)."""
 LIGHT_SHIFTS = (2, 4, 6)
 """Bit offsets of the 2-bit light codes of channels 2, 3, 4 in a packed view byte."""
 
@@ -202,9 +205,10 @@ def get_raster(town_name: str) -> TownRaster:
 class BEVRenderer:
     """Renders the five-channel BEV of a pose from a town raster, at one of ``SUPPORTED_SIZES``."""
 
-    def __init__(self, raster: TownRaster, size: int = FULL_SIZE):
+    def __init__(self, raster: TownRaster, size: int = FULL_SIZE, light_encoding: str = "intensity"):
         self.raster = raster
         self.size = check_bev_size(size)
+        self.light_encoding = check_choice("light_encoding", light_encoding, LIGHT_ENCODINGS)
         self.pool = FULL_SIZE // self.size
         res = raster.res
         forward = (EGO_ROW - (np.arange(FULL_SIZE) + 0.5)) / res  # (192,) metres ahead of each row
@@ -226,7 +230,10 @@ class BEVRenderer:
 
     def _lut(self, lights: np.ndarray) -> np.ndarray:
         """256-entry table from raster byte to packed view byte, for light states (3, L) at the three lags."""
-        code = lights.astype(np.uint8) + 1  # (3, L): 1 green, 2 yellow, 3 red
+        if self.light_encoding == "flag":
+            code = np.where(lights == 0, 0, 3).astype(np.uint8)  # (3, L): green not drawn, yellow and red as red
+        else:
+            code = lights.astype(np.uint8) + 1  # (3, L): 1 green, 2 yellow, 3 red
         ids = np.zeros(64, dtype=np.uint8)
         ids[1:self._n_lights + 1] = ((code[0] << LIGHT_SHIFTS[0]) | (code[1] << LIGHT_SHIFTS[1])
                                      | (code[2] << LIGHT_SHIFTS[2]))
@@ -304,7 +311,7 @@ class BEVRenderer:
         return self.unpack(self.packed_batch(poses, lights))
 
 
-def get_renderer(town_name: str, size: int = FULL_SIZE) -> BEVRenderer:
+def get_renderer(town_name: str, size: int = FULL_SIZE, light_encoding: str = "intensity") -> BEVRenderer:
     """A renderer for ``town_name`` at ``size`` (checked against ``SUPPORTED_SIZES``)."""
     check_choice("town", town_name, TOWNS)
-    return BEVRenderer(get_raster(town_name), check_bev_size(size))
+    return BEVRenderer(get_raster(town_name), check_bev_size(size), light_encoding)

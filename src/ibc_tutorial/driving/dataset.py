@@ -258,15 +258,16 @@ class DemoDataset(torch.utils.data.Dataset):
     Args:
         source: a ``DemoLog`` or the path of a file written by ``DemoLog.save``.
         bev_size: side of the rendered BEV (one of ``bev.SUPPORTED_SIZES``).
+        light_encoding: how the BEV draws the lights (``bev.LIGHT_ENCODINGS``; "intensity", the book's).
         cache: render every sample once, now, and keep the views packed one byte per pixel
             (N x S x S bytes: 86 MB for the paper-sized dataset at 64 x 64, 775 MB at 192), so
             that later epochs only unpack them.
     """
 
-    def __init__(self, source, bev_size: int = 192, cache: bool = False):
+    def __init__(self, source, bev_size: int = 192, cache: bool = False, light_encoding: str = "intensity"):
         self.log = source if isinstance(source, DemoLog) else DemoLog.load(source)
         self.bev_size = check_bev_size(bev_size)
-        self.renderer = BEVRenderer(get_raster(self.log.town), self.bev_size)
+        self.renderer = BEVRenderer(get_raster(self.log.town), self.bev_size, light_encoding)
         self.states = torch.from_numpy(self.log.states())  # (N, 3) float32
         self.actions = torch.from_numpy(self.log.action.copy())  # (N, 2) float32
         self._packed = None

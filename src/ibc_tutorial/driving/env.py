@@ -21,7 +21,7 @@ import gymnasium
 import numpy as np
 from gymnasium import spaces
 
-from ibc_tutorial.driving.bev import BEVRenderer, check_bev_size, get_raster
+from ibc_tutorial.driving.bev import LIGHT_ENCODINGS, BEVRenderer, check_bev_size, get_raster
 from ibc_tutorial.driving.car import CarConfig
 from ibc_tutorial.driving.lights import LightTiming
 from ibc_tutorial.driving.routes import Route, random_route
@@ -52,10 +52,13 @@ class EnvConfig:
     """The car's physical parameters."""
     lights: LightTiming = field(default_factory=LightTiming)
     """The traffic lights' timing."""
+    light_encoding: str = "intensity"
+    """How the BEV draws the lights (``bev.LIGHT_ENCODINGS``): by state, or as one "must stop" bit."""
 
     def __post_init__(self):
         check_choice("town", self.town, TOWNS)
         check_bev_size(self.bev_size)
+        check_choice("light_encoding", self.light_encoding, LIGHT_ENCODINGS)
         check_int("max_steps", self.max_steps, minimum=1)
         if not isinstance(self.routeless, bool):
             raise ValueError(f"routeless must be True or False, got {self.routeless!r}")
@@ -67,16 +70,18 @@ class DrivingEnv(gymnasium.Env):
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
 
     def __init__(self, town: str = "town01", bev_size: int = 192, routeless: bool = True, max_steps: int = 3000,
-                 render_mode: str | None = None, config: EnvConfig | None = None):
-        self.config = config if config is not None else EnvConfig(town, bev_size, routeless, max_steps)
+                 render_mode: str | None = None, config: EnvConfig | None = None, light_encoding: str = "intensity"):
+        self.config = config if config is not None else EnvConfig(town, bev_size, routeless, max_steps,
+                                                                  light_encoding=light_encoding)
         if render_mode is not None:
             check_choice("render_mode", render_mode, self.metadata["render_modes"])
         self.render_mode = render_mode
         c = self.config
         self.sim = DrivingSim(c.town, c.car, c.lights)
         self.town = self.sim.town
-        self.renderer = BEVRenderer(get_raster(c.town), c.bev_size)
-        self._full_renderer = self.renderer if c.bev_size == 192 else BEVRenderer(get_raster(c.town), 192)
+        self.renderer = BEVRenderer(get_raster(c.town), c.bev_size, c.light_encoding)
+        self._full_renderer = (self.renderer if c.bev_size == 192
+                               else BEVRenderer(get_raster(c.town), 192, c.light_encoding))
         S = c.bev_size
         self.observation_space = spaces.Dict({
             "bev": spaces.Box(0.0, 1.0, (5, S, S), dtype=np.float32),
@@ -187,7 +192,7 @@ def register_envs() -> None:
 
 
 def make_env(town: str = "town01", bev_size: int = 192, routeless: bool = True, max_steps: int = 3000,
-             seed: int | None = None, render_mode: str | None = None) -> DrivingEnv:
+             seed: int | None = None, render_mode: str | None = None, light_encoding: str = "intensity") -> DrivingEnv:
     """A driving environment (see ``DrivingEnv``), made through its Gymnasium id so that it carries
     its spec, without Gymnasium's wrappers; if ``seed`` is given it is reset with it once."""
     check_choice("town", town, TOWNS)
@@ -195,7 +200,7 @@ def make_env(town: str = "town01", bev_size: int = 192, routeless: bool = True, 
         check_choice("render_mode", render_mode, DrivingEnv.metadata["render_modes"])
     register_envs()
     env = gymnasium.make(ENV_IDS[town], bev_size=bev_size, routeless=routeless, max_steps=max_steps,
-                         render_mode=render_mode, disable_env_checker=True).unwrapped
+                         render_mode=render_mode, light_encoding=light_encoding, disable_env_checker=True).unwrapped
     if seed is not None:
         check_int("seed", seed, minimum=0)
         env.reset(seed=seed)

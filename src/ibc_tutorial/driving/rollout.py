@@ -105,7 +105,8 @@ class _Trace:
 
 def rollout(policy: Policy | str, town: str = "town02", episodes: int = 10, steps: int = 3000, bev_size: int = 64,
             seed: int = 0, routeless: bool = True, record_xy: bool = True, record_steps: bool = False,
-            keep_obs: bool = False, show_progress: bool | None = None) -> list[EpisodeResult]:
+            keep_obs: bool = False, show_progress: bool | None = None,
+            light_encoding: str = "intensity") -> list[EpisodeResult]:
     """Run ``episodes`` episodes of at most ``steps`` steps side by side; return one result each.
 
     Actions are clipped to [-1, 1] (a NaN still raises the environment's ValueError).
@@ -115,6 +116,7 @@ def rollout(policy: Policy | str, town: str = "town02", episodes: int = 10, step
         record_xy: keep every episode's positions in ``EpisodeResult.xy``.
         record_steps: keep the per-step record in ``EpisodeResult.trace``.
         keep_obs: with ``record_steps``, keep the observations in the trace too.
+        light_encoding: how the BEV draws the lights (``driving.bev.LIGHT_ENCODINGS``).
     """
     episodes = check_int("episodes", episodes, minimum=1)
     steps = check_int("steps", steps, minimum=1)
@@ -125,7 +127,8 @@ def rollout(policy: Policy | str, town: str = "town02", episodes: int = 10, step
         raise ValueError(f"policy must be a callable or 'expert', got {type(policy).__name__}")
     if keep_obs and not record_steps:
         raise ValueError("keep_obs needs record_steps=True")
-    envs = [make_env(town, bev_size=bev_size, routeless=routeless, max_steps=steps) for _ in range(episodes)]
+    envs = [make_env(town, bev_size=bev_size, routeless=routeless, max_steps=steps, light_encoding=light_encoding)
+            for _ in range(episodes)]
     obs, infos = zip(*(env.reset(seed=seed + i) for i, env in enumerate(envs)))
     obs, infos = list(obs), list(infos)
     experts = [Expert(env) for env in envs] if policy == "expert" else None

@@ -216,3 +216,36 @@ def ch07_expert_stops(state, gap_m, speed):
     if state == 2:
         return True
     return gap_m > 0 and speed * speed / (2 * gap_m) <= 4.0
+
+
+# =========================================================================== chapter 08: training the agents
+def ch08_episode_score(xy, crossed):
+    """The path's length (a sum over steps) x 0.7 ** (stop lines crossed at red, state 2)."""
+
+    distance = float(np.hypot(*np.diff(xy, axis=0).T).sum())  # metres, step by step
+    return distance * 0.7 ** int((np.asarray(crossed) == 2).sum())
+
+
+def ch08_unseen_share(probs, batch_size):
+    """Mean over samples of (1 - p_i) ** n, n = ceil(M / B) B draws with replacement in one epoch."""
+
+    n = math.ceil(len(probs) / batch_size) * batch_size
+    return float(((1 - np.asarray(probs, dtype=float)) ** n).mean())
+
+
+def ch08_recipe(method):
+    """The chapter's table: BC's Beta NLL; IBC uniform everywhere, argmax; DA-IBC from the expert's actions, a draw."""
+    if method == "bc":
+        return {"loss": "beta nll", "negatives": None, "dfo_init": None, "dfo_select": None}
+    if method == "ibc":
+        return {"loss": "infonce", "negatives": "uniform", "dfo_init": "uniform", "dfo_select": "argmax"}
+    return {"loss": "infonce", "negatives": "expert + noise", "dfo_init": "inverse-kde", "dfo_select": "sample"}
+
+
+# =========================================================================== chapter 09: the replication
+def ch09_exit_shares(visits, approach):
+    """Share of the approach's visits that left by each exit (all three keys, summing to 1)."""
+
+    turns = [v["turn"] for v in visits if v["approach"] == approach]
+    return {t: turns.count(t) / len(turns) for t in ("left", "straight", "right")}
+

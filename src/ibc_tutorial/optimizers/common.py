@@ -8,6 +8,11 @@ Energy functions come in two forms:
 For an ``EnergyModel``: ``z = model.embed(obs)`` once, then
 ``energy_fn = lambda a: model.energy_from_embedding(z, a)`` (the batched form). The single form
 is the batched one with B = 1 (``single_observation``): both run the same core.
+
+**Devices.** A population lives on the device of the expert actions it starts from (and the
+energy function must return energies there). Random draws are made on the generator's device
+(the CPU for a ``torch.Generator()``; ``utils.draw_device``) and moved: on a GPU, Algorithm 1
+draws the same indices and noise from the same seeded generator as on the CPU.
 """
 
 from __future__ import annotations
@@ -17,7 +22,7 @@ from collections.abc import Sequence
 
 import torch
 
-from ibc_tutorial.utils import check_choice, check_tensor
+from ibc_tutorial.utils import check_choice, check_tensor, draw_device
 
 SELECTIONS = ("sample", "argmax")
 """Final choice: "sample" ŷ ~ Categorical({ỹ_i}, {p̃_i}) (Algorithm 1 line 14 of the DA-IBC paper)
@@ -71,9 +76,10 @@ def bounds(low, high, d: int) -> tuple[torch.Tensor, torch.Tensor]:
 
 
 def check_expert_actions(expert_actions: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor) -> torch.Tensor:
-    """(M, D) expert actions inside [lo, hi], M >= 1, in the default dtype, without gradient."""
+    """(M, D) expert actions inside [lo, hi], M >= 1, in the default dtype, without gradient (on their device)."""
     if len(expert_actions) == 0:
         raise ValueError("expert_actions must hold at least one action (M >= 1)")
+    lo, hi = lo.to(expert_actions.device), hi.to(expert_actions.device)  # (D,), (D,)
     if ((expert_actions < lo) | (expert_actions > hi)).any():
         raise ValueError(f"expert_actions must lie inside [low, high] = [{lo.tolist()}, {hi.tolist()}]")
     return expert_actions.detach().to(torch.get_default_dtype())
@@ -90,14 +96,20 @@ def energies(energy_fn, y: torch.Tensor) -> torch.Tensor:
     return e.to(y.dtype)  # (B, N), in the populations' dtype
 
 
+def multinomial(p: torch.Tensor, n: int, generator: torch.Generator | None, replacement: bool = False) -> torch.Tensor:
+    """``torch.multinomial(p, n, replacement)``, drawn on the generator's device and returned on p's."""
+    where = draw_device(generator)
+    return torch.multinomial(p.to(where), n, replacement=replacement, generator=generator).to(p.device)
+
+
 def select_action(y: torch.Tensor, p: torch.Tensor, select: str, generator: torch.Generator | None) -> torch.Tensor:
     """Line 14 of Algorithm 1 ("sample") or the original argmax: y (B, N, D), p (B, N) -> (B, D)."""
     check_choice("select", select, SELECTIONS)
     if select == "sample":
-        j = torch.multinomial(p, 1, generator=generator)[:, 0]  # (B,) ŷ ~ Categorical({ỹ_i}, {p̃_i})
+        j = multinomial(p, 1, generator)[:, 0]  # (B,) ŷ ~ Categorical({ỹ_i}, {p̃_i})
     else:
         j = p.argmax(dim=1)  # (B,) the lowest energy
-    return y[torch.arange(len(y)), j]  # (B, D)
+    return y[torch.arange(len(y), device=y.device), j.to(y.device)]  # (B, D)
 
 
 def single_observation(energy_fn):

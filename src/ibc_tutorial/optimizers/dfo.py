@@ -16,9 +16,10 @@ import torch
 
 from ibc_tutorial.kde import DEFAULT_BANDWIDTH, inverse_density_weights, kde_density
 from ibc_tutorial.optimizers.common import (
-    SELECTIONS, bounds, check_box, check_call, check_expert_actions, energies, select_action, single_observation,
+    SELECTIONS, bounds, check_box, check_call, check_expert_actions, energies, multinomial, select_action,
+    single_observation,
 )
-from ibc_tutorial.utils import check_choice, check_int, check_positive, check_tensor
+from ibc_tutorial.utils import check_choice, check_int, check_positive, check_tensor, draw_device
 
 if TYPE_CHECKING:  # type hints only: langevin imports this module
     from ibc_tutorial.optimizers.langevin import LangevinConfig
@@ -104,18 +105,20 @@ def initial_weights(expert_actions: torch.Tensor, config: DFOConfig | LangevinCo
         expert_actions: (M, D) expert actions.
         config: a ``DFOConfig`` or ``LangevinConfig`` (its ``init`` and ``bandwidth`` are used).
     Returns:
-        (M,) weights summing to 1 in the default dtype, or None.
+        (M,) weights summing to 1 in the default dtype, on the expert actions' device, or None.
     """
     check_tensor("expert_actions", expert_actions, ndim=2)
     if config.init == "uniform":
         return None
     if config.init == "expert":  # each expert action equally likely: draws distributed like ĝ
         m = len(expert_actions)
-        return torch.full((m,), 1.0 / m, dtype=torch.get_default_dtype())
+        return torch.full((m,), 1.0 / m, dtype=torch.get_default_dtype(), device=expert_actions.device)
+    device, experts = expert_actions.device, expert_actions.cpu()  # the KDE is computed on the CPU
     if config.init == "inverse-kde":
-        return inverse_density_weights(expert_actions, config.bandwidth).to(torch.get_default_dtype())  # eqs. 4-5
-    g = kde_density(expert_actions, expert_actions, config.bandwidth).to(torch.float64)  # (M,) ĝ(y_i), eq. 4
-    return (g / g.sum()).to(torch.get_default_dtype())
+        w = inverse_density_weights(experts, config.bandwidth)  # (M,) eqs. 4-5
+        return w.to(torch.get_default_dtype()).to(device)
+    g = kde_density(experts, experts, config.bandwidth).to(torch.float64)  # (M,) ĝ(y_i), eq. 4
+    return (g / g.sum()).to(torch.get_default_dtype()).to(device)
 
 
 def initial_samples(
@@ -138,7 +141,10 @@ def initial_samples(
         config: a ``DFOConfig`` or ``LangevinConfig`` (``n_samples``, ``init``, ``low``, ``high``,
             ``bandwidth``).
         init_weights: optional precomputed (M,) weights (skips the KDE).
-        generator: a seeded ``torch.Generator`` for reproducible draws.
+        generator: a seeded ``torch.Generator`` for reproducible draws (made on its device, the
+            CPU for a ``torch.Generator()``, then moved).
+
+    Returns the population on the expert actions' device.
     """
     check_tensor("expert_actions", expert_actions, ndim=2)
     check_int("n_obs", n_obs, minimum=1)
@@ -147,7 +153,8 @@ def initial_samples(
     experts = check_expert_actions(expert_actions, lo, hi)  # (M, D), default dtype
     n = config.n_samples
     if config.init == "uniform":
-        u = torch.rand(n_obs, n, d, generator=generator)  # (B, N, D)
+        u = torch.rand(n_obs, n, d, generator=generator, device=draw_device(generator))  # (B, N, D)
+        lo, hi, u = lo.to(experts.device), hi.to(experts.device), u.to(experts.device)
         return lo + (hi - lo) * u
     if init_weights is None:
         init_weights = initial_weights(experts, config)
@@ -155,8 +162,8 @@ def initial_samples(
         check_tensor("init_weights", init_weights, shape=(m,))
         if (init_weights < 0).any() or init_weights.sum() <= 0:
             raise ValueError("init_weights must be non-negative with a positive sum")
-    idx = torch.multinomial(init_weights, n_obs * n, replacement=True, generator=generator)  # (B·N,)
-    return experts[idx].reshape(n_obs, n, d)  # (B, N, D)
+    idx = multinomial(init_weights, n_obs * n, generator, replacement=True)  # (B·N,)
+    return experts[idx.to(experts.device)].reshape(n_obs, n, d)  # (B, N, D)
 
 
 # --------------------------------------------------------------------------- lines 3-14
@@ -166,6 +173,7 @@ def _dfo_core(energy_fn, y: torch.Tensor, config: DFOConfig, lo, hi, generator, 
     y: (B, N, D) the initial population of line 2. Returns (ŷ (B, D), per-iteration records or None).
     """
     b, n, d = y.shape
+    lo, hi, where = lo.to(y.device), hi.to(y.device), draw_device(generator)  # bounds (D,) on y's device
     n_iters = config.n_iters
     sigma = config.sigma_init  # line 2: σ = σ_init
     rec = {"samples": [], "energies": [], "probs": [], "sigmas": []} if record else None
@@ -179,10 +187,10 @@ def _dfo_core(energy_fn, y: torch.Tensor, config: DFOConfig, lo, hi, generator, 
             rec["sigmas"].append(sigma if it < n_iters else float("nan"))
         if it < n_iters:  # line 6
             # lines 7-8: resample N_samples with replacement, Multinomial(N_samples, {p̃_i}, {ỹ_i})
-            idx = torch.multinomial(p, n, replacement=True, generator=generator)  # (B, N)
+            idx = multinomial(p, n, generator, replacement=True)  # (B, N)
             y = torch.gather(y, 1, idx[:, :, None].expand(b, n, d))  # (B, N, D)
             # line 9: add noise N(0, σ) (σ is a standard deviation, as in the IBC reference)
-            y = y + sigma * torch.randn(y.shape, generator=generator)
+            y = y + sigma * torch.randn(y.shape, generator=generator, device=where).to(y.device)
             # line 10: clip to [y_min, y_max]. Samples the noise pushed out of the box are clamped
             # onto its faces, as the IBC reference does (tf.clip_by_value): they are not redrawn.
             y = torch.clamp(y, lo, hi)  # (B, N, D), bounds (D,)

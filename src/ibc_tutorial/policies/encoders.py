@@ -98,5 +98,6 @@ class BEVStateEncoder(ObservationEncoder):
         check_tensor("obs['bev']", bev, shape=(None, self.in_channels, s, s), finite=False)
         check_tensor("obs['state']", state, shape=(len(bev), 3))
         x = bev.float()  # (B, 5, S, S) of 0./1.
-        st = state.float() * torch.tensor([1.0 / SPEED_SCALE, 1.0, 1.0])  # (B, 3), speed rescaled
+        scale = torch.tensor([1.0 / SPEED_SCALE, 1.0, 1.0], device=state.device)  # (3,), on the state's device
+        st = state.float() * scale  # (B, 3), speed rescaled
         return torch.cat([self.cnn(x), self.state_mlp(st)], dim=1)  # (B, 2 E)

@@ -29,7 +29,7 @@ from torch import nn
 
 from ibc_tutorial.optimizers.grid import grid_argmin, grid_energies
 from ibc_tutorial.policies.encoders import ObservationEncoder
-from ibc_tutorial.utils import check_int, check_tensor
+from ibc_tutorial.utils import check_int, check_tensor, draw_device
 
 
 class EnergyModel(nn.Module):
@@ -164,5 +164,6 @@ class GridSamplePolicy:
             energies = grid_energies(self.model, self.model.embed(obs), self.grid)  # (B, G)
         finally:
             self.model.train(was_training)
-        idx = torch.multinomial(torch.softmax(-energies, dim=1), 1, generator=self.generator)[:, 0]  # (B,)
-        return self.grid[idx]  # (B, D)
+        probs = torch.softmax(-energies, dim=1).to(draw_device(self.generator))  # (B, G), drawn where the generator is
+        idx = torch.multinomial(probs, 1, generator=self.generator)[:, 0]  # (B,)
+        return self.grid[idx.to(self.grid.device)]  # (B, D)

@@ -37,7 +37,7 @@ from torch.nn import functional as F
 
 from ibc_tutorial.losses import beta_nll, bin_centers, classification_loss, mdn_nll, regression_loss
 from ibc_tutorial.policies.encoders import MLPEncoder, ObservationEncoder
-from ibc_tutorial.utils import check_choice, check_int, check_positive, check_tensor
+from ibc_tutorial.utils import check_choice, check_int, check_positive, check_tensor, draw_device
 
 
 class ExplicitPolicy(nn.Module):
@@ -198,14 +198,15 @@ def _sample_beta(alpha: torch.Tensor, beta: torch.Tensor, generator: torch.Gener
     ``Beta.sample`` takes no generator and draws from torch's global one, so with a
     ``generator`` it runs under ``torch.random.fork_rng`` with the global generator seeded from
     one draw of ``generator``: reproducible, and the global random state is left as it was.
-    Without one, it draws from the global generator."""
-    dist = torch.distributions.Beta(alpha, beta)
+    Without one, it draws from the global generator. The draws are made on the CPU (where
+    ``fork_rng(devices=[])`` applies) and returned on α's device."""
+    dist = torch.distributions.Beta(alpha.cpu(), beta.cpu())
     if generator is None:
-        return dist.sample()
-    seed = int(torch.randint(0, 2**62, (), generator=generator))
+        return dist.sample().to(alpha.device)
+    seed = int(torch.randint(0, 2**62, (), generator=generator, device=draw_device(generator)))
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(seed)
-        return dist.sample()
+        return dist.sample().to(alpha.device)
 
 
 # --------------------------------------------------------------------------- classifier
@@ -239,8 +240,8 @@ class ClassifierPolicy(ExplicitPolicy):
         if mode == "argmax":
             idx = logits.argmax(dim=-1)  # (B, D)
         else:
-            probs = torch.softmax(logits, dim=-1).reshape(-1, self.n_bins)  # (B*D, N)
-            idx = torch.multinomial(probs, 1, generator=generator).view(logits.shape[:2])
+            probs = torch.softmax(logits, dim=-1).reshape(-1, self.n_bins).to(draw_device(generator))  # (B*D, N)
+            idx = torch.multinomial(probs, 1, generator=generator).view(logits.shape[:2]).to(logits.device)
         return self.centers[idx]  # (B, D)
 
     def action_density(self, obs, values):
@@ -286,11 +287,14 @@ class MDNPolicy(ExplicitPolicy):
         logits, means, stds = self(obs)
         if mode == "paper":
             comp = logits.argmax(dim=1)  # (B,)
-            y = means[torch.arange(len(comp)), comp]  # (B, D)
+            y = means[torch.arange(len(comp), device=comp.device), comp]  # (B, D)
         else:
-            comp = torch.multinomial(torch.softmax(logits, dim=1), 1, generator=generator).squeeze(1)  # (B,)
-            rows = torch.arange(len(comp))
-            noise = torch.randn(means.shape[0], means.shape[2], generator=generator)  # (B, D)
+            where = draw_device(generator)  # drawn where the generator is, used on the means' device
+            comp = torch.multinomial(torch.softmax(logits, dim=1).to(where), 1, generator=generator).squeeze(1)  # (B,)
+            comp = comp.to(means.device)
+            rows = torch.arange(len(comp), device=means.device)
+            noise = torch.randn(means.shape[0], means.shape[2], generator=generator, device=where)  # (B, D)
+            noise = noise.to(means.device)
             y = means[rows, comp] + stds[rows, comp] * noise
         return y.clamp(-1.0, 1.0)
 

@@ -13,6 +13,11 @@ The network (the DA-IBC paper's sec. 3.3 and Fig. 2):
 and checks); ``build_network`` builds from it. ``Agent`` couples a network with the way it acts
 (Beta mean; or Algorithm 1 with the method's initialisation and final selection) and gives the
 closed-loop ``driving.rollout.Policy`` that ``driving.rollout`` calls on numpy observation batches.
+
+**Devices.** ``Agent.to(device)`` puts the network and the expert actions (the DFO population's
+support) on a GPU; observations are moved there, the DFO draws are still made with the policy's
+seeded CPU generator (``optimizers.common``), and actions come back as CPU tensors (numpy for the
+rollout). The DFO initial weights stay on the CPU, where their draws are made.
 """
 
 from __future__ import annotations
@@ -28,7 +33,7 @@ from ibc_tutorial.optimizers.dfo import DFOConfig, dfo
 from ibc_tutorial.policies.encoders import BEVStateEncoder
 from ibc_tutorial.policies.energy import EnergyModel
 from ibc_tutorial.policies.explicit import BetaPolicy
-from ibc_tutorial.utils import check_choice, check_tensor
+from ibc_tutorial.utils import check_choice, check_device, check_tensor
 
 ACTION_DIM = 2
 """(steer, acceleration)."""
@@ -74,11 +79,14 @@ def build_network(method: str, preset: Preset) -> nn.Module:
     return network_from_architecture(architecture(method, preset))
 
 
-def to_tensor_obs(obs) -> dict[str, torch.Tensor]:
-    """Numpy or torch ``{"bev", "state"}`` batches -> torch tensors (float32 BEV and state)."""
+def to_tensor_obs(obs, device: torch.device | str | None = None) -> dict[str, torch.Tensor]:
+    """Numpy or torch ``{"bev", "state"}`` batches -> torch tensors (float32 BEV and state), moved to
+    ``device`` if given."""
     bev, state = obs["bev"], obs["state"]
     bev = torch.from_numpy(np.ascontiguousarray(bev)) if isinstance(bev, np.ndarray) else bev
     state = torch.from_numpy(np.asarray(state, dtype=np.float32)) if isinstance(state, np.ndarray) else state.float()
+    if device is not None:
+        bev, state = bev.to(device), state.to(device)
     return {"bev": bev, "state": state}
 
 
@@ -107,6 +115,8 @@ class Agent:
             initialisation of DA-IBC (unused by bc and ibc, but kept for every method).
         init_weights: optional precomputed (M,) DFO initial weights w ∝ 1 / ĝ
             (``kde.inverse_density_weights``); computed here if None and needed (da-ibc).
+
+    The agent acts on the device of its network's weights (``to`` moves it; the CPU by default).
     """
 
     def __init__(self, method: str, network: nn.Module, preset: Preset, expert_actions: torch.Tensor,
@@ -116,25 +126,39 @@ class Agent:
         self.preset = preset
         self.expert_actions = check_tensor("expert_actions", expert_actions, ndim=2).float()  # (M, 2)
         if method == "da-ibc" and init_weights is None:
-            init_weights = inverse_density_weights(self.expert_actions, preset.kde_bandwidth)  # (M,) eqs. 4-5
-        self.init_weights = init_weights
+            init_weights = inverse_density_weights(self.expert_actions.cpu(), preset.kde_bandwidth)  # (M,) eqs. 4-5
+        self.init_weights = None if init_weights is None else init_weights.cpu()  # drawn from on the CPU
         self.dfo_config = dfo_config(method, preset)
         """Algorithm 1's settings for this agent (None for bc)."""
 
+    @property
+    def device(self) -> torch.device:
+        """Where the network's weights are (and the agent computes)."""
+        return next(self.network.parameters()).device
+
+    def to(self, device: torch.device | str) -> "Agent":
+        """Move the network and the expert actions to ``device`` (checked: ``utils.check_device``); returns self."""
+        device = check_device("device", device)
+        self.network.to(device)
+        self.expert_actions = self.expert_actions.to(device)  # (M, 2): the DFO population lives here
+        return self
+
     @torch.no_grad()
     def act(self, obs, generator: torch.Generator | None = None) -> torch.Tensor:
-        """Actions (B, 2) in [-1, 1] for a batch of observations (numpy or torch dict)."""
-        obs = to_tensor_obs(obs)
+        """Actions (B, 2) in [-1, 1], on the CPU, for a batch of observations (numpy or torch dict)."""
+        obs = to_tensor_obs(obs, self.device)
         self.network.eval()
         if self.method == "bc":
-            return self.network.act(obs, mode="mean")  # (B, 2)
+            return self.network.act(obs, mode="mean").cpu()  # (B, 2)
         z = self.network.embed(obs)  # (B, E), once per observation
         weights = self.init_weights if self.method == "da-ibc" else None
         return dfo(lambda a: self.network.energy_from_embedding(z, a), self.expert_actions, self.dfo_config,
-                   n_obs=len(z), init_weights=weights, generator=generator)  # (B, 2)
+                   n_obs=len(z), init_weights=weights, generator=generator).cpu()  # (B, 2)
 
     def policy(self, seed: int = 0) -> Policy:
-        """The seeded ``driving.rollout.Policy`` of this agent: numpy obs batch -> numpy actions (B, 2)."""
+        """The seeded ``driving.rollout.Policy`` of this agent: numpy obs batch -> numpy actions (B, 2).
+
+        Its DFO draws come from a CPU generator seeded with ``seed``, whatever the agent's device."""
         gen = torch.Generator().manual_seed(int(seed))
 
         def policy(obs):
@@ -147,9 +171,9 @@ class Agent:
         """E over a (steer, acceleration) grid for one observation: (steer (G,), accel (G,), E (G, G)) [accel, steer]."""
         if self.method == "bc":
             raise ValueError("energy_grid needs an energy agent (ibc or da-ibc), got bc")
-        obs = to_tensor_obs(obs)
+        obs = to_tensor_obs(obs, self.device)
         v = torch.linspace(-1.0, 1.0, n_per_dim)
         acc, steer = torch.meshgrid(v, v, indexing="ij")
-        grid = torch.stack([steer.reshape(-1), acc.reshape(-1)], dim=1)  # (G², 2)
-        e = self.network.energy_from_embedding(self.network.embed(obs), grid)[0]  # (G²,)
+        grid = torch.stack([steer.reshape(-1), acc.reshape(-1)], dim=1).to(self.device)  # (G², 2)
+        e = self.network.energy_from_embedding(self.network.embed(obs), grid)[0].cpu()  # (G²,)
         return v.numpy(), v.numpy(), e.reshape(n_per_dim, n_per_dim).numpy()

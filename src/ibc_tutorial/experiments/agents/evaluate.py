@@ -12,6 +12,8 @@ The command's defaults are the book's protocol, the one ``replicate`` uses for t
 routeless episodes from ``EVAL_SEED``, the checkpoint preset's ``final_episodes`` x
 ``final_steps``, and the agent's training seed as the policy seed (``--policy-seed`` changes it).
 So on the machine that made them it reproduces a run's ``final_eval.json`` episode by episode.
+``--device cuda`` runs the network on a GPU (the DFO draws still come from the seeded CPU generator;
+the arithmetic, and so the episodes, may differ from a CPU run's in the last bits and then more).
 """
 
 from __future__ import annotations
@@ -27,7 +29,7 @@ from ibc_tutorial.driving.rollout import EpisodeResult, rollout
 from ibc_tutorial.cli import UserError, check_input_file, check_output_file
 from ibc_tutorial.experiments.agents.agent import Agent
 from ibc_tutorial.experiments.agents.checkpoints import load_agent, training_seed
-from ibc_tutorial.utils import atomic_write_bytes, check_int
+from ibc_tutorial.utils import atomic_write_bytes, check_device, check_int
 
 EVAL_SEED = 1000
 """Seed of the first evaluation episode (the training routes use seeds from 0: kept apart)."""
@@ -51,11 +53,12 @@ def evaluate_agent(agent: Agent | str, town: str = "town02", episodes: int = 10,
     check_int("episodes", episodes, minimum=1)
     check_int("steps", steps, minimum=1)
     if agent == "expert":
-        policy, bev_size = "expert", EXPERT_BEV_SIZE
+        policy, bev_size, encoding = "expert", EXPERT_BEV_SIZE, "intensity"
     else:
-        policy, bev_size = agent.policy(policy_seed), agent.preset.bev_size
+        policy, bev_size, encoding = agent.policy(policy_seed), agent.preset.bev_size, agent.preset.light_encoding
     return rollout(policy, town=town, episodes=episodes, steps=steps, bev_size=bev_size, seed=seed, routeless=routeless,
-                   record_xy=record_xy, record_steps=record_steps, keep_obs=keep_obs, show_progress=show_progress)
+                   record_xy=record_xy, record_steps=record_steps, keep_obs=keep_obs, show_progress=show_progress,
+                   light_encoding=encoding)
 
 
 def episode_rows(results: list[EpisodeResult]) -> list[dict]:
@@ -83,6 +86,7 @@ def run(args: argparse.Namespace) -> int:
     print, write. Errors are raised for ``cli.main`` to print on one line."""
     seed = check_int("--seed", args.seed, minimum=0)
     threads = check_int("--threads", args.threads, minimum=0)
+    device = check_device("--device", getattr(args, "device", "cpu"))
     if args.episodes is not None:
         check_int("--episodes", args.episodes, minimum=1)
     if args.steps is not None:
@@ -92,6 +96,7 @@ def run(args: argparse.Namespace) -> int:
     if args.out:
         check_output_file("--out", args.out, force=getattr(args, "force", False))
     agent, ckpt = load_agent(check_input_file("--checkpoint", args.checkpoint, "agent checkpoint (.pt)"))
+    agent.to(device)  # loaded onto the CPU (map_location="cpu"), then moved
     episodes = args.episodes or agent.preset.final_episodes
     steps = args.steps or agent.preset.final_steps
     policy_seed = args.policy_seed if args.policy_seed is not None else training_seed(ckpt)

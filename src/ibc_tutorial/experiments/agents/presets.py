@@ -34,6 +34,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, fields
 
+from ibc_tutorial.driving.bev import LIGHT_ENCODINGS
 from ibc_tutorial.training import LR_SCHEDULES
 from ibc_tutorial.utils import check_choice, check_int, check_positive
 
@@ -59,6 +60,8 @@ class Preset:
     # ---- network (the paper's Fig. 2)
     bev_size: int = 192
     """Side of the bird's-eye view in pixels (the paper: 192)."""
+    light_encoding: str = "intensity"
+    """How the BEV draws lights: by state ("intensity", as the paper's Fig. 1(d)) or as one bit ("flag")."""
     cnn_channels: tuple = (32, 64, 128, 256)
     """Output channels of the CNN's stride-2 convolutions."""
     embed_dim: int = 256
@@ -103,11 +106,14 @@ class Preset:
     final_steps: int = 3000
     """Steps of each final episode (the paper: 3000)."""
     heldout_episodes: int = 10
-    """Episodes of a second final evaluation from other starts (``evaluate.HELDOUT_SEED``), which nothing is tuned on."""
+    """Episodes of a second final evaluation from other starts (``evaluate.HELDOUT_SEED``), which nothing is tuned on
+    (0: none)."""
     seeds: tuple = (0, 1, 2)
     """Training seeds: one agent per seed and method (the paper: three agents per method)."""
+    methods: tuple = METHODS
+    """The methods a replication trains (all three; an ablation may train fewer)."""
     routeless_episodes: int = 3
-    """Free-driving episodes per agent for the Fig. 5 analogue (BC and DA-IBC)."""
+    """Free-driving episodes per agent for the Fig. 5 analogue (BC and DA-IBC); 0: no Fig. 5/6 analogues."""
     routeless_steps: int = 3000
     """Steps of each free-driving episode."""
 
@@ -116,8 +122,13 @@ class Preset:
         check_int("bev_size", self.bev_size, minimum=8)
         for f in ("embed_dim", "head_hidden", "head_layers", "epochs", "batch_size", "n_neg", "dfo_samples",
                   "dfo_iters", "eval_every", "eval_episodes", "eval_steps", "final_episodes", "final_steps",
-                  "routeless_episodes", "routeless_steps", "heldout_episodes"):
+                  "routeless_steps"):
             check_int(f, getattr(self, f), minimum=1)
+        for f in ("routeless_episodes", "heldout_episodes"):
+            check_int(f, getattr(self, f), minimum=0)
+        check_choice("light_encoding", self.light_encoding, LIGHT_ENCODINGS)
+        if not self.methods or any(m not in METHODS for m in self.methods) or len(set(self.methods)) < len(self.methods):
+            raise ValueError(f"methods must name distinct methods of {METHODS}, got {self.methods!r}")
         for f in ("lr", "kde_bandwidth", "min_minutes", "max_minutes"):
             check_positive(f, getattr(self, f))
         check_choice("lr_schedule", self.lr_schedule, LR_SCHEDULES)

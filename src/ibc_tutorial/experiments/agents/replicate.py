@@ -21,6 +21,9 @@ is refused (another ``--out``, or ``--force`` to start over), and so is a damage
 named with what to do. Every agent's ``final.pt`` is kept (its weights in float16: about 1 MB
 each), so that any agent of the table can be evaluated again; ``last.pt`` is deleted once a run
 is finished.
+
+``--device cuda`` trains and evaluates every agent on a GPU (each worker process uses it); the
+demonstrations, the expert's row and every random draw stay on the CPU (see ``train``).
 """
 
 from __future__ import annotations
@@ -41,16 +44,17 @@ import torch
 from ibc_tutorial.cli import UserError, check_output_dir
 from ibc_tutorial.driving.collect import CollectConfig, collect
 from ibc_tutorial.driving.dataset import DemoDataset, DemoLog
+from ibc_tutorial.experiments.agents.ablations import ablation_preset
 from ibc_tutorial.experiments.agents.checkpoints import load_agent
 from ibc_tutorial.experiments.agents.evaluate import EVAL_SEED, HELDOUT_SEED, episode_rows, evaluate_agent, summarize
 from ibc_tutorial.experiments.agents.figures import free_driving, landscapes
-from ibc_tutorial.experiments.agents.presets import METHODS, Preset, differences, get_preset
+from ibc_tutorial.experiments.agents.presets import Preset, differences, get_preset
 from ibc_tutorial.experiments.agents.results import (
     DATA, FREE_DRIVING, LANDSCAPES, PROVENANCE, RESULTS, collect_results, expert_dir, finished_runs, invocations_of, now,
     preset_results, read_json_dict, run_dir, run_name, write_json, write_provenance)
 from ibc_tutorial.experiments.agents.train import inspect_run, train_agent
 from ibc_tutorial.kde import inverse_density_weights
-from ibc_tutorial.utils import check_int
+from ibc_tutorial.utils import check_device, check_int
 
 FIGURE_METHODS = ("bc", "da-ibc")
 """The agents of the first seed kept for the Fig. 5/6 analogues (their ``final.pt`` is kept too)."""
@@ -69,6 +73,14 @@ def _collect_config(preset: Preset) -> CollectConfig:
     return CollectConfig("town01", preset.routes, preset.collect_seed, preset.min_minutes, preset.max_minutes)
 
 
+def _same_preset(stored, preset: Preset) -> bool:
+    """Whether a stored preset dict describes ``preset`` (fields added since it was written take their defaults)."""
+    try:
+        return isinstance(stored, dict) and Preset.from_dict(stored) == preset
+    except (TypeError, ValueError):
+        return False
+
+
 def check_folder(out, preset: Preset) -> None:
     """Refuse (ValueError, one line: what differs and how to proceed) a folder that holds anything but an
     unfinished or finished replication of ``preset``: other files, another preset, other demonstrations,
@@ -85,7 +97,7 @@ def check_folder(out, preset: Preset) -> None:
         if (out / name).exists():
             d = read_json_dict(out / name, fix)
             stored = stored if stored is not None else d.get("preset")
-    if stored is not None and stored != preset.to_dict():
+    if stored is not None and not _same_preset(stored, preset):
         try:
             diff = ", ".join(sorted(differences(Preset.from_dict(stored), preset))[:5]) or "name"
         except (TypeError, ValueError):
@@ -102,7 +114,7 @@ def check_folder(out, preset: Preset) -> None:
             raise ValueError(f"{data} was collected with other settings than preset {preset.name!r}'s: use another "
                              "--out, or --force to start over")
         checksum = log.checksum()
-    for m in METHODS:
+    for m in preset.methods:
         for seed in preset.seeds:
             inspect_run(run_dir(out, m, seed), m, preset, seed, checksum, data if data.exists() else None)
 
@@ -125,7 +137,7 @@ def _dataset(data: Path, preset: Preset) -> tuple[DemoDataset, torch.Tensor]:
     """The rendered demonstrations and their minibatch probabilities w ∝ 1 / ĝ, made once per process."""
     key = (str(data), data.stat().st_mtime_ns, preset.bev_size, preset.kde_bandwidth)
     if key not in _WORKER_DATA:
-        ds = DemoDataset(data, bev_size=preset.bev_size, cache=True)
+        ds = DemoDataset(data, bev_size=preset.bev_size, cache=True, light_encoding=preset.light_encoding)
         _WORKER_DATA[key] = (ds, inverse_density_weights(ds.actions, preset.kde_bandwidth))  # (M,) eqs. 4-5
     return _WORKER_DATA[key]
 
@@ -137,6 +149,8 @@ def final_evaluations(agent, out_dir: Path, preset: Preset, policy_seed: int, sh
     evals = {}
     for name, seed, episodes in (("heldout_eval.json", HELDOUT_SEED, preset.heldout_episodes),
                                  ("final_eval.json", EVAL_SEED, preset.final_episodes)):
+        if not episodes:
+            continue
         te = time.perf_counter()
         rows = episode_rows(evaluate_agent(agent, "town02", episodes, preset.final_steps, seed=seed,
                                            policy_seed=policy_seed, show_progress=show_progress))
@@ -146,15 +160,17 @@ def final_evaluations(agent, out_dir: Path, preset: Preset, policy_seed: int, sh
     return evals["final_eval.json"]
 
 
-def run_one(method: str, seed: int, out, preset, *, show_progress: bool | None = False, log=print) -> dict:
-    """Train one agent, evaluate it finally in town02 and write its ``final_eval.json``; returns that dict."""
+def run_one(method: str, seed: int, out, preset, *, show_progress: bool | None = False, log=print,
+            device: str = "cpu") -> dict:
+    """Train one agent on ``device``, evaluate it finally in town02 and write its ``final_eval.json``; returns
+    that dict."""
     preset = preset if isinstance(preset, Preset) else Preset.from_dict(preset)
     out = Path(out)
     data = out / DATA
     dataset, probs = _dataset(data, preset)
     d = run_dir(out, method, seed)
     res = train_agent(method, data, preset, seed, d, dataset=dataset, sample_probs=probs, show_progress=show_progress,
-                      log=log)
+                      log=log, device=device)
     ev = final_evaluations(res.agent, d, preset, seed, show_progress,
                            extra={"method": method, "seed": seed, "train_seconds": round(res.seconds, 1)})
     (d / "last.pt").unlink(missing_ok=True)
@@ -173,10 +189,12 @@ def expert_row(out: Path, preset: Preset, log=print) -> None:
 
 
 def replicate(preset: Preset, out, *, command: str = "", workers: int = 1, log=print,
-              show_progress: bool | None = None, force: bool = False) -> dict:
+              show_progress: bool | None = None, force: bool = False, device: str = "cpu") -> dict:
     """Run the whole replication (see the module docstring); returns the contents of ``results.json``.
 
-    ``out`` is checked first (``check_folder``); ``force`` deletes the replication already there."""
+    ``out`` is checked first (``check_folder``); ``force`` deletes the replication already there. ``device``
+    ("cpu", "cuda", "cuda:1", "mps") is where the agents train and drive."""
+    device = str(check_device("device", device))  # a string: it goes to the worker processes
     out = Path(out)
     if force:
         if out.is_dir() and any(p.name not in ENTRIES and not p.name.startswith(".") for p in out.iterdir()):
@@ -191,7 +209,7 @@ def replicate(preset: Preset, out, *, command: str = "", workers: int = 1, log=p
     started = previous.get("started") or now()
     invocations = invocations_of(previous) + [{"started": now(), "last_seen": now(), "seconds": 0.0}]
     command = command or f"ibc-tutorial replicate --preset {preset.name} --out {out}"
-    planned = [run_name(m, s) for s in preset.seeds for m in METHODS]
+    planned = [run_name(m, s) for s in preset.seeds for m in preset.methods]
     res_file = out / RESULTS
     results = read_json_dict(res_file, "delete it and re-run") if res_file.exists() else {}
     lock = threading.Lock()
@@ -216,7 +234,7 @@ def replicate(preset: Preset, out, *, command: str = "", workers: int = 1, log=p
     heartbeat()
     threading.Thread(target=beat, daemon=True, name="provenance heartbeat").start()
     try:
-        _work(out, preset, results, save, workers, log, show_progress)
+        _work(out, preset, results, save, workers, log, show_progress, device)
         save(True)
     finally:
         stop.set()
@@ -227,7 +245,8 @@ def replicate(preset: Preset, out, *, command: str = "", workers: int = 1, log=p
     return results
 
 
-def _work(out: Path, preset: Preset, results: dict, save, workers: int, log, show_progress: bool | None) -> None:
+def _work(out: Path, preset: Preset, results: dict, save, workers: int, log, show_progress: bool | None,
+          device: str = "cpu") -> None:
     """Steps 1-3 of the module docstring; ``save(False)`` after each run."""
     # 1. the demonstrations
     data = out / DATA
@@ -239,7 +258,7 @@ def _work(out: Path, preset: Preset, results: dict, save, workers: int, log, sho
     results["data"] = {"file": DATA, "samples": len(DemoLog.load(data)), "routes": preset.routes}
 
     # 2-3. the runs, seed by seed (in ``workers`` processes: the first seed's runs are submitted first)
-    todo = [(m, s) for s in preset.seeds for m in METHODS if not (run_dir(out, m, s) / "final_eval.json").exists()]
+    todo = [(m, s) for s in preset.seeds for m in preset.methods if not (run_dir(out, m, s) / "final_eval.json").exists()]
 
     def after_run(ev: dict) -> None:
         if log:
@@ -249,9 +268,10 @@ def _work(out: Path, preset: Preset, results: dict, save, workers: int, log, sho
 
     def figures_if_ready() -> None:
         s0 = preset.seeds[0]
-        if "free_driving" in results or not all((run_dir(out, m, s0) / "final_eval.json").exists() for m in FIGURE_METHODS):
+        if ("free_driving" in results or not preset.routeless_episodes or not set(FIGURE_METHODS) <= set(preset.methods)
+                or not all((run_dir(out, m, s0) / "final_eval.json").exists() for m in FIGURE_METHODS)):
             return
-        agents = {m: load_agent(run_dir(out, m, s0) / "final.pt")[0] for m in FIGURE_METHODS}
+        agents = {m: load_agent(run_dir(out, m, s0) / "final.pt")[0].to(device) for m in FIGURE_METHODS}
         summary, recordings = free_driving(out, preset, agents, log=log)
         results["free_driving"] = summary
         results["landscapes"] = landscapes(out, agents["da-ibc"], recordings, log=log)
@@ -262,14 +282,14 @@ def _work(out: Path, preset: Preset, results: dict, save, workers: int, log, sho
         expert_row(out, preset, log)
         save(False)
         for method, seed in todo:
-            after_run(run_one(method, seed, out, preset, show_progress=show_progress, log=log))
+            after_run(run_one(method, seed, out, preset, show_progress=show_progress, log=log, device=device))
             figures_if_ready()
         return
     ctx = multiprocessing.get_context("spawn")  # no fork after torch has started its threads
     with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_worker,
                              initargs=(torch.get_num_threads(),)) as pool:
         try:
-            futures = [pool.submit(run_one, m, s, str(out), preset.to_dict()) for m, s in todo]
+            futures = [pool.submit(run_one, m, s, str(out), preset.to_dict(), device=device) for m, s in todo]
             expert_row(out, preset, log)  # here, while the workers train
             save(False)
             for fut in as_completed(futures):
@@ -286,8 +306,11 @@ def run(args: argparse.Namespace) -> int:
     """``ibc-tutorial replicate`` (arguments in ``ibc_tutorial.cli``): check the inputs and the folder, then
     replicate. Errors are raised for ``cli.main`` to print on one line."""
     preset = get_preset(args.preset)
+    if getattr(args, "ablation", None):
+        preset = ablation_preset(preset, args.ablation)
     threads = check_int("--threads", args.threads, minimum=0)
     workers = check_int("--workers", args.workers, minimum=1)
+    device = check_device("--device", getattr(args, "device", "cpu"))
     out = check_output_dir("--out", args.out)
     force = bool(getattr(args, "force", False))
     if not force:
@@ -298,5 +321,5 @@ def run(args: argparse.Namespace) -> int:
     if threads:
         torch.set_num_threads(threads)
     command = "ibc-tutorial " + " ".join(sys.argv[1:]) if sys.argv and "replicate" in sys.argv else ""
-    replicate(preset, out, command=command, workers=workers, force=force)
+    replicate(preset, out, command=command, workers=workers, force=force, device=str(device))
     return 0

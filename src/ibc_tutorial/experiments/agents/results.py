@@ -32,7 +32,7 @@ import torch
 
 from ibc_tutorial import __version__
 from ibc_tutorial.experiments.agents.evaluate import summarize
-from ibc_tutorial.experiments.agents.presets import METHODS, PAPER, Preset, differences
+from ibc_tutorial.experiments.agents.presets import PAPER, Preset, differences
 from ibc_tutorial.experiments.agents.train import read_metrics
 from ibc_tutorial.utils import atomic_write_bytes
 
@@ -98,7 +98,8 @@ def run_name(method: str, seed: int) -> str:
 
 def finished_runs(out, preset: Preset) -> list[str]:
     """The runs of ``preset`` under ``out`` that have their ``final_eval.json``, in planned order."""
-    return [run_name(m, s) for s in preset.seeds for m in METHODS if (run_dir(out, m, s) / "final_eval.json").exists()]
+    return [run_name(m, s) for s in preset.seeds for m in preset.methods
+            if (run_dir(out, m, s) / "final_eval.json").exists()]
 
 
 def write_json(path, obj) -> Path:
@@ -142,7 +143,7 @@ def collect_results(out, preset: Preset) -> dict:
     """Read every finished run under ``out`` into the table, per-seed finals and curves of ``results.json``."""
     out = Path(out)
     table, curves, finals, heldout = {}, {}, {}, {}
-    for method in METHODS:
+    for method in preset.methods:
         rows, per_seed, held = [], {}, []
         curves[method] = {}
         for seed in preset.seeds:

@@ -16,6 +16,12 @@ top of the book's one loop, ``training.Trainer``:
 - after each evaluation, one JSON line in ``metrics.jsonl`` and a checkpoint ``last.pt`` with
   the trainer's optimiser and generator states; at the end ``final.pt`` (weights only) too.
 
+On a GPU (``--device cuda``): the network and each minibatch are on the device; the minibatch
+indices, the counter-examples and the evaluations' DFO draws are still drawn with the run's seeded
+CPU generators and then moved, so a CPU run is unchanged by the option and a GPU run draws the same
+numbers (its arithmetic, hence its results, differ in the last bits). Checkpoints are written from
+CPU copies and read back onto the CPU first: a run trained on a GPU resumes or evaluates anywhere.
+
 Interrupted, the same command resumes from ``last.pt`` and continues exactly as the
 uninterrupted run would have. A run's folder records what it is (``run.json``: method, seed,
 preset, the demonstrations' checksum), and ``inspect_run`` compares it with a request before any
@@ -27,6 +33,7 @@ finished run is never overwritten (``--force`` starts over), and a run already t
 from __future__ import annotations
 
 import argparse
+import copy
 import dataclasses
 import hashlib
 import json
@@ -47,7 +54,7 @@ from ibc_tutorial.kde import inverse_density_weights
 from ibc_tutorial.negatives import ExpertSampler, UniformSampler
 from ibc_tutorial.objectives import info_nce_objective, likelihood_objective
 from ibc_tutorial.training import Objective, TrainConfig, Trainer
-from ibc_tutorial.utils import atomic_write_bytes, check_choice, check_int
+from ibc_tutorial.utils import atomic_write_bytes, check_choice, check_device, check_int
 
 
 @dataclass
@@ -178,17 +185,38 @@ def clear_run(out) -> None:
 
 
 class DemoBatches:
-    """A ``DemoDataset`` as ``training.Minibatches``: minibatches ``{"obs": {"bev", "state"}, "actions"}``."""
+    """A ``DemoDataset`` as ``training.Minibatches``: minibatches ``{"obs": {"bev", "state"}, "actions"}``,
+    rendered on the CPU and moved to ``device`` (the CPU by default)."""
 
-    def __init__(self, dataset: DemoDataset):
+    def __init__(self, dataset: DemoDataset, device: torch.device | str = "cpu"):
         self.dataset = dataset
+        self.device = check_device("device", device)
 
     def __len__(self) -> int:
         return len(self.dataset)
 
     def batch(self, indices: torch.Tensor) -> dict:
         obs, actions = self.dataset.batch(indices)  # {"bev": (B, 5, S, S) uint8, "state": (B, 3)}, (B, 2)
-        return {"obs": obs, "actions": actions}
+        obs = {k: v.to(self.device) for k, v in obs.items()}
+        return {"obs": obs, "actions": actions.to(self.device)}
+
+
+def _cpu(obj):
+    """``obj`` (tensors in dicts, lists, tuples) with every tensor on the CPU: what a checkpoint stores."""
+    if isinstance(obj, torch.Tensor):
+        return obj.cpu()
+    if isinstance(obj, dict):
+        return {k: _cpu(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return type(obj)(_cpu(v) for v in obj)
+    return obj
+
+
+def _cpu_network(network: torch.nn.Module) -> torch.nn.Module:
+    """``network`` itself if it is on the CPU, else a CPU copy (``save_checkpoint`` stores its state dict)."""
+    if all(p.device.type == "cpu" for p in network.parameters()):
+        return network
+    return copy.deepcopy(network).cpu()
 
 
 def objective_for(method: str, network: torch.nn.Module, preset: Preset) -> Objective:
@@ -220,7 +248,7 @@ def steps_per_epoch(n_samples: int, batch_size: int) -> int:
 
 def train_agent(method: str, data, preset: Preset, seed: int, out, *, dataset: DemoDataset | None = None,
                 sample_probs: torch.Tensor | None = None, eval_town: str = "town02", show_progress: bool | None = None,
-                log=print, force: bool = False) -> RunResult:
+                log=print, force: bool = False, device: torch.device | str = "cpu") -> RunResult:
     """Train one agent (see the module docstring); resumes from ``out/last.pt`` if present.
 
     A folder holding another run, or this run trained beyond ``preset.epochs``, is refused with a
@@ -239,11 +267,17 @@ def train_agent(method: str, data, preset: Preset, seed: int, out, *, dataset: D
             if already computed (they are also DA-IBC's DFO initial weights: both are w ∝ 1 / ĝ).
         log: where one line per evaluation goes (``None``: nowhere).
         force: delete the run already in ``out`` (``RUN_FILES``) and start over.
+        device: where the network trains and acts ("cpu", "cuda", "cuda:1", "mps"; see the module
+            docstring); the returned agent is on it.
     """
     check_choice("method", method, METHODS)
     seed = check_int("seed", seed, minimum=0)
+    device = check_device("device", device)
     out = Path(out)
     t0 = time.perf_counter()
+    if dataset is not None and dataset.renderer.light_encoding != preset.light_encoding:
+        raise ValueError(f"dataset must draw the lights as {preset.light_encoding!r}, got "
+                         f"{dataset.renderer.light_encoding!r}")
     if dataset is not None and dataset.bev_size != preset.bev_size:
         raise ValueError(f"dataset must be rendered at bev_size {preset.bev_size}, got {dataset.bev_size}")
     log_ = dataset.log if dataset is not None else data if isinstance(data, DemoLog) else DemoLog.load(data)
@@ -257,6 +291,7 @@ def train_agent(method: str, data, preset: Preset, seed: int, out, *, dataset: D
             raise ValueError(f"{out} holds this run finished, without its final.pt (not kept): nothing to load; "
                              "--force to train it again")
         agent, ckpt = load_agent(out / "final.pt", method=method, preset=preset)
+        agent.to(device)
         if log:
             log(f"{method} seed {seed}: already trained to epoch {state.epoch} in {out}; nothing to do")
         return RunResult(out, list(ckpt["metrics"]), agent, 0.0, state.epoch, already_done=True)
@@ -265,23 +300,24 @@ def train_agent(method: str, data, preset: Preset, seed: int, out, *, dataset: D
         atomic_write_bytes(out / RUN_INFO, json.dumps({"method": method, "seed": seed, "preset": preset.to_dict(),
                                                        "data_sha256": data_hash}, indent=1).encode())
     if dataset is None:
-        dataset = DemoDataset(log_, bev_size=preset.bev_size, cache=True)
+        dataset = DemoDataset(log_, bev_size=preset.bev_size, cache=True, light_encoding=preset.light_encoding)
     actions = dataset.actions  # (M, 2)
     if sample_probs is None:
         sample_probs = inverse_density_weights(actions, preset.kde_bandwidth)  # (M,) eqs. 4-5, by sampling
 
     last = out / "last.pt"
     ckpt = load_checkpoint(last, method=method, preset=preset, resumable=True) if state.status == "resume" else None
-    torch.manual_seed(seed)  # the network's initial weights
-    network = build_network(method, preset)
+    torch.manual_seed(seed)  # the network's initial weights (drawn on the CPU, whatever the device)
+    network = build_network(method, preset).to(device)
     agent = Agent(method, network, preset, actions, init_weights=sample_probs if method == "da-ibc" else None)
+    agent.to(device)
     n_steps = steps_per_epoch(len(dataset), preset.batch_size)
     epochs = preset.epochs  # inspect_run refused a run already beyond it
     config = TrainConfig(steps=epochs * n_steps, batch_size=preset.batch_size, lr=preset.lr,
                          lr_schedule=preset.lr_schedule, seed=seed,
                          log_every=preset.eval_every * n_steps, progress=show_progress, desc=f"{method} seed {seed}")
-    trainer = Trainer(network, objective_for(method, network, preset), DemoBatches(dataset), config,
-                      sample_probs=sample_probs)
+    trainer = Trainer(network, objective_for(method, network, preset), DemoBatches(dataset, device), config,
+                      sample_probs=sample_probs)  # minibatch indices drawn on the CPU, with sample_probs (M,)
     metrics: list = []
     if ckpt is not None:
         trainer.load_state_dict({"model": ckpt["model"], "optimizer": ckpt["optimizer"], "generator": ckpt["generator"],
@@ -299,9 +335,9 @@ def train_agent(method: str, data, preset: Preset, seed: int, out, *, dataset: D
                  "eval_seconds": round(time.perf_counter() - te, 1)}
         metrics.append(entry)
         state = trainer.state_dict()
-        save_checkpoint(last, method=method, preset=preset, network=network, data_sha256=data_hash, epoch=entry["epoch"],
-                        expert_actions=actions, init_weights=agent.init_weights, optimizer=state["optimizer"],
-                        generator=state["generator"], metrics=metrics, seed=seed)
+        save_checkpoint(last, method=method, preset=preset, network=_cpu_network(network), data_sha256=data_hash,
+                        epoch=entry["epoch"], expert_actions=actions, init_weights=agent.init_weights,
+                        optimizer=_cpu(state["optimizer"]), generator=state["generator"], metrics=metrics, seed=seed)
         atomic_write_bytes(out / "metrics.jsonl", "".join(json.dumps(m) + "\n" for m in metrics).encode())
         if log:
             log(f"{method} seed {seed} epoch {entry['epoch']}: loss {entry['loss']:.4f}, town02 score "
@@ -312,9 +348,9 @@ def train_agent(method: str, data, preset: Preset, seed: int, out, *, dataset: D
     network.eval()
     round_to_half(network)  # the agent evaluated is the one final.pt ships (weights in float16)
     final_epoch = metrics[-1]["epoch"] if metrics else preset.epochs
-    save_checkpoint(out / "final.pt", method=method, preset=preset, network=network, data_sha256=data_hash,
-                    epoch=final_epoch, expert_actions=actions, init_weights=agent.init_weights, metrics=metrics, seed=seed,
-                    half=True)
+    save_checkpoint(out / "final.pt", method=method, preset=preset, network=_cpu_network(network),
+                    data_sha256=data_hash, epoch=final_epoch, expert_actions=actions, init_weights=agent.init_weights,
+                    metrics=metrics, seed=seed, half=True)
     return RunResult(out, metrics, agent, time.perf_counter() - t0, ckpt["epoch"] if ckpt else 0)
 
 
@@ -356,6 +392,7 @@ def run(args: argparse.Namespace) -> int:
         preset = dataclasses.replace(preset, epochs=check_int("--epochs", args.epochs, minimum=1))
     seed = check_int("--seed", args.seed, minimum=0)
     threads = check_int("--threads", args.threads, minimum=0)
+    device = check_device("--device", getattr(args, "device", "cpu"))
     force = bool(getattr(args, "force", False))
     demo = DemoLog.load(check_input_file("--data", args.data, "demonstration file (.npz)"))
     out = check_output_dir("--out", args.out)
@@ -367,7 +404,7 @@ def run(args: argparse.Namespace) -> int:
             return 0
     if threads:
         torch.set_num_threads(threads)
-    result = train_agent(args.method, args.data, preset, seed, out, force=force)
+    result = train_agent(args.method, args.data, preset, seed, out, force=force, device=device)
     if not result.metrics or result.metrics[-1]["epoch"] != preset.epochs:
         raise UserError(f"{out}: the run ended at epoch {result.metrics[-1]['epoch'] if result.metrics else 0}, "
                         f"not {preset.epochs}")
