@@ -13,7 +13,10 @@ The variants (``ABLATIONS``):
 - ``flag-lights``: the light channels as one "must stop" bit (red and yellow drawn at 1, green not
   drawn), the encoding the book used before it drew each state by intensity (``driving.bev``);
 - ``constant-lr``: the training of the previous laptop preset, 6 epochs at a constant step size,
-  instead of 8 epochs of cosine decay.
+  instead of 8 epochs of cosine decay;
+- ``previous-preset``: both at once, i.e. the previous laptop preset (one-bit lights, 6 epochs at a
+  constant step size); against ``flag-lights`` it measures the training schedule alone on the
+  one-bit lights.
 """
 
 from __future__ import annotations
@@ -28,6 +31,8 @@ ABLATIONS = {
                     {"light_encoding": "flag"}),
     "constant-lr": ("6 epochs at a constant step size (the previous laptop training)",
                     {"epochs": 6, "lr_schedule": "constant"}),
+    "previous-preset": ("the previous laptop preset: one-bit lights and 6 epochs at a constant step size",
+                        {"light_encoding": "flag", "epochs": 6, "lr_schedule": "constant"}),
 }
 """Each variant: (what it changes, in words; the preset fields it changes)."""
 
