@@ -179,6 +179,12 @@ def _replicate_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--device", default="cpu", help=DEVICE_HELP + "; every worker uses it")
 
 
+def _replicate_steering_arguments(p: argparse.ArgumentParser) -> None:
+    from ibc_tutorial.experiments.steering.replicate import add_arguments  # deferred: loads torch
+
+    add_arguments(p)
+
+
 # name -> (module with ``run(args)``, function adding the arguments, help)
 SUBCOMMANDS: dict[str, tuple[str, object, str]] = {
     "collect": ("ibc_tutorial.driving.collect", _collect_arguments, "drive the expert and store demonstrations"),
@@ -187,6 +193,8 @@ SUBCOMMANDS: dict[str, tuple[str, object, str]] = {
                  "drive a trained agent in closed loop and score it"),
     "replicate": ("ibc_tutorial.experiments.agents.replicate", _replicate_arguments,
                   "collect, train, evaluate: every result of chapters 08-09"),
+    "replicate-steering": ("ibc_tutorial.experiments.steering.replicate", _replicate_steering_arguments,
+                           "the steering-EBM paper's road-following study: every result of chapter 10"),
 }
 
 
@@ -228,7 +236,7 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         if debug:
             raise
-        resumable = args.command in ("train", "replicate")
+        resumable = args.command in ("train", "replicate", "replicate-steering")
         print(f"{prog}: interrupted; " + ("re-run the same command to resume" if resumable else "nothing was written"),
               file=sys.stderr)
         return INTERRUPTED

@@ -7,6 +7,7 @@
 - ``expert_rank``: the share of candidates an energy model ranks above the expert's action.
 - ``swerve_rate``: the share of passes of a side road with a swerve towards it, a slight swerve
   counting half (Table 2 of the steering-EBM paper).
+- ``crashes_per_km``: crashes (VISTA's, in the steering-EBM paper) per kilometre driven.
 """
 
 from __future__ import annotations
@@ -134,3 +135,30 @@ def swerve_rate(toward_side_road, *, slight: float, clear: float, per_pass: bool
     peak = np.nanmax(x, axis=1)  # (P,)
     score = np.where(peak >= clear, 1.0, np.where(peak >= slight, 0.5, 0.0))  # (P,)
     return score if per_pass else float(score.mean())
+
+
+def crashes_per_km(crashes, distance_m) -> float:
+    """Crashes per kilometre driven: ``sum(crashes) / (sum(distance_m) / 1000)``.
+
+    The steering-EBM paper counts VISTA crashes per session of about 20 minutes; over routes of
+    different lengths the count per distance compares. Several runs are pooled: their crashes
+    and distances are summed first (not their rates averaged, which would weigh a short run
+    like a long one).
+
+    Args:
+        crashes: a count, or a sequence of counts (non-negative integers).
+        distance_m: the distance driven (m), or a sequence of them (one per count); the total
+            must be > 0.
+    Returns:
+        a float >= 0.
+    """
+    c = np.atleast_1d(np.asarray(crashes))
+    d = np.atleast_1d(np.asarray(distance_m, dtype=np.float64))
+    if c.ndim != 1 or c.shape != d.shape or not np.issubdtype(c.dtype, np.number):
+        raise ValueError(f"crashes and distance_m must be numbers or equally long sequences, got shapes "
+                         f"{np.shape(crashes)} and {np.shape(distance_m)}")
+    if not np.isfinite(c).all() or (c < 0).any() or (c != np.round(c)).any():
+        raise ValueError(f"crashes must be non-negative integers, got {c.tolist()}")
+    if not np.isfinite(d).all() or (d < 0).any() or d.sum() <= 0:
+        raise ValueError(f"distance_m must be finite, >= 0 and sum to more than 0, got {d.tolist()}")
+    return float(c.sum() / (d.sum() / 1000.0))

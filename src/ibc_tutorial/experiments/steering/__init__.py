@@ -1,0 +1,9 @@
+"""The steering-EBM paper's road-following study in the town (chapter 10, ``ibc-tutorial replicate-steering``).
+
+- ``presets``: the ``laptop`` and ``tiny`` settings;
+- ``task``: the steering-only task, its demonstrations (side roads rarely taken) and minibatches;
+- ``models``: the paper's six models from the library's heads and losses;
+- ``evaluate``: fixed town02 routes, crashes with restarts (VISTA's protocol), W_cmd, swerve rate;
+- ``train``: one run (train, evaluate, trace) with resumable checkpoints;
+- ``replicate``: the command, its results and provenance, ``load_results`` for the chapter.
+"""

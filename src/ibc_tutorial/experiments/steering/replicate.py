@@ -1,0 +1,383 @@
+"""``ibc-tutorial replicate-steering``: the steering-EBM paper's road-following study, end to end.
+
+    ibc-tutorial replicate-steering --preset laptop --out book/results/steering-laptop
+
+Steps:
+
+1. the demonstrations: the expert drives ``preset.routes`` town01 routes (``task``), side roads
+   taken with probability ``preset.side_road_share`` (``data/town01.npz``);
+2. the references: the expert drives every evaluation route of town02 (``evaluate``), and the
+   observations of 5 s of one side-road pass are kept for the Fig. 5 analogue (``references.npz``);
+3. for each seed, each of the six models (``models``): train, drive every route under the
+   crash-and-restart protocol, record its outputs along the Fig. 5 window (``train.run_one``),
+   in ``--workers`` processes;
+4. after every run: ``results.json`` (the tables), ``traces.npz`` (Fig. 5), ``provenance.json``
+   and ``PROVENANCE.md`` (command, commit, machine, wall time over every invocation, resumed or not).
+
+Interrupted, the same command resumes: finished runs are kept, an unfinished one continues from
+its ``last.pt``. A folder holding another preset's study, other files, or damaged files is
+refused before any work (``--force`` starts over). Chapter 10 only reads the folder
+(``load_results``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import multiprocessing
+import shutil
+import sys
+import threading
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from ibc_tutorial import __version__
+from ibc_tutorial.driving.dataset import DemoDataset, DemoLog
+from ibc_tutorial.experiments.agents.replicate import _init_worker
+from ibc_tutorial.experiments.agents.results import (
+    git_commit, invocations_of, machine, now, read_json_dict, write_json, write_npz)
+from ibc_tutorial.experiments.steering import evaluate as ev
+from ibc_tutorial.experiments.steering.models import LABELS, MODELS
+from ibc_tutorial.experiments.steering.presets import LAPTOP, PRESETS, SteeringPreset, differences, get_preset
+from ibc_tutorial.experiments.steering.task import collect_demonstrations, side_road_counts
+from ibc_tutorial.experiments.steering.train import EVAL, TRACE, read_eval, run_dir, run_one
+from ibc_tutorial.utils import atomic_write_bytes, check_choice, check_int
+
+DATA = "data/town01.npz"
+"""The demonstrations, relative to the folder."""
+REFERENCES = "references.npz"
+"""The expert's drives of the evaluation routes and the Fig. 5 window's observations."""
+RESULTS = "results.json"
+"""The file chapter 10 reads."""
+TRACES = "traces.npz"
+"""The Fig. 5 analogue's arrays."""
+PROVENANCE = "provenance.json"
+"""How, where and when the results were made (``PROVENANCE.md`` says the same for readers)."""
+ENTRIES = ("data", "runs", REFERENCES, RESULTS, TRACES, PROVENANCE, "PROVENANCE.md")
+"""What a study folder holds (``--force`` deletes these, and only these)."""
+HEARTBEAT_S = 30.0
+"""How often a running study records in ``provenance.json`` that it is still running."""
+
+PAPER = {
+    "table1": {  # per run: real-world interventions, W_eff, W_cmd (°/s); VISTA crashes, W_cmd (°/s)
+        "ebm": [[4, 35.25, 176.93, 2, 114.33], [1, 32.34, 96.94, 1, 121.57], [2, 28.57, 223.59, 2, 121.67]],
+        "ebm-smooth": [[5, 49.92, 119.39, 3, 58.70], [2, 38.96, 137.22, 2, 60.37], [3, 34.21, 77.28, 2, 48.86]],
+        "ebm-soft": [[5, 27.80, 56.33, 3, 85.72], [5, 46.83, 57.15, 3, 74.97], [4, 33.72, 56.86, 3, 81.87]],
+        "regression": [[2, 26.69, 37.84, 0, 24.39], [2, 29.65, 75.34, 0, 24.75], [1, 26.28, 33.10, 0, 24.25]],
+        "classification": [[1, 41.05, 182.39, 1, 123.69], [7, 62.17, 287.14, 1, 105.13],
+                           [1, 34.11, 162.27, 1, 104.31]],
+        "mdn": [[1, 25.32, 33.62, 3, 37.22], [5, 24.82, 35.46, 3, 35.74], [5, 26.66, 37.39, 3, 35.84]],
+    },
+    "table1_columns": ["interventions", "w_eff_deg_s", "w_cmd_deg_s", "vista_crashes", "vista_w_cmd_deg_s"],
+    "table2_swerve_rate": {"ebm": 0.44, "ebm-smooth": 0.66, "ebm-soft": 0.39, "regression": 0.89,
+                           "classification": 0.44, "mdn": 0.33},
+}
+"""The steering-EBM paper's Tables 1 (the three runs of each model; its means follow from them)
+and 2, as printed."""
+
+
+def _clear(out: Path) -> None:
+    for name in ENTRIES:
+        p = out / name
+        if p.is_dir():
+            shutil.rmtree(p)
+        elif p.exists():
+            p.unlink()
+
+
+def check_folder(out, preset: SteeringPreset) -> None:
+    """Refuse (ValueError: what differs and what to do) a folder holding anything but this preset's study."""
+    out = Path(out)
+    if not out.exists():
+        return
+    if not out.is_dir():
+        raise ValueError(f"{out} is a file, expected a folder")
+    names = {p.name for p in out.iterdir() if not p.name.startswith(".")}
+    if names - set(ENTRIES):
+        raise ValueError(f"{out} holds other files ({', '.join(sorted(names - set(ENTRIES))[:3])}), not a "
+                         "road-following study: use another --out")
+    for name in (PROVENANCE, RESULTS):
+        if (out / name).exists():
+            stored = read_json_dict(out / name, "delete it and re-run the same command").get("preset")
+            if stored != preset.to_dict():
+                try:
+                    diff = ", ".join(sorted(differences(SteeringPreset.from_dict(stored), preset))[:5]) or "name"
+                except (TypeError, ValueError):
+                    diff = "a damaged preset"
+                raise ValueError(f"{out} holds a study of another preset (differs in {diff}): use another --out, "
+                                 "or --force to start over")
+    if (out / DATA).exists() and DemoLog.load(out / DATA).meta.get("config") != _data_config(preset):
+        raise ValueError(f"{out / DATA} was collected with other settings: use another --out, or --force")
+    for model in MODELS:
+        for seed in preset.seeds:
+            if (run_dir(out, model, seed) / EVAL).exists():
+                read_eval(run_dir(out, model, seed) / EVAL)
+
+
+def _data_config(p: SteeringPreset) -> dict:
+    return {"town": "town01", "routes": p.routes, "minutes": p.route_minutes, "side_road_share": p.side_road_share,
+            "speed": p.speed, "steer_noise": p.steer_noise, "seed": p.collect_seed}
+
+
+def make_references(out: Path, preset: SteeringPreset) -> None:
+    """Step 2: the expert's drives of the evaluation routes and the Fig. 5 window (``references.npz``)."""
+    arrays, window = {}, None
+    for name in preset.eval_routes:
+        ref, _ = ev.expert_reference(name, preset)
+        arrays.update(ref.to_arrays())
+        w = ev.fig5_window(ref)
+        if window is None and w is not None:
+            _, obs = ev.expert_reference(name, preset, keep_obs=w)
+            window = (name, w, obs)
+    if window is None:  # no pass at speed (the tiny preset's short routes): the first 5 s of the first route
+        name = preset.eval_routes[0]
+        w = (0, min(ev.FIG5_STEPS, len(arrays[f"{name}/poses"])))
+        _, obs = ev.expert_reference(name, preset, keep_obs=w)
+        window = (name, w, obs)
+    name, (a, b), obs = window
+    arrays.update({"fig5/route": np.array(name), "fig5/steps": np.array([a, b]), "fig5/bev": obs["bev"],
+                   "fig5/state": obs["state"], "fig5/expert_steer": arrays[f"{name}/steer"][a:b]})
+    write_npz(out / REFERENCES, arrays)
+
+
+def read_references(out: Path, preset: SteeringPreset) -> tuple[list[ev.Reference], dict]:
+    """The references of ``preset.eval_routes`` and the Fig. 5 window's observations."""
+    try:
+        with np.load(Path(out) / REFERENCES, allow_pickle=False) as z:
+            arrays = {k: z[k] for k in z.files}
+        refs = [ev.Reference.from_arrays(name, arrays) for name in preset.eval_routes]
+    except Exception as exc:
+        raise ValueError(f"{Path(out) / REFERENCES} is damaged ({type(exc).__name__}): delete it and re-run") from None
+    return refs, {"bev": arrays["fig5/bev"], "state": arrays["fig5/state"]}
+
+
+_WORKER: dict = {}
+"""Per process: the rendered dataset, the references and the window (made once)."""
+
+
+def _work_one(model: str, seed: int, out: str, preset_d: dict) -> dict:
+    preset = SteeringPreset.from_dict(preset_d)
+    key = (out, repr(preset_d))
+    if key not in _WORKER:
+        log = DemoLog.load(Path(out) / DATA)
+        ds = DemoDataset(log, bev_size=preset.bev_size, cache=True)
+        refs, window = read_references(Path(out), preset)
+        _WORKER.clear()
+        _WORKER[key] = (ds, log.checksum(), refs, window)
+    ds, sha, refs, window = _WORKER[key]
+    return run_one(model, seed, out, preset, ds, refs, window, sha, keep_final=seed == preset.seeds[0])
+
+
+def _stats(values: list) -> dict:
+    v = np.array([x for x in values if x is not None], dtype=float)
+    if not len(v):
+        return {"mean": None, "std": None, "n": 0}
+    return {"mean": round(float(v.mean()), 4), "std": round(float(v.std(ddof=1)) if len(v) > 1 else 0.0, 4),
+            "n": int(len(v))}
+
+
+def collect_results(out: Path, preset: SteeringPreset) -> dict:
+    """The runs finished under ``out``: per seed and route, and the table (mean and spread over seeds)."""
+    runs, table, traces = {}, {}, {}
+    for model in MODELS:
+        runs[model] = {}
+        for seed in preset.seeds:
+            d = run_dir(out, model, seed)
+            if (d / EVAL).exists():
+                runs[model][str(seed)] = read_eval(d / EVAL)
+                with np.load(d / TRACE, allow_pickle=False) as z:
+                    traces.update({f"{model}/seed{seed}/{k}": z[k] for k in z.files})
+        per_seed = [r["summary"] for r in runs[model].values()]
+        if per_seed:
+            table[model] = {k: _stats([s[k] for s in per_seed]) for k in ("crashes_per_km", "w_cmd", "swerve_rate")}
+            table[model]["w_cmd_paper_deg_s"] = _stats([s["w_cmd"] * ev.PAPER_DEG_PER_STEER for s in per_seed])
+            table[model]["crashes"] = int(sum(s["crashes"] for s in per_seed))
+            table[model]["distance_km"] = round(sum(s["distance_m"] for s in per_seed) / 1000, 3)
+            table[model]["passes"] = int(sum(s["passes"] for s in per_seed))
+            table[model]["seeds"] = len(per_seed)
+    return {"runs": runs, "table": table, "traces": traces}
+
+
+def _provenance(out: Path, preset: SteeringPreset, started: str, invocations: list, done: list, planned: list,
+                command: str, complete: bool) -> None:
+    wall = sum(float(i["seconds"]) for i in invocations)
+    prov = {"command": command, "commit": git_commit(), "package_version": __version__, "started": started,
+            "finished": now() if complete else None, "updated": now(), "wall_seconds": round(wall, 1),
+            "invocations": invocations, "resumed": len(invocations) > 1, "complete": complete, "runs_done": done,
+            "runs_planned": planned, "machine": machine(), "preset": preset.to_dict()}
+    write_json(out / PROVENANCE, prov)
+    m = prov["machine"]
+    lines = [f"# Provenance of the `{preset.name}` road-following study", "", f"- command: `{command}`",
+             f"- commit: `{prov['commit']}` (ibc_tutorial {__version__})",
+             f"- started: {started}; " + (f"finished: {prov['finished']}" if complete
+                                          else f"NOT FINISHED (last update {prov['updated']})"),
+             f"- wall time: {wall / 60:.1f} min over {len(invocations)} invocation(s)"
+             + (" (resumed)" if len(invocations) > 1 else ""),
+             f"- machine: {m['nproc']} CPUs ({m['cpu']}), {m['os']}, Python {m['python']}, torch {m['torch']} with "
+             f"{m['torch_threads']} thread(s)", f"- runs finished: {len(done)} of {len(planned)}", "",
+             "Differences of this preset from the `laptop` preset (field: laptop -> this preset):", ""]
+    lines += [f"- `{k}`: {a} -> {b}" for k, (a, b) in differences(LAPTOP, preset).items()] or ["- none"]
+    atomic_write_bytes(out / "PROVENANCE.md", ("\n".join(lines) + "\n").encode())
+
+
+def replicate(preset: SteeringPreset, out, *, command: str = "", workers: int = 1, force: bool = False,
+              log=print) -> dict:
+    """Run the whole study (module docstring) into ``out``; returns the contents of ``results.json``."""
+    out = Path(out)
+    if force and out.exists():
+        if out.is_dir() and any(p.name not in ENTRIES and not p.name.startswith(".") for p in out.iterdir()):
+            raise ValueError(f"{out} holds files that are not a study's: --force deletes only a study; "
+                             "use another --out")
+        _clear(out)
+    check_folder(out, preset)
+    out.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    previous = read_json_dict(out / PROVENANCE, "delete it and re-run") if (out / PROVENANCE).exists() else {}
+    started = previous.get("started") or now()
+    invocations = invocations_of(previous) + [{"started": now(), "last_seen": now(), "seconds": 0.0}]
+    command = command or f"ibc-tutorial replicate-steering --preset {preset.name} --out {out}"
+    planned = [f"{m}/seed{s}" for s in preset.seeds for m in MODELS]
+    lock = threading.Lock()
+    results: dict = {}
+
+    def finished() -> list:
+        return [f"{m}/seed{s}" for s in preset.seeds for m in MODELS if (run_dir(out, m, s) / EVAL).exists()]
+
+    def heartbeat(complete: bool = False) -> None:
+        with lock:
+            invocations[-1].update(last_seen=now(), seconds=round(time.perf_counter() - t0, 1))
+            _provenance(out, preset, started, invocations, finished(), planned, command, complete)
+
+    def save(complete: bool) -> None:
+        agg = collect_results(out, preset)
+        write_npz(out / TRACES, agg.pop("traces"))
+        results.update(agg, complete=complete)
+        write_json(out / RESULTS, results)
+        heartbeat(complete)
+
+    stop = threading.Event()
+    heartbeat()
+    def beat() -> None:
+        while not stop.wait(HEARTBEAT_S):
+            heartbeat()
+
+    threading.Thread(target=beat, daemon=True, name="provenance heartbeat").start()
+    try:
+        _work(out, preset, results, save, workers, log)
+        save(True)
+    finally:
+        stop.set()
+        if not results.get("complete"):
+            heartbeat()
+    if log:
+        log(f"study finished in {sum(i['seconds'] for i in invocations) / 60:.1f} min; results in {out}")
+    return results
+
+
+def _work(out: Path, preset: SteeringPreset, results: dict, save, workers: int, log) -> None:
+    if not (out / DATA).exists():
+        demo = collect_demonstrations(preset.routes, preset.route_minutes, preset.side_road_share, speed=preset.speed,
+                                      steer_noise=preset.steer_noise, seed=preset.collect_seed)
+        demo.save(out / DATA)
+    demo = DemoLog.load(out / DATA)
+    counts = side_road_counts(demo)
+    results.update(
+        preset=preset.to_dict(), paper=PAPER, labels=LABELS, models=list(MODELS),
+        data={"file": DATA, "samples": len(demo), "routes": preset.routes,
+              "km": round(sum(e["distance_m"] for e in demo.meta["episodes"]) / 1000, 3), "side_roads": counts},
+        protocol={"crash_distance_m": ev.CRASH_DISTANCE_M, "restart_s": ev.RESTART_S, "slight_m": ev.SLIGHT_M,
+                  "clear_m": ev.CLEAR_M, "section_before_m": ev.SECTION_BEFORE_M, "dt": ev.DT,
+                  "paper_deg_per_steer": ev.PAPER_DEG_PER_STEER,
+                  "front_wheel_deg_per_steer": round(ev.FRONT_WHEEL_DEG_PER_STEER, 3)})
+    if log:
+        log(f"demonstrations: {len(demo)} samples; side roads taken {counts['side_road']} of "
+            f"{counts['straight'] + counts['side_road']} passes")
+    if not (out / REFERENCES).exists():
+        make_references(out, preset)
+    refs, _ = read_references(out, preset)
+    results["references"] = {r.name: {"steps": int(len(r.poses)), "length_m": round(float(len(r.path)) *
+                                      ev.PATH_SPACING_M, 1), "side_road_passes": int(len(r.sections)),
+                                      "expert_w_cmd": round(ev.expert_whiteness(r), 5)} for r in refs}
+    with np.load(out / REFERENCES, allow_pickle=False) as z:
+        results["fig5"] = {"route": str(z["fig5/route"]), "steps": z["fig5/steps"].tolist()}
+    save(False)
+    todo = [(m, s) for s in preset.seeds for m in MODELS if not (run_dir(out, m, s) / EVAL).exists()]
+
+    def after(r: dict) -> None:
+        if log:
+            s = r["summary"]
+            log(f"{r['model']} seed {r['seed']}: {s['crashes']} crashes in {s['distance_m'] / 1000:.2f} km, "
+                f"W_cmd {s['w_cmd']:.3f}/s, swerve rate {s['swerve_rate']} ({r['train_seconds']:.0f} s training, "
+                f"{r['eval_seconds']:.0f} s driving)")
+        save(False)
+
+    if workers <= 1:
+        for m, s in todo:
+            after(_work_one(m, s, str(out), preset.to_dict()))
+        return
+    ctx = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_worker,
+                             initargs=(torch.get_num_threads(),)) as pool:
+        try:
+            futures = [pool.submit(_work_one, m, s, str(out), preset.to_dict()) for m, s in todo]
+            for fut in as_completed(futures):
+                after(fut.result())
+        except KeyboardInterrupt:
+            for proc in list(getattr(pool, "_processes", {}).values()):
+                proc.terminate()
+            pool.shutdown(wait=False, cancel_futures=True)
+            raise
+
+
+def load_results(out) -> dict:
+    """What chapter 10 reads: ``results.json`` and ``provenance.json`` as dicts, ``traces.npz`` as a dict of
+    arrays. ValueError naming the file if one is missing or damaged."""
+    out = Path(out)
+    if not (out / RESULTS).is_file():
+        raise ValueError(f"no {RESULTS} in {out}: run 'ibc-tutorial replicate-steering --out {out}' first")
+    fix = f"delete it and re-run 'ibc-tutorial replicate-steering' with the same --preset and --out {out}"
+    res = {"results": read_json_dict(out / RESULTS, fix),
+           "provenance": read_json_dict(out / PROVENANCE, fix) if (out / PROVENANCE).exists() else {}}
+    try:
+        with np.load(out / TRACES, allow_pickle=False) as z:
+            res["traces"] = {k: z[k] for k in z.files}
+    except Exception as exc:
+        raise ValueError(f"{out / TRACES} is missing or damaged ({type(exc).__name__}): {fix}") from None
+    return res
+
+
+# ---------------------------------------------------------------------- command line
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The arguments of ``ibc-tutorial replicate-steering``."""
+    p.add_argument("--preset", default="laptop", choices=tuple(PRESETS), help="settings (default: %(default)s)")
+    p.add_argument("--out", required=True, help="folder for the data, runs, results and provenance; an interrupted "
+                   "study of the same preset there is resumed")
+    p.add_argument("--force", action="store_true", help="start over: delete the study already in --out")
+    p.add_argument("--threads", type=int, default=0, help="torch CPU threads per process (default 0: torch's choice; "
+                   "1 is fastest on a busy machine)")
+    p.add_argument("--workers", type=int, default=1, help="runs in parallel processes (default: %(default)s)")
+    p.add_argument("--device", default="cpu", choices=("cpu",), help="where to train (the study is sized for a CPU)")
+
+
+def run(args: argparse.Namespace) -> int:
+    """``ibc-tutorial replicate-steering``: check the inputs and the folder, then run the study."""
+    from ibc_tutorial.cli import UserError, check_output_dir
+
+    preset = get_preset(args.preset)
+    threads = check_int("--threads", args.threads, minimum=0)
+    workers = check_int("--workers", args.workers, minimum=1)
+    check_choice("--device", args.device, ("cpu",))
+    out = check_output_dir("--out", args.out)
+    force = bool(getattr(args, "force", False))
+    if not force:
+        check_folder(out, preset)
+    elif out.is_dir() and any(p.name not in ENTRIES and not p.name.startswith(".") for p in out.iterdir()):
+        raise UserError(f"{out} holds files that are not a study's: --force deletes only a study; use another --out")
+    if threads:
+        torch.set_num_threads(threads)
+    command = "ibc-tutorial " + " ".join(sys.argv[1:]) if sys.argv and "replicate-steering" in sys.argv else ""
+    replicate(preset, out, command=command, workers=workers, force=force)
+    return 0
