@@ -1,7 +1,7 @@
 """Checkers of exercises/10_road_following.ipynb: solution -> correct, stub -> not attempted,
 typical mistakes -> a hint naming the mistake, code that raises -> a hint (never an exception).
 
-The reference solutions are here (``ch10_*``): ``ibc_tutorial.exercises.solutions`` is to take them."""
+The reference solutions are ``ibc_tutorial.exercises.solutions.ch10_*``."""
 
 import math
 
@@ -9,22 +9,7 @@ import numpy as np
 import pytest
 
 from ibc_tutorial.exercises import ch10
-
-
-# --------------------------------------------------------------------------- reference solutions
-def ch10_swerve_rate(offsets, slight, clear):
-    x = np.asarray(offsets, dtype=float)
-    peak = (x - x[:, :1]).max(axis=1)  # (P,) farthest towards the side road, from where the pass began
-    return float(np.where(peak >= clear, 1.0, np.where(peak >= slight, 0.5, 0.0)).mean())
-
-
-def ch10_command_whiteness(segments, dt):
-    rates = np.concatenate([np.diff(np.asarray(s, dtype=float)) / dt for s in segments if len(s) >= 2])
-    return float(np.sqrt(np.mean(rates ** 2)))
-
-
-def ch10_crashes_per_km(runs):
-    return sum(r["crashes"] for r in runs) / (sum(r["distance_m"] for r in runs) / 1000.0)
+from ibc_tutorial.exercises.solutions import ch10_command_whiteness, ch10_crashes_per_km, ch10_swerve_rate
 
 
 def stub(*args, **kwargs):

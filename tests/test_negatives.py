@@ -1,24 +1,11 @@
-"""Counter-example samplers: shapes, bounds and statistics against independent references;
-chapter 04's experiment around them (``experiments.counter_examples``)."""
-
-import math
+"""Counter-example samplers: shapes, bounds and statistics against independent references
+(chapter 04's experiment around them: ``tests/test_counter_examples.py``)."""
 
 import pytest
 import torch
 from scipy import stats
 
-from ibc_tutorial.experiments.counter_examples import (
-    CounterExampleConfig,
-    CounterExampleRun,
-    evaluate,
-    expert_nll,
-    make_datasets,
-    mode_masses,
-    negatives_histogram,
-    run,
-)
 from ibc_tutorial.negatives import ExpertSampler, UniformSampler, expert_negatives, uniform_negatives
-from ibc_tutorial.toy import JunctionWorld
 
 
 def test_uniform_shape_bounds_and_distribution():
@@ -118,68 +105,6 @@ def test_bad_input():
         expert_negatives(torch.zeros(3, 1), 2, 3, 0.1, low=-1.0)
     with pytest.raises(ValueError, match="batch_size"):
         expert_negatives(torch.zeros(3, 1), 0, 3, 0.1)
-
-
-# --------------------------------------------------------------------------- chapter 04's experiment and measures
-def test_evaluate_of_the_expert_density_reaches_the_floor():
-    problem = JunctionWorld()
-    config = CounterExampleConfig(n_heldout=60)
-    _, heldout = make_datasets(problem, config)
-
-    class Oracle(torch.nn.Module):
-        """E(x, y) = -log p(y|x) of the expert itself."""
-
-        def embed(self, obs):
-            return obs
-
-        def energy_from_embedding(self, z, actions):
-            a = actions.expand(len(z), -1, -1) if actions.ndim == 2 else actions
-            n = a.shape[1]
-            return -problem.log_density(z.repeat_interleave(n, 0), a.reshape(-1, 2)).reshape(len(z), n)
-
-    out = evaluate(Oracle(), heldout, problem, config)
-    assert abs(out["nll"] - expert_nll(problem, heldout)) < 0.05 and out["hit"] == 1.0
-
-
-def test_negatives_histogram_and_mode_masses():
-    actions = torch.tensor([[0.0, 0.0]]).repeat(10, 1)
-    h = negatives_histogram(ExpertSampler(0.0), actions, 4, batches=2, batch_size=4, bins=10)
-    assert h.shape == (10, 10) and float(h.sum()) == pytest.approx(1.0) and float(h[5, 5]) == pytest.approx(1.0)
-    u = negatives_histogram(UniformSampler(-1.0, 1.0), actions, 100, batches=20, bins=4)
-    assert (u > 0.05).all()  # uniform counter-examples visit every cell
-
-    problem = JunctionWorld()
-
-    class Flat(torch.nn.Module):
-        hidden = 1
-
-        def embed(self, obs):
-            return obs
-
-        def energy_from_embedding(self, z, actions):
-            return torch.zeros(len(z), actions.shape[-2])
-
-    m = mode_masses(Flat(), torch.tensor([[0.0, 1.0, 0.0, 0.5]]), problem, grid_n=41, radius=0.15)
-    # a flat landscape puts on each disc of radius 0.15 about its share of the box: π 0.15² / 4
-    torch.testing.assert_close(m, torch.full((1, 3), math.pi * 0.15**2 / 4), atol=0.004, rtol=0)
-
-
-def test_a_short_run_records_its_measures():
-    world = JunctionWorld()
-    config = CounterExampleConfig(n_train=128, n_heldout=16, steps=4, batch_size=8, eval_every=2, grid_n=11)
-    data = make_datasets(world, config)
-    out = run(world, UniformSampler(), config, seed=0, data=data)
-    assert isinstance(out, CounterExampleRun) and out.steps == [2, 4]
-    assert len(out.nll) == len(out.hit) == len(out.losses) == 2 and all(math.isfinite(v) for v in out.nll)
-    again = run(world, UniformSampler(), config, seed=0, data=data)
-    assert again.nll == out.nll  # reproducible from the seed
-
-
-def test_counter_example_config_is_checked():
-    with pytest.raises(ValueError, match="n_neg"):
-        CounterExampleConfig(n_neg=0)
-    with pytest.raises(ValueError, match="hit_radius"):
-        CounterExampleConfig(hit_radius=0.0)
 
 
 def test_expert_clipping_per_dimension_bounds():

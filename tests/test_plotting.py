@@ -97,6 +97,12 @@ def test_multimodality_figures():
     assert fig.axes[0].get_xlabel() == common.STEER_LABEL
     assert_labelled(fig)
     assert_labelled(multimodality.plot_command_traces(0.1, {"a": np.zeros(10), "b": np.ones(10)}))
+    fig = multimodality.plot_command_traces(0.1, {"a": np.zeros(10), "b": np.ones(10), "c": -np.ones(10)}, reference="a")
+    assert len(fig.axes) == 3  # one panel per trace, so that nearly equal traces do not overlap
+    assert [len(ax.lines) for ax in fig.axes] == [2, 3, 3]  # zero line, trace, and the reference in the others
+    assert_labelled(fig)
+    with pytest.raises(ValueError, match="reference"):
+        multimodality.plot_command_traces(0.1, {"a": np.zeros(10)}, reference="b")
     assert_labelled(multimodality.plot_density_fits(torch.rand(30) * 2 - 1, actions, {"flat": torch.full((21,), 0.5)}, title="t"))
     assert_labelled(multimodality.plot_beta_shapes([(2, 2)]))
     prev = torch.linspace(-1, 1, 5)
@@ -210,3 +216,12 @@ def test_agents_figures():
     fig = agents.plot_energy_landscapes([("p", np.ones((4, 5)) + accel[:, None], np.zeros((3, 2)), None)], steer, accel)
     assert common.STEER_LABEL in fig.axes[1].get_xlabel()
     assert_labelled(fig)
+    counts = {"bc": {3: {"left": 1, "straight": 2, "right": 0}},
+              "da-ibc": {3: {"left": 0, "straight": 1, "right": 1}, 5: {"left": 2, "straight": 0, "right": 0}}}
+    fig = agents.plot_exit_counts(counts)
+    assert [ax.get_title() for ax in fig.axes] == ["BC (Beta)", "DA-IBC"]
+    assert [t.get_text() for t in fig.axes[1].get_xticklabels()] == ["3", "5"]
+    assert fig.axes[1].patches[1].get_height() == 2  # da-ibc, approach 5, left
+    assert_labelled(fig)
+    with pytest.raises(ValueError):
+        agents.plot_exit_counts({})

@@ -130,6 +130,31 @@ def test_bad_config_and_arguments_raise():
         w.in_window(w.obs_at([1.0]), (5.0, 2.0))
 
 
+def test_observation_noise_is_what_the_policy_sees_not_the_state():
+    clean = TreeWorld(TreeConfig(obs_lateral=True))
+    noisy = TreeWorld(TreeConfig(obs_lateral=True, obs_noise_std=0.1))
+    d0, d1 = clean.expert_demonstrations(20, seed=0), noisy.expert_demonstrations(20, seed=0)
+    # the expert steers from the true state, with its own noise: the same episodes
+    assert torch.equal(d0.states, d1.states) and torch.equal(d0.actions, d1.actions)
+    jitter = d1.obs - d0.obs  # (M, 2)
+    assert 0.09 < float(jitter.std()) < 0.11 and abs(float(jitter.mean())) < 0.01
+    seen = []
+
+    def policy(obs):
+        seen.append(obs.clone())
+        return torch.zeros(len(obs), 1)
+
+    r0, r1 = noisy.rollout(policy, 10, seed=3), noisy.rollout(policy, 10, seed=3)
+    assert torch.equal(r0.obs, r1.obs)  # reproducible from the seed
+    assert torch.equal(seen[0], r0.obs[:, 0])  # the policy saw the noisy observation recorded
+    straight = clean.rollout(zero_policy, 10, seed=3)
+    assert torch.equal(r0.states, straight.states)  # same starts; the car moves on its true state
+    assert not torch.equal(r0.obs, straight.obs)
+    assert not torch.equal(noisy.rollout(policy, 10, seed=4).obs[:, 1:], r0.obs[:, 1:])
+    with pytest.raises(ValueError, match="obs_noise_std"):
+        TreeWorld(TreeConfig(obs_noise_std=-0.1))
+
+
 # --------------------------------------------------------------------------- experts
 @pytest.fixture(scope="module")
 def expert():

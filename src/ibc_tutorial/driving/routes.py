@@ -9,6 +9,7 @@ the lane graph it gives the dense path the expert follows.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
@@ -57,8 +58,17 @@ def random_start(town: Town, rng: np.random.Generator) -> tuple[int, float]:
     return lanes[k].id, 3.0 + float(rng.random()) * usable[k]
 
 
-def random_route(town: Town, rng: np.random.Generator, n_turns: int = 64, start: tuple[int, float] | None = None) -> Route:
-    """A route with ``n_turns`` random legal turns from a random start (or ``start`` = (lane, s))."""
+def uniform_exit(exits: list[str], rng: np.random.Generator) -> str:
+    """One of a junction approach's legal ``exits`` (sorted), each equally likely."""
+    return exits[int(rng.integers(len(exits)))]
+
+
+def random_route(town: Town, rng: np.random.Generator, n_turns: int = 64, start: tuple[int, float] | None = None,
+                 choose: Callable[[list[str], np.random.Generator], str] = uniform_exit) -> Route:
+    """A route with ``n_turns`` legal turns from a random start (or ``start`` = (lane, s)).
+
+    At each junction approach met, ``choose(exits, rng)`` picks the turn among the sorted legal exits
+    (``uniform_exit``: each equally likely; chapter 10's demonstrations keep straight past side roads)."""
     check_int("n_turns", n_turns, minimum=0)
     if start is None:
         start = random_start(town, rng)
@@ -67,8 +77,7 @@ def random_route(town: Town, rng: np.random.Generator, n_turns: int = 64, start:
     while len(turns) < n_turns:
         ap = town.approach_of_lane.get(lane)
         if ap is not None and town.approaches[ap].is_junction:
-            exits = sorted(town.approaches[ap].exits)
-            turn = exits[int(rng.integers(len(exits)))]
+            turn = choose(sorted(town.approaches[ap].exits), rng)
             turns.append(turn)
             lane = town.next_lane(lane, turn)
         else:

@@ -22,20 +22,12 @@ import math
 
 import numpy as np
 
-from ibc_tutorial.exercises.core import Feedback, correct, hint, run_check
+from ibc_tutorial.exercises.core import Feedback, correct, hint, number_answer, run_check
 
 L = 2.9  # wheelbase (m)
 DELTA_MAX = 0.6  # front-wheel angle at steer = 1 (rad)
 
 
-def _num(value, name: str) -> float | Feedback:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        return hint(f"{name} must return a number, got {type(value).__name__}.")
-    if not math.isfinite(v):
-        return hint(f"{name} returned {v} for an ordinary input.")
-    return v
 
 
 # --------------------------------------------------------------------------- 1. yaw rate
@@ -49,7 +41,7 @@ def check_yaw_rate(fn) -> Feedback:
     def check() -> Feedback:
         cases = [(4.0, 0.5), (6.0, -1.0), (2.5, 0.2), (10.0, 0.9), (0.0, 0.7), (3.0, 0.0)]
         for v, s in cases:
-            out = _num(fn(v, s), "yaw_rate")
+            out = number_answer(fn(v, s), "yaw_rate")
             if isinstance(out, Feedback):
                 return out
             ref = _yaw_ref(v, s)

@@ -21,22 +21,12 @@ import math
 
 import numpy as np
 
-from ibc_tutorial.exercises.core import Feedback, correct, hint, run_check
+from ibc_tutorial.exercises.core import Feedback, correct, hint, number_answer, run_check
 
 PENALTY = 0.7
 """The score's factor per red light run (``driving.sim.SCORE_PENALTY``)."""
 
 
-def _num(value, name: str) -> float | Feedback:
-    if isinstance(value, (bool, np.bool_)):
-        return hint(f"{name} must return a number, got {type(value).__name__}.")
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        return hint(f"{name} must return a number, got {type(value).__name__}.")
-    if not math.isfinite(v):
-        return hint(f"{name} returned {v} for an ordinary input.")
-    return v
 
 
 # --------------------------------------------------------------------------- 1. the episode score
@@ -78,7 +68,7 @@ def check_episode_score(fn) -> Feedback:
         logs = [_log(s) for s in (0, 1)]
         clean = (logs[0][0], np.full(len(logs[0][1]), -1))  # no stop line crossed
         for xy, crossed in [clean] + logs:
-            out = _num(fn(xy.copy(), crossed.copy()), "episode_score")
+            out = number_answer(fn(xy.copy(), crossed.copy()), "episode_score")
             if isinstance(out, Feedback):
                 return out
             n_red = int((crossed == 2).sum())
@@ -129,7 +119,7 @@ def check_unseen_share(fn) -> Feedback:
     def check() -> Feedback:
         cases = [(np.full(1000, 1e-3), 128), (_probs(), 128), (_probs(), 96), (np.r_[0.5, np.full(50, 0.01)], 7)]
         for p, b in cases:
-            out = _num(fn(p.copy(), b), "unseen_share")
+            out = number_answer(fn(p.copy(), b), "unseen_share")
             if isinstance(out, Feedback):
                 return out
             ref = _unseen_ref(p, b)

@@ -19,18 +19,10 @@ import math
 
 import numpy as np
 
-from ibc_tutorial.exercises.core import Feedback, correct, hint, run_check
+from ibc_tutorial.exercises.core import Feedback, correct, hint, number_answer, run_check
 from ibc_tutorial.metrics import crashes_per_km, swerve_rate, whiteness
 
 
-def _num(value, name: str) -> float | Feedback:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        return hint(f"{name} must return a number, got {type(value).__name__}.")
-    if not math.isfinite(v):
-        return hint(f"{name} returned {v} for an ordinary input.")
-    return v
 
 
 def _close(a: float, b: float) -> bool:
@@ -75,7 +67,7 @@ def check_swerve_rate(fn) -> Feedback:
     def check() -> Feedback:
         wrong = False
         for offsets, slight, clear in SWERVE_CASES:
-            out = _num(fn(offsets.copy(), slight, clear), "swerve_rate")
+            out = number_answer(fn(offsets.copy(), slight, clear), "swerve_rate")
             if isinstance(out, Feedback):
                 return out
             ref = swerve_rate(offsets - offsets[:, :1], slight=slight, clear=clear)
@@ -121,7 +113,7 @@ def check_command_whiteness(fn) -> Feedback:
 
     def check() -> Feedback:
         for segments, dt in ((SEGMENTS[0], 0.1), (SEGMENTS[1], 0.1), (SEGMENTS[1], 0.05)):
-            out = _num(fn([s.copy() for s in segments], dt), "command_whiteness")
+            out = number_answer(fn([s.copy() for s in segments], dt), "command_whiteness")
             if isinstance(out, Feedback):
                 return out
             ref = _w_pooled(segments, dt)
@@ -160,7 +152,7 @@ def check_crashes_per_km(fn) -> Feedback:
 
     def check() -> Feedback:
         for runs in RUNS:
-            out = _num(fn([dict(r) for r in runs]), "crashes_per_km")
+            out = number_answer(fn([dict(r) for r in runs]), "crashes_per_km")
             if isinstance(out, Feedback):
                 return out
             c = [r["crashes"] for r in runs]

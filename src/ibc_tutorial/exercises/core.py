@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import traceback
 from dataclasses import dataclass
 from typing import Callable
@@ -78,3 +79,17 @@ def tensor_answer(out, name: str, shape: tuple, what: str = "") -> "torch.Tensor
     if not torch.isfinite(out).all():
         return hint(f"{name} returned NaN or inf values.")
     return out.detach()
+
+
+def number_answer(value, name: str) -> "float | Feedback":
+    """A reader's function's return value as a finite float, or the hint that says why it is not one
+    (``name`` is the function's name in the exercise). True and False are refused: they are not numbers."""
+    if isinstance(value, bool) or type(value).__name__ == "bool_":
+        return hint(f"{name} must return a number, got {type(value).__name__}.")
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        return hint(f"{name} must return a number, got {type(value).__name__}.")
+    if not math.isfinite(v):
+        return hint(f"{name} returned {v} for an ordinary input.")
+    return v

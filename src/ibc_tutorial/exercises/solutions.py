@@ -249,3 +249,21 @@ def ch09_exit_shares(visits, approach):
     turns = [v["turn"] for v in visits if v["approach"] == approach]
     return {t: turns.count(t) / len(turns) for t in ("left", "straight", "right")}
 
+
+def ch10_swerve_rate(offsets, slight, clear):
+    """Share of passes (P, T) whose farthest offset towards the side road, from where the pass began,
+    reaches ``clear`` (a swerve, 1) or ``slight`` (half a swerve)."""
+    x = np.asarray(offsets, dtype=float)
+    peak = (x - x[:, :1]).max(axis=1)  # (P,) farthest towards the side road, from where the pass began
+    return float(np.where(peak >= clear, 1.0, np.where(peak >= slight, 0.5, 0.0)).mean())
+
+
+def ch10_command_whiteness(segments, dt):
+    """W_cmd (eq. 2 of the steering-EBM paper) pooled over the stretches between restarts."""
+    rates = np.concatenate([np.diff(np.asarray(s, dtype=float)) / dt for s in segments if len(s) >= 2])
+    return float(np.sqrt(np.mean(rates ** 2)))
+
+
+def ch10_crashes_per_km(runs):
+    """Crashes over kilometres driven, summed over the runs."""
+    return sum(r["crashes"] for r in runs) / (sum(r["distance_m"] for r in runs) / 1000.0)

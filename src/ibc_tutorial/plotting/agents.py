@@ -35,7 +35,7 @@ def plot_agent_architecture(bev_size: int = 64, channels=(16, 32, 32, 64), embed
     for c in channels:
         side = (side + 1) // 2
         convs.append(f"{c}x{side}x{side}")
-    box(0.1, 3.2, 1.6, 1.2, f"BEV\n5 x {bev_size} x {bev_size}\n(road, lanes,\nred lights t-16, -9, -1)", "#dde8f5")
+    box(0.1, 3.2, 1.6, 1.2, f"BEV\n5 x {bev_size} x {bev_size}\n(road, lanes,\nlights t-16, -9, -1\nby intensity)", "#dde8f5")
     box(2.1, 3.2, 2.0, 1.2, "CNN: 3x3 stride-2 convs\n" + " -> ".join(convs[:2]) + "\n-> " + " -> ".join(convs[2:]), "#c6dbef")
     box(4.5, 3.3, 1.3, 1.0, f"linear\n-> {embed_dim}", "#c6dbef")
     box(0.1, 1.3, 1.6, 1.0, "state (3)\nspeed, previous\nsteer, acceleration", "#e5f5e0")
@@ -116,3 +116,26 @@ def plot_energy_landscapes(panels: list, steer, accel, *, suptitle: str = "Energ
         ax_e.scatter(p[:, 0], p[:, 1], c="red", s=28, edgecolors="white", linewidths=0.8, label=f"{len(p)} DFO inferences")
         label_axes(ax_e, f"y_1: {STEER_LABEL}", f"y_2: {ACCEL_LABEL}", title, legend=True, loc="lower right")
     return finish(fig, True, title=suptitle)
+
+
+def plot_exit_counts(counts: dict, *, title: str = "Exits taken at each junction approach"):
+    """Per method, one stacked bar per junction approach: how many visits left it by each exit.
+
+    ``counts``: ``{method: {approach: {"left": n, "straight": n, "right": n}}}`` (``stats.exit_counts``).
+    Only approaches that some method visited are drawn, in the same order in every panel."""
+    n = check_panels("counts", counts)
+    approaches = sorted({int(a) for c in counts.values() for a in c})
+    fig, axes = plt.subplots(n, 1, figsize=(max(6.0, 0.45 * len(approaches) + 2.0), 2.6 * n), squeeze=False,
+                             sharex=True)
+    x = np.arange(len(approaches))
+    for ax, (method, per) in zip(axes[:, 0], counts.items()):
+        bottom = np.zeros(len(approaches))
+        for turn, color in (("left", "C1"), ("straight", "0.6"), ("right", "C4")):
+            h = np.array([per.get(a, {}).get(turn, 0) for a in approaches], dtype=float)
+            ax.bar(x, h, bottom=bottom, color=color, label=turn, width=0.7)
+            bottom += h
+        ax.set_xticks(x, [str(a) for a in approaches])
+        label_axes(ax, "junction approach (id)", "visits", METHOD_LABELS.get(method, method), legend=True,
+                   loc="upper right", fontsize=8)
+        ax.grid(alpha=0.3, axis="y")
+    return finish(fig, True, title=title)

@@ -392,13 +392,33 @@ def plot_energy_curves(actions, curves: dict, *, title: str, xlabel: str = STEER
     return finish(fig, own)
 
 
-def plot_command_traces(dt: float, traces: dict, *, title: str = "Steering commands of one episode", ylabel: str = "steering command"):
-    """Command sequences over time, one line per policy (to see what whiteness measures)."""
-    fig, ax = plt.subplots(figsize=(7.0, 3.4))
-    for i, (label, x) in enumerate(traces.items()):
+def plot_command_traces(dt: float, traces: dict, *, title: str = "Steering commands of one episode", ylabel: str = "steering command", reference: str | None = None):
+    """Command sequences over time (to see what whiteness measures), one panel per policy, stacked
+    on a shared time axis, so that traces that nearly coincide stay apart and readable.
+
+    Args:
+        dt: seconds between commands.
+        traces: {label: (T,) commands}, one panel each, in order.
+        reference: a key of ``traces`` (e.g. the experts) drawn thin and grey in every other
+            panel as well, to compare against; None = no reference.
+    """
+    check_panels("traces", traces)
+    if reference is not None and reference not in traces:
+        raise ValueError(f"reference must be one of the keys of traces {list(traces)}, got {reference!r}")
+    n = len(traces)
+    fig, axes = plt.subplots(n, 1, figsize=(7.0, 0.6 + 1.25 * n), sharex=True, sharey=True, squeeze=False)
+    ref = None if reference is None else as_array(traces[reference], float).reshape(-1)
+    for i, (ax, (label, x)) in enumerate(zip(axes[:, 0], traces.items())):
         x = as_array(x, float).reshape(-1)
-        ax.plot(np.arange(len(x)) * dt, x, color=f"C{i}", lw=1.2, label=label)
-    label_axes(ax, TIME_LABEL, ylabel, title, legend=True)
+        if ref is not None and label != reference:
+            ax.plot(np.arange(len(ref)) * dt, ref, color="0.6", lw=0.9, label=reference)
+        ax.plot(np.arange(len(x)) * dt, x, color=f"C{i}", lw=1.4, label=label)
+        ax.axhline(0.0, color="0.85", lw=0.6, zorder=0)
+        ax.set_ylim(-1.1, 1.1)
+        ax.legend(loc="upper left", fontsize=7, ncol=2, frameon=False)
+    axes[-1, 0].set_xlabel(TIME_LABEL)
+    axes[n // 2, 0].set_ylabel(ylabel)  # one label for the shared axis, beside the middle panel
+    axes[0, 0].set_title(title)
     return finish(fig, True)
 
 

@@ -70,6 +70,18 @@ class ToyConfig:
     of the DA-IBC paper). The car's heading is that action (``heading = -heading_max * steer``,
     see ``ibc_tutorial.toy.car``), so it is read off the state; expert demonstrations record it
     like every other observation."""
+    obs_noise_std: float = 0.0
+    """Standard deviation of Gaussian noise added to every component of the observation (in the
+    scaled units of ``observe``), independently at every step: sensor jitter, as consecutive
+    camera frames differ a little (the setting of the steering-EBM paper's Table 1). It is added
+    to what a policy sees in ``rollout`` and to what demonstrations record; the car, the expert
+    (which steers from the true state) and the collision test use the true state. The noise has
+    its own generator, seeded from the episodes' ``seed`` + ``OBS_NOISE_SEED_OFFSET``, so the
+    start states and the expert's own noise are the same as without it. 0 = noiseless."""
+
+
+OBS_NOISE_SEED_OFFSET = 7919
+"""Added to a rollout's ``seed`` to seed the generator of its observation noise."""
 
 
 @dataclass
@@ -77,7 +89,8 @@ class Demonstrations:
     """Expert data from ``world.expert_demonstrations``: M = E * T samples of E episodes of T steps."""
 
     obs: torch.Tensor
-    """(M, obs_dim) observations (torch default dtype: float32, or float64 in the toy chapters)."""
+    """(M, obs_dim) observations (torch default dtype: float32, or float64 in the toy chapters),
+    with the sensor noise of ``config.obs_noise_std`` when it is > 0."""
     actions: torch.Tensor
     """(M, 1) steering the expert applied (noise included), in [-1, 1], +1 = right."""
     episode: torch.Tensor
@@ -171,7 +184,7 @@ class ToyWorld:
     def __init__(self, config: ToyConfig):
         c = config
         check_positive_fields(c, ("speed", "dt", "heading_max", "expert_lookahead", "obs_distance_scale", "obs_lateral_scale"))
-        check_positive_fields(c, ("start_lateral_range", "expert_noise_std"), allow_zero=True)
+        check_positive_fields(c, ("start_lateral_range", "expert_noise_std", "obs_noise_std"), allow_zero=True)
         check_int("config.horizon", c.horizon, minimum=1)
         if not c.heading_max < math.pi / 2:
             raise ValueError(f"config.heading_max must be < pi/2 (the car drives forward), got {c.heading_max}")
@@ -288,9 +301,12 @@ class ToyWorld:
         return steer.clamp(-1.0, 1.0)[:, None]  # (B, 1)
 
     # ------------------------------------------------------------------ closed loop
-    def _simulate(self, act: Callable[[torch.Tensor, torch.Tensor], torch.Tensor], start: torch.Tensor) -> Rollouts:
-        """Drive all episodes from ``start`` (E, 3) for ``horizon`` steps with ``act(obs, states) -> (E, 1)``."""
+    def _simulate(self, act: Callable[[torch.Tensor, torch.Tensor], torch.Tensor], start: torch.Tensor, seed: int) -> Rollouts:
+        """Drive all episodes from ``start`` (E, 3) for ``horizon`` steps with ``act(obs, states) -> (E, 1)``;
+        ``seed`` seeds the observation noise (``config.obs_noise_std``)."""
         e, t_max = len(start), self.config.horizon
+        noise_std = self.config.obs_noise_std
+        noise_gen = torch.Generator().manual_seed(seed + OBS_NOISE_SEED_OFFSET) if noise_std > 0 else None
         states = torch.empty(e, t_max + 1, 3)
         actions = torch.empty(e, t_max, 1)
         obs_all = torch.empty(e, t_max, self.obs_dim)
@@ -301,6 +317,8 @@ class ToyWorld:
         done = torch.zeros(e, dtype=torch.bool)
         for t in range(t_max):
             obs = self.observe(s)  # (E, obs_dim)
+            if noise_gen is not None:  # sensor jitter: what the policy sees, not the state
+                obs = obs + noise_std * torch.randn(obs.shape, generator=noise_gen)
             a = check_policy_actions(act(obs, s), e)  # (E, 1)
             nxt = self.step(s, a)
             frac = self.contact_fraction(s[:, :2], nxt[:, :2])  # (E,)
@@ -321,7 +339,8 @@ class ToyWorld:
         """Run ``policy`` in closed loop on ``n_episodes`` episodes at once, started from the
         start distribution drawn with ``seed`` (or from ``initial_states`` (E, 3) when given).
 
-        The same ``seed`` gives the same starts as ``expert_rollouts`` and ``expert_demonstrations``."""
+        The same ``seed`` gives the same starts as ``expert_rollouts`` and ``expert_demonstrations``
+        (and, with ``config.obs_noise_std`` > 0, the same observation noise at each step)."""
         if not callable(policy):
             raise ValueError(f"policy must be callable as policy(obs) -> actions, got {type(policy).__name__}")
         n = check_int("n_episodes", n_episodes, minimum=1)
@@ -335,7 +354,7 @@ class ToyWorld:
             with torch.no_grad():
                 return policy(obs)
 
-        return self._simulate(act, start)
+        return self._simulate(act, start, seed)
 
     def expert_rollouts(self, n_episodes: int, seed: int) -> tuple[Rollouts, torch.Tensor]:
         """The expert's episodes as ``Rollouts`` (to compare with a policy's) and their modes (E,) int64."""
@@ -344,7 +363,7 @@ class ToyWorld:
         gen = torch.Generator().manual_seed(seed)
         start = self.initial_states(n, gen)
         plans = self.sample_plans(start, gen)  # (E, P)
-        ro = self._simulate(lambda obs, s: self.expert_steer(s, plans, gen), start)
+        ro = self._simulate(lambda obs, s: self.expert_steer(s, plans, gen), start, seed)
         return ro, plans[:, 0].to(torch.long)
 
     def expert_demonstrations(self, n_episodes: int, seed: int) -> Demonstrations:

@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import argparse
 import multiprocessing
-import shutil
 import signal
 import sys
 import threading
@@ -41,7 +40,7 @@ from pathlib import Path
 
 import torch
 
-from ibc_tutorial.cli import UserError, check_output_dir
+from ibc_tutorial.cli import check_output_dir
 from ibc_tutorial.driving.collect import CollectConfig, collect
 from ibc_tutorial.driving.dataset import DemoDataset, DemoLog
 from ibc_tutorial.experiments.agents.ablations import ablation_preset
@@ -50,8 +49,8 @@ from ibc_tutorial.experiments.agents.evaluate import EVAL_SEED, HELDOUT_SEED, ep
 from ibc_tutorial.experiments.agents.figures import free_driving, landscapes
 from ibc_tutorial.experiments.agents.presets import Preset, differences, get_preset
 from ibc_tutorial.experiments.agents.results import (
-    DATA, FREE_DRIVING, LANDSCAPES, PROVENANCE, RESULTS, collect_results, expert_dir, finished_runs, invocations_of, now,
-    preset_results, read_json_dict, run_dir, run_name, write_json, write_provenance)
+    DATA, FREE_DRIVING, LANDSCAPES, PROVENANCE, RESULTS, begin_invocation, check_only_entries, collect_results, delete_entries, expert_dir, finished_runs,
+    now, preset_results, read_json_dict, run_dir, run_name, write_json, write_provenance)
 from ibc_tutorial.experiments.agents.train import inspect_run, train_agent
 from ibc_tutorial.kde import inverse_density_weights
 from ibc_tutorial.utils import check_device, check_int
@@ -121,12 +120,7 @@ def check_folder(out, preset: Preset) -> None:
 
 def clear_folder(out) -> None:
     """Delete a replication's entries (``ENTRIES``) from ``out``, nothing else: ``--force``."""
-    for name in ENTRIES:
-        p = Path(out) / name
-        if p.is_dir():
-            shutil.rmtree(p)
-        elif p.exists():
-            p.unlink()
+    delete_entries(out, ENTRIES)
 
 
 _WORKER_DATA: dict = {}
@@ -197,17 +191,12 @@ def replicate(preset: Preset, out, *, command: str = "", workers: int = 1, log=p
     device = str(check_device("device", device))  # a string: it goes to the worker processes
     out = Path(out)
     if force:
-        if out.is_dir() and any(p.name not in ENTRIES and not p.name.startswith(".") for p in out.iterdir()):
-            raise ValueError(f"{out} holds files that are not a replication's: --force deletes only a replication; "
-                             "use another --out")
+        check_only_entries(out, ENTRIES, "replication")
         clear_folder(out)
     check_folder(out, preset)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    prov_file = out / PROVENANCE
-    previous = read_json_dict(prov_file, "delete it and re-run") if prov_file.exists() else {}
-    started = previous.get("started") or now()
-    invocations = invocations_of(previous) + [{"started": now(), "last_seen": now(), "seconds": 0.0}]
+    started, invocations = begin_invocation(out)
     command = command or f"ibc-tutorial replicate --preset {preset.name} --out {out}"
     planned = [run_name(m, s) for s in preset.seeds for m in preset.methods]
     res_file = out / RESULTS
@@ -315,9 +304,8 @@ def run(args: argparse.Namespace) -> int:
     force = bool(getattr(args, "force", False))
     if not force:
         check_folder(out, preset)  # before any work (replicate checks again after --force's deletion)
-    elif out.is_dir() and any(p.name not in ENTRIES and not p.name.startswith(".") for p in out.iterdir()):
-        raise UserError(f"{out} holds files that are not a replication's: --force deletes only a replication; "
-                        "use another --out")
+    else:
+        check_only_entries(out, ENTRIES, "replication")
     if threads:
         torch.set_num_threads(threads)
     command = "ibc-tutorial " + " ".join(sys.argv[1:]) if sys.argv and "replicate" in sys.argv else ""

@@ -23,6 +23,7 @@ import io
 import json
 import os
 import platform
+import shutil
 import subprocess
 from datetime import datetime, timezone
 from pathlib import Path
@@ -223,25 +224,58 @@ def write_provenance(out, preset: Preset, started: str, invocations: list[dict],
     atomic_write_bytes(out / "PROVENANCE.md", ("\n".join(lines) + "\n").encode())
 
 
-# ---------------------------------------------------------------------- reading (the chapters)
-def load_results(out) -> dict:
-    """What the chapters read from a replication folder: ``results.json`` and ``provenance.json`` as
-    dicts, ``free_driving.npz`` and ``landscapes.npz`` as dicts of arrays (empty if absent).
-
-    ValueError naming the file if one is missing or damaged."""
+def check_only_entries(out, entries: tuple, what: str) -> None:
+    """Refuse (ValueError) ``out`` if it holds files other than ``entries`` (hidden ones aside): what ``--force``
+    may delete is a ``what``'s files (e.g. "replication"), never anything else."""
     out = Path(out)
-    if not (out / RESULTS).is_file():
-        raise ValueError(f"no {RESULTS} in {out}: run 'ibc-tutorial replicate --out {out}' first")
-    fix = f"delete it and re-run 'ibc-tutorial replicate' with the same --preset and --out {out} to make it again"
-    res = {"results": read_json_dict(out / RESULTS, fix),
+    if out.is_dir() and any(p.name not in entries and not p.name.startswith(".") for p in out.iterdir()):
+        raise ValueError(f"{out} holds files that are not a {what}'s: --force deletes only a {what}; use another --out")
+
+
+def delete_entries(out, entries: tuple) -> None:
+    """Delete ``entries`` (files or folders) from ``out``, nothing else (``--force``, after ``check_only_entries``)."""
+    for name in entries:
+        p = Path(out) / name
+        if p.is_dir():
+            shutil.rmtree(p)
+        elif p.exists():
+            p.unlink()
+
+
+def begin_invocation(out) -> tuple[str, list[dict]]:
+    """When a resumable run in ``out`` first started, and its invocations so far plus this one (from its
+    ``provenance.json``, if any): what ``write_provenance`` sums into the wall time."""
+    prov = Path(out) / PROVENANCE
+    previous = read_json_dict(prov, "delete it and re-run") if prov.exists() else {}
+    this = {"started": now(), "last_seen": now(), "seconds": 0.0}
+    return previous.get("started") or this["started"], invocations_of(previous) + [this]
+
+
+def read_folder(out, results: str, arrays: dict[str, str], command: str) -> dict:
+    """``results`` and ``provenance.json`` of a finished run's folder as dicts, and each ``.npz`` of ``arrays``
+    ({key: file name}) as a dict of arrays ({} if absent). ValueError naming a missing or damaged file and
+    ``command``, the command that makes it again."""
+    out = Path(out)
+    if not (out / results).is_file():
+        raise ValueError(f"no {results} in {out}: run '{command} --out {out}' first")
+    fix = f"delete it and re-run '{command}' with the same --preset and --out {out} to make it again"
+    res = {"results": read_json_dict(out / results, fix),
            "provenance": read_json_dict(out / PROVENANCE, fix) if (out / PROVENANCE).exists() else {}}
-    for key, name in (("free_driving", FREE_DRIVING), ("landscapes", LANDSCAPES)):
+    for key, name in arrays.items():
+        res[key] = {}
         if (out / name).exists():
             try:
                 with np.load(out / name, allow_pickle=False) as z:
                     res[key] = {k: z[k] for k in z.files}
             except Exception as exc:  # zip, zlib, format errors of a truncated or altered file
                 raise ValueError(f"{out / name} is truncated or damaged ({type(exc).__name__}): {fix}") from None
-        else:
-            res[key] = {}
     return res
+
+
+# ---------------------------------------------------------------------- reading (the chapters)
+def load_results(out) -> dict:
+    """What the chapters read from a replication folder: ``results.json`` and ``provenance.json`` as
+    dicts, ``free_driving.npz`` and ``landscapes.npz`` as dicts of arrays (empty if absent).
+
+    ValueError naming the file if one is missing or damaged."""
+    return read_folder(out, RESULTS, {"free_driving": FREE_DRIVING, "landscapes": LANDSCAPES}, "ibc-tutorial replicate")

@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import argparse
 import multiprocessing
-import shutil
 import sys
 import threading
 import time
@@ -35,10 +34,11 @@ import numpy as np
 import torch
 
 from ibc_tutorial import __version__
+from ibc_tutorial.cli import check_output_dir
 from ibc_tutorial.driving.dataset import DemoDataset, DemoLog
 from ibc_tutorial.experiments.agents.replicate import _init_worker
 from ibc_tutorial.experiments.agents.results import (
-    git_commit, invocations_of, machine, now, read_json_dict, write_json, write_npz)
+    begin_invocation, check_only_entries, delete_entries, git_commit, machine, now, read_folder, read_json_dict, write_json, write_npz)
 from ibc_tutorial.experiments.steering import evaluate as ev
 from ibc_tutorial.experiments.steering.models import LABELS, MODELS
 from ibc_tutorial.experiments.steering.presets import LAPTOP, PRESETS, SteeringPreset, differences, get_preset
@@ -77,15 +77,6 @@ PAPER = {
 }
 """The steering-EBM paper's Tables 1 (the three runs of each model; its means follow from them)
 and 2, as printed."""
-
-
-def _clear(out: Path) -> None:
-    for name in ENTRIES:
-        p = out / name
-        if p.is_dir():
-            shutil.rmtree(p)
-        elif p.exists():
-            p.unlink()
 
 
 def check_folder(out, preset: SteeringPreset) -> None:
@@ -228,16 +219,12 @@ def replicate(preset: SteeringPreset, out, *, command: str = "", workers: int = 
     """Run the whole study (module docstring) into ``out``; returns the contents of ``results.json``."""
     out = Path(out)
     if force and out.exists():
-        if out.is_dir() and any(p.name not in ENTRIES and not p.name.startswith(".") for p in out.iterdir()):
-            raise ValueError(f"{out} holds files that are not a study's: --force deletes only a study; "
-                             "use another --out")
-        _clear(out)
+        check_only_entries(out, ENTRIES, "study")
+        delete_entries(out, ENTRIES)
     check_folder(out, preset)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    previous = read_json_dict(out / PROVENANCE, "delete it and re-run") if (out / PROVENANCE).exists() else {}
-    started = previous.get("started") or now()
-    invocations = invocations_of(previous) + [{"started": now(), "last_seen": now(), "seconds": 0.0}]
+    started, invocations = begin_invocation(out)
     command = command or f"ibc-tutorial replicate-steering --preset {preset.name} --out {out}"
     planned = [f"{m}/seed{s}" for s in preset.seeds for m in MODELS]
     lock = threading.Lock()
@@ -335,17 +322,9 @@ def _work(out: Path, preset: SteeringPreset, results: dict, save, workers: int, 
 def load_results(out) -> dict:
     """What chapter 10 reads: ``results.json`` and ``provenance.json`` as dicts, ``traces.npz`` as a dict of
     arrays. ValueError naming the file if one is missing or damaged."""
-    out = Path(out)
-    if not (out / RESULTS).is_file():
-        raise ValueError(f"no {RESULTS} in {out}: run 'ibc-tutorial replicate-steering --out {out}' first")
-    fix = f"delete it and re-run 'ibc-tutorial replicate-steering' with the same --preset and --out {out}"
-    res = {"results": read_json_dict(out / RESULTS, fix),
-           "provenance": read_json_dict(out / PROVENANCE, fix) if (out / PROVENANCE).exists() else {}}
-    try:
-        with np.load(out / TRACES, allow_pickle=False) as z:
-            res["traces"] = {k: z[k] for k in z.files}
-    except Exception as exc:
-        raise ValueError(f"{out / TRACES} is missing or damaged ({type(exc).__name__}): {fix}") from None
+    res = read_folder(out, RESULTS, {"traces": TRACES}, "ibc-tutorial replicate-steering")
+    if not res["traces"]:
+        raise ValueError(f"{Path(out) / TRACES} is missing: delete {out} and re-run 'ibc-tutorial replicate-steering'")
     return res
 
 
@@ -364,8 +343,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """``ibc-tutorial replicate-steering``: check the inputs and the folder, then run the study."""
-    from ibc_tutorial.cli import UserError, check_output_dir
-
     preset = get_preset(args.preset)
     threads = check_int("--threads", args.threads, minimum=0)
     workers = check_int("--workers", args.workers, minimum=1)
@@ -374,8 +351,8 @@ def run(args: argparse.Namespace) -> int:
     force = bool(getattr(args, "force", False))
     if not force:
         check_folder(out, preset)
-    elif out.is_dir() and any(p.name not in ENTRIES and not p.name.startswith(".") for p in out.iterdir()):
-        raise UserError(f"{out} holds files that are not a study's: --force deletes only a study; use another --out")
+    else:
+        check_only_entries(out, ENTRIES, "study")
     if threads:
         torch.set_num_threads(threads)
     command = "ibc-tutorial " + " ".join(sys.argv[1:]) if sys.argv and "replicate-steering" in sys.argv else ""

@@ -33,7 +33,7 @@ import torch
 from ibc_tutorial.driving.collect import Recorder
 from ibc_tutorial.driving.dataset import DemoDataset, DemoLog, exit_counts
 from ibc_tutorial.driving.expert import Expert, ExpertConfig
-from ibc_tutorial.driving.routes import Route, random_start
+from ibc_tutorial.driving.routes import Route, random_route, uniform_exit
 from ibc_tutorial.driving.sim import DrivingSim
 from ibc_tutorial.driving.towns import Town, get_town
 from ibc_tutorial.utils import check_int, check_positive, check_probability
@@ -71,24 +71,14 @@ def demo_route(town: Town, rng: np.random.Generator, side_road_share: float, n_t
     ``side_road_share``, the other exit (the side road); at an approach without one (the stem of a
     T) left and right are equally likely. Corners take no choice."""
     p = check_probability("side_road_share", side_road_share)
-    check_int("n_turns", n_turns, minimum=0)
-    if start is None:
-        start = random_start(town, rng)
-    lane, turns = start[0], []
-    while len(turns) < n_turns:
-        ap = town.approach_of_lane.get(lane)
-        if ap is not None and town.approaches[ap].is_junction:
-            exits = sorted(town.approaches[ap].exits)
+
+    def keep_straight_mostly(exits: list[str], rng: np.random.Generator) -> str:
+        if "straight" in exits:
             side = [e for e in exits if e != "straight"]
-            if "straight" in exits:
-                turn = side[0] if rng.random() < p else "straight"
-            else:
-                turn = exits[int(rng.integers(len(exits)))]
-            turns.append(turn)
-            lane = town.next_lane(lane, turn)
-        else:
-            lane = town.next_lane(lane)
-    return Route(int(start[0]), float(start[1]), tuple(turns))
+            return side[0] if rng.random() < p else "straight"
+        return uniform_exit(exits, rng)  # the stem of a T: left or right
+
+    return random_route(town, rng, n_turns, start, choose=keep_straight_mostly)
 
 
 def collect_demonstrations(routes: int, minutes: float, side_road_share: float, *, speed: float = 6.0,
