@@ -52,7 +52,8 @@ def shared(tmp_path_factory):
     """A small demonstration file (about 100 samples) and a finished tiny bc run trained on it."""
     root = tmp_path_factory.mktemp("shared")
     data = root / "town01.npz"
-    collect(CollectConfig(routes=1, seed=0, min_minutes=0.15, max_minutes=0.2), show_progress=False).save(data)
+    collect(CollectConfig(routes=1, seed=0, min_minutes=0.15, max_minutes=0.2, brake_noise=TINY.brake_noise),
+            show_progress=False).save(data)
     run = root / "run"
     assert cli.main(["train", "--method", "bc", "--data", str(data), "--preset", "tiny", "--out", str(run)]) == 0
     return root, data, run

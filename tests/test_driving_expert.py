@@ -99,6 +99,39 @@ def test_same_seed_same_drive_and_noise_changes_only_execution():
     assert not sim.terminated and sim.infractions == 0
 
 
+def test_brake_noise_holds_brakes_and_the_labels_drive_on():
+    """Held brakes (``brake_noise``) replace only the executed acceleration, with a brake of the given strength, for
+    the configured number of steps; the labels stay the expert's, so at rest away from a red light they say "go"."""
+    sim = DrivingSim("town01")
+    route = random_route(sim.town, np.random.default_rng(0))
+    sim.reset(np.random.default_rng(5), route=route)
+    config = ExpertConfig(brake_noise=0.8, brake_prob=0.05, brake_steps=(10, 20))
+    expert = Expert(sim, config, seed=1)
+    labels, executed, speeds = [], [], []
+    for _ in range(600):
+        a = expert.act()
+        b = expert.perturb(a)
+        labels.append(a)
+        executed.append(b)
+        speeds.append(sim.car.speed)
+        sim.step(float(b[0]), float(b[1]))
+    labels, executed, speeds = np.array(labels), np.array(executed), np.array(speeds)
+    assert np.array_equal(labels[:, 0], executed[:, 0])  # steering untouched without steer_noise
+    held = labels[:, 1] != executed[:, 1]
+    assert held.mean() > 0.1
+    assert np.all((executed[held, 1] <= -0.4 + 1e-6) & (executed[held, 1] >= -0.8 - 1e-6))  # -0.8 x U(0.5, 1)
+    # each run of held steps lasts 10-20 steps (a run may be cut by the end of the drive or merge with the next)
+    edges = np.flatnonzero(np.diff(np.r_[0, held.astype(int), 0]))
+    lengths = edges[1::2] - edges[::2]
+    assert lengths[:-1].min() >= 10
+    # the point of it: states at rest with the expert's label "drive on"
+    assert ((speeds < 0.3) & (labels[:, 1] > 0.2)).sum() >= 5
+    with pytest.raises(ValueError, match="brake_noise"):
+        ExpertConfig(brake_noise=1.5)
+    with pytest.raises(ValueError, match="brake_steps"):
+        ExpertConfig(brake_steps=(5, 2))
+
+
 def test_expert_takes_over_after_another_driver():
     env = make_env("town02", bev_size=32)
     env.reset(seed=4)

@@ -12,7 +12,7 @@ import torch
 from ibc_tutorial import cli
 from ibc_tutorial.experiments.agents.ablations import ABLATION_SEEDS, ablation_preset
 from ibc_tutorial.experiments.agents.checkpoints import load_agent
-from ibc_tutorial.experiments.agents.presets import LAPTOP, METHODS, TINY, Preset
+from ibc_tutorial.experiments.agents.presets import LAPTOP, METHODS, TINY, Preset, differences
 from ibc_tutorial.experiments.agents.results import collect_results, load_results, machine, run_dir
 
 SHIPPED = Path(__file__).resolve().parents[1] / "book" / "results" / "laptop"
@@ -102,16 +102,25 @@ def test_the_shipped_results_are_a_clean_run_of_an_ancestor_commit():
     assert ancestor.returncode == 0, f"the shipped results' commit {commit} is not an ancestor of HEAD"
 
 
+@pytest.mark.parametrize("folder, variant", [("flag-lights", "no-brake-noise"), ("previous-preset", "previous-preset")])
+def test_the_shipped_ablation_folders_are_todays_variants_of_the_laptop_preset(folder, variant):
+    """Chapter 08 compares each shipped ablation folder with today's replication as the variant named here: the
+    folder's preset must be that variant of today's laptop preset in every setting (its name aside)."""
+    stored = json.loads((SHIPPED.parent / "ablations" / folder / "provenance.json").read_text())["preset"]
+    assert differences(Preset.from_dict(stored), ablation_preset(LAPTOP, variant)) == {}
+
+
 def test_an_ablation_is_a_smaller_replication_of_a_variant(tmp_path):
-    out = tmp_path / "flag"
-    assert cli.main(["replicate", "--preset", "tiny", "--ablation", "flag-lights", "--out", str(out)]) == 0
+    out = tmp_path / "intensity"
+    assert cli.main(["replicate", "--preset", "tiny", "--ablation", "intensity-lights", "--out", str(out)]) == 0
     res = json.loads((out / "results.json").read_text())
     preset = Preset.from_dict(res["preset"])
-    assert preset == ablation_preset(TINY, "flag-lights") and preset.light_encoding == "flag"
+    assert TINY.light_encoding == "flag"
+    assert preset == ablation_preset(TINY, "intensity-lights") and preset.light_encoding == "intensity"
     assert set(res["table"]) == {"bc", "da-ibc", "expert"} and not res["heldout"] and "free_driving" not in res
     assert len(res["final_per_seed"]["bc"]) == len(ABLATION_SEEDS)
     agent, ckpt = load_agent(run_dir(out, "da-ibc", 0) / "final.pt")
-    assert agent.preset.light_encoding == "flag"
+    assert agent.preset.light_encoding == "intensity"
     assert cli.main(["replicate", "--preset", "tiny", "--out", str(out)]) == 2  # the folder holds another preset
     with pytest.raises(ValueError, match="ablation"):
         ablation_preset(TINY, "no-such-thing")

@@ -124,6 +124,8 @@ def _collect_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--min-minutes", type=float, default=d.min_minutes, help="shortest route (default: %(default)s)")
     p.add_argument("--max-minutes", type=float, default=d.max_minutes, help="longest route (default: %(default)s)")
     p.add_argument("--steer-noise", type=float, default=d.steer_noise, help="steering perturbation size (default: %(default)s)")
+    p.add_argument("--brake-noise", type=float, default=d.brake_noise,
+                   help="braking perturbation strength in [0, 1] (default: %(default)s; the laptop preset's data: 1.0)")
 
 
 def _train_arguments(p: argparse.ArgumentParser) -> None:

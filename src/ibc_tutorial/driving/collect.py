@@ -4,8 +4,9 @@ Like the DA-IBC paper's dataset (its sec. 4.1): ten routes in town01, recorded a
 shortest 2.5 minutes and about 3.5 minutes on average, about 21,000 samples in all. A route
 here is a random start and a random list of junction choices (``routes.random_route``), and
 the durations are spread evenly between ``min_minutes`` and ``max_minutes``. Small steering
-perturbations (``steer_noise``) widen the states seen; the label is always the expert's own
-action. Routeless collection (random exits chosen on the way) is offered too.
+perturbations (``steer_noise``) and, optionally, held brakes (``brake_noise``) widen the states
+seen; the label is always the expert's own action (``driving.expert``). Routeless collection
+(random exits chosen on the way) is offered too.
 
     ibc-tutorial collect --town town01 --routes 10 --seed 0 --out data/town01.npz
 
@@ -49,6 +50,8 @@ class CollectConfig:
     """True: no fixed route, the expert picks a random exit at each junction on the way."""
     steer_noise: float = 0.3
     """Size of the expert's steering perturbations during collection (0 = none)."""
+    brake_noise: float = 0.0
+    """Strength of the expert's braking perturbations during collection, in [0, 1] (0 = none; ``ExpertConfig``)."""
 
     def __post_init__(self):
         check_choice("town", self.town, TOWNS)
@@ -59,6 +62,8 @@ class CollectConfig:
         if self.max_minutes < self.min_minutes:
             raise ValueError(f"max_minutes must be >= min_minutes, got {self.max_minutes} < {self.min_minutes}")
         check_positive("steer_noise", self.steer_noise, allow_zero=True)
+        if not 0.0 <= self.brake_noise <= 1.0:
+            raise ValueError(f"brake_noise must be in [0, 1], got {self.brake_noise!r}")
 
 
 class Recorder:
@@ -96,7 +101,7 @@ def collect(config: CollectConfig = CollectConfig(), show_progress: bool | None 
     """Drive the expert over ``config.routes`` episodes and return the log."""
     c = config
     sim = DrivingSim(c.town)
-    expert = Expert(sim, ExpertConfig(steer_noise=c.steer_noise), seed=c.seed)
+    expert = Expert(sim, ExpertConfig(steer_noise=c.steer_noise, brake_noise=c.brake_noise), seed=c.seed)
     rng = np.random.default_rng(c.seed)
     # durations spread evenly over [min, max] (stratified: one draw per 1/routes of the range, shuffled),
     # so the total stays close to routes x the mean duration: 600 steps per minute at 10 Hz
@@ -138,7 +143,7 @@ def run(args: argparse.Namespace) -> int:
 
     Errors are raised (``ValueError``, ``cli.UserError``) for ``cli.main`` to print on one line."""
     config = CollectConfig(args.town, args.routes, args.seed, args.min_minutes, args.max_minutes,
-                           args.routeless, args.steer_noise)
+                           args.routeless, args.steer_noise, args.brake_noise)
     check_output_file("--out", args.out, force=getattr(args, "force", False))
     t0 = time.perf_counter()
     log = collect(config)

@@ -18,8 +18,19 @@ point trajectory and a PID controller"):
   brake), and holding full brake there; a yellow light that it can no longer stop for (it would need more than full
   braking) is passed. Red lights are never passed.
 
-The action is [steer, throttle - brake] in [-1, 1]^2. Optional steering noise (short
-perturbations, for data collection) changes what is *executed*, not the expert's label.
+The action is [steer, throttle - brake] in [-1, 1]^2. Optional perturbations for data
+collection (DART-style, [Laskey et al. 2017]) change what is *executed*, not the expert's label:
+
+* steering noise (``steer_noise``): a short constant offset of the steering, so that the data
+  hold states off the lane's centre line, each labelled with the expert's correction;
+* braking noise (``brake_noise``): the acceleration held at a brake for 1-3 s, at random moments
+  (``brake_prob`` per step) and, with chance ``hesitate_prob``, at the moment the expert leaves
+  from rest (the light has turned green). The car then slows or stops where the expert would
+  have driven on, or waits on at a green light, and the data hold states "slow or at rest, the
+  light green", each labelled with the expert's "drive on". Without them nearly every state at
+  rest in the data is a wait at a red light, the label "brake"; only the first second after the
+  change says "go", and a policy at rest before a green light has almost no example of leaving:
+  chapter 08 measures this.
 
 Changes from LBC's starting values (``docs/design.md``), found by driving town02 (largest distance
 from the lane's centre line over 4 x 150 s: 1.8 m with LBC's settings, 0.5 m with these):
@@ -79,11 +90,27 @@ class ExpertConfig:
     """Chance per step that a perturbation starts."""
     noise_steps: tuple[int, int] = (5, 15)
     """Range of a perturbation's length in steps."""
+    brake_noise: float = 0.0
+    """Strength of braking perturbations during collection, in [0, 1] (0 = none): the executed acceleration is held
+    at -brake_noise x U(0.5, 1) for ``brake_steps`` steps."""
+    brake_prob: float = 0.01
+    """Chance per step that a braking perturbation starts (when none is running)."""
+    brake_steps: tuple[int, int] = (10, 30)
+    """Range of a braking perturbation's length in steps (1-3 s at 10 Hz)."""
+    hesitate_prob: float = 1.0
+    """Chance that a braking perturbation starts when the expert leaves from rest (with ``brake_noise`` > 0)."""
 
     def __post_init__(self):
         for name in ("lookahead_m", "turn_lookahead_m", "cruise_speed", "turn_speed", "stop_distance_m"):
             check_positive(f"ExpertConfig.{name}", getattr(self, name))
         check_positive("ExpertConfig.steer_noise", self.steer_noise, allow_zero=True)
+        if not 0.0 <= self.brake_noise <= 1.0:
+            raise ValueError(f"ExpertConfig.brake_noise must be in [0, 1], got {self.brake_noise!r}")
+        for name in ("brake_prob", "hesitate_prob"):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise ValueError(f"ExpertConfig.{name} must be in [0, 1], got {getattr(self, name)!r}")
+        if len(self.brake_steps) != 2 or not 1 <= self.brake_steps[0] <= self.brake_steps[1]:
+            raise ValueError(f"ExpertConfig.brake_steps must be (low, high) with 1 <= low <= high, got {self.brake_steps!r}")
 
 
 class PID:
@@ -165,6 +192,9 @@ class Expert:
         self._passed = 0
         self._noise_left = 0
         self._noise_value = 0.0
+        self._brake_left = 0
+        self._brake_value = 0.0
+        self._last_label_acc = 0.0
         self._braking = False
         self.last: dict = {}
 
@@ -198,6 +228,7 @@ class Expert:
         self.steer_pid.reset()
         self.speed_pid.reset()
         self._noise_left = 0
+        self._brake_left = 0
         self._braking = False
         self._extend()
 
@@ -316,16 +347,26 @@ class Expert:
 
     # ------------------------------------------------------------------ noise
     def perturb(self, action: np.ndarray) -> np.ndarray:
-        """The action actually executed during collection: ``action`` plus a steering perturbation."""
+        """The action actually executed during collection: ``action`` with a steering offset and a held brake, when
+        one of those perturbations is running (see the module's doc). Each draws from the expert's generator only
+        when its size is above 0, so a collection without it is the same as before it existed."""
         c = self.config
-        if c.steer_noise <= 0:
-            return action
-        if self._noise_left <= 0 and self.rng.random() < c.noise_prob:
-            self._noise_left = int(self.rng.integers(c.noise_steps[0], c.noise_steps[1] + 1))
-            self._noise_value = float(self.rng.choice([-1.0, 1.0]) * self.rng.uniform(0.5, 1.0) * c.steer_noise)
         out = np.array(action, dtype=np.float32)
-        if self._noise_left > 0:
-            self._noise_left -= 1
-            out[0] = np.float32(min(max(out[0] + self._noise_value, -1.0), 1.0))
+        if c.steer_noise > 0:
+            if self._noise_left <= 0 and self.rng.random() < c.noise_prob:
+                self._noise_left = int(self.rng.integers(c.noise_steps[0], c.noise_steps[1] + 1))
+                self._noise_value = float(self.rng.choice([-1.0, 1.0]) * self.rng.uniform(0.5, 1.0) * c.steer_noise)
+            if self._noise_left > 0:
+                self._noise_left -= 1
+                out[0] = np.float32(min(max(out[0] + self._noise_value, -1.0), 1.0))
+        if c.brake_noise > 0:
+            leaving = self.sim.car.speed < 0.1 and action[1] > 0 >= self._last_label_acc  # leaving from rest
+            self._last_label_acc = float(action[1])
+            if self._brake_left <= 0 and self.rng.random() < (c.hesitate_prob if leaving else c.brake_prob):
+                self._brake_left = int(self.rng.integers(c.brake_steps[0], c.brake_steps[1] + 1))
+                self._brake_value = -float(self.rng.uniform(0.5, 1.0) * c.brake_noise)
+            if self._brake_left > 0:
+                self._brake_left -= 1
+                out[1] = np.float32(self._brake_value)
         return out
 

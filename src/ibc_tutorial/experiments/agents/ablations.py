@@ -1,6 +1,6 @@
 """Ablations of the laptop replication: which of its departures from the paper decide how the agents drive.
 
-    ibc-tutorial replicate --preset laptop --ablation flag-lights --out book/results/ablations/flag-lights
+    ibc-tutorial replicate --preset laptop --ablation no-brake-noise --out book/results/ablations/no-brake-noise
 
 An ablation is a replication of a variant of a preset (``ablation_preset``): one setting changed
 back (or away), with BC and DA-IBC only, three seeds, the table's final evaluation and nothing
@@ -8,15 +8,21 @@ else (no held-out starts, no free driving). Its runs use the same seeds, data an
 starts as the replication it varies, so chapter 08 compares each variant with the replication's
 own agents of those seeds, method by method.
 
-The variants (``ABLATIONS``):
+The variants of the laptop preset (``ABLATIONS``):
 
-- ``flag-lights``: the light channels as one "must stop" bit (red and yellow drawn at 1, green not
-  drawn), the encoding the book used before it drew each state by intensity (``driving.bev``);
-- ``constant-lr``: the training of the previous laptop preset, 6 epochs at a constant step size,
-  instead of 8 epochs of cosine decay;
-- ``previous-preset``: both at once, i.e. the previous laptop preset (one-bit lights, 6 epochs at a
-  constant step size); against ``flag-lights`` it measures the training schedule alone on the
-  one-bit lights.
+- ``no-brake-noise``: demonstrations collected without the expert's held brakes
+  (``driving.expert``), as the paper's;
+- ``intensity-lights``: the light channels drawn by state (red 1.0, yellow 0.6, green 0.3,
+  ``driving.bev``) instead of one "must stop" bit;
+- ``constant-lr``: 6 epochs at a constant step size instead of 8 epochs of cosine decay;
+- ``previous-preset``: the laptop preset of the book's previous edition, i.e. no held brakes and 6
+  epochs at a constant step size (one-bit lights, as now); against ``no-brake-noise`` it measures
+  the training schedule alone.
+
+The book's ablation folders were made as the laptop preset changed, each at its own commit
+(``PROVENANCE.md`` in each): ``flag-lights`` when the preset drew lights by intensity and had no held
+brakes, so that it is today's ``no-brake-noise`` variant (chapter 08 checks that the two presets
+are equal), and ``intensity-lights`` is the replication of that time.
 """
 
 from __future__ import annotations
@@ -27,12 +33,14 @@ from ibc_tutorial.experiments.agents.presets import Preset
 from ibc_tutorial.utils import check_choice
 
 ABLATIONS = {
-    "flag-lights": ("the lights as one 'must stop' bit (red and yellow drawn, green not)",
-                    {"light_encoding": "flag"}),
+    "no-brake-noise": ("demonstrations without the expert's held brakes (as the paper's)",
+                       {"brake_noise": 0.0}),
+    "intensity-lights": ("the lights drawn by state (red 1.0, yellow 0.6, green 0.3), not as one 'must stop' bit",
+                         {"light_encoding": "intensity"}),
     "constant-lr": ("6 epochs at a constant step size (the previous laptop training)",
                     {"epochs": 6, "lr_schedule": "constant"}),
-    "previous-preset": ("the previous laptop preset: one-bit lights and 6 epochs at a constant step size",
-                        {"light_encoding": "flag", "epochs": 6, "lr_schedule": "constant"}),
+    "previous-preset": ("the previous edition's laptop preset: no held brakes, 6 epochs at a constant step size",
+                        {"brake_noise": 0.0, "epochs": 6, "lr_schedule": "constant"}),
 }
 """Each variant: (what it changes, in words; the preset fields it changes)."""
 

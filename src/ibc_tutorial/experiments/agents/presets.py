@@ -57,6 +57,8 @@ class Preset:
     """Shortest route in minutes (the paper: 2.5)."""
     max_minutes: float = 4.5
     """Longest route in minutes (mean 3.5, the paper's)."""
+    brake_noise: float = 0.0
+    """Strength of the expert's braking perturbations while collecting, in [0, 1] (the paper: none; ``driving.expert``)."""
     # ---- network (the paper's Fig. 2)
     bev_size: int = 192
     """Side of the bird's-eye view in pixels (the paper: 192)."""
@@ -129,6 +131,8 @@ class Preset:
         check_choice("light_encoding", self.light_encoding, LIGHT_ENCODINGS)
         if not self.methods or any(m not in METHODS for m in self.methods) or len(set(self.methods)) < len(self.methods):
             raise ValueError(f"methods must name distinct methods of {METHODS}, got {self.methods!r}")
+        if not 0.0 <= self.brake_noise <= 1.0:
+            raise ValueError(f"brake_noise must be in [0, 1], got {self.brake_noise!r}")
         for f in ("lr", "kde_bandwidth", "min_minutes", "max_minutes"):
             check_positive(f, getattr(self, f))
         check_choice("lr_schedule", self.lr_schedule, LR_SCHEDULES)
@@ -159,7 +163,9 @@ PAPER = Preset(name="paper")
 
 LAPTOP = Preset(
     name="laptop",
+    brake_noise=1.0,  # held brakes while collecting, so that the data show the car leaving from rest (chapter 08)
     bev_size=64,  # 9x fewer pixels than 192; the same 5 channels and field of view (OR-pooled)
+    light_encoding="flag",  # one "must stop" bit: the agents drive better with it (chapter 08's ablation)
     cnn_channels=(16, 32, 32, 64),  # a small CNN: 64 -> 4 x 4 x 64 after four stride-2 convolutions
     embed_dim=256,  # as the paper: 256-d BEV and 256-d state embeddings
     head_hidden=128,  # the energy head runs N_neg times per sample and N_samples times per decision
@@ -188,7 +194,9 @@ TINY = Preset(
     routes=1,
     min_minutes=0.15,
     max_minutes=0.2,
+    brake_noise=1.0,  # the laptop preset's data and lights, in miniature
     bev_size=32,
+    light_encoding="flag",
     cnn_channels=(4, 8),
     embed_dim=16,
     head_hidden=16,

@@ -69,7 +69,8 @@ def _init_worker(threads: int) -> None:
 
 
 def _collect_config(preset: Preset) -> CollectConfig:
-    return CollectConfig("town01", preset.routes, preset.collect_seed, preset.min_minutes, preset.max_minutes)
+    return CollectConfig("town01", preset.routes, preset.collect_seed, preset.min_minutes, preset.max_minutes,
+                         brake_noise=preset.brake_noise)
 
 
 def _same_preset(stored, preset: Preset) -> bool:
@@ -108,8 +109,10 @@ def check_folder(out, preset: Preset) -> None:
     if data.exists():
         log = DemoLog.load(data)
         config = log.meta.get("config")
-        if not isinstance(config, dict) or any(config.get(k) != v for k, v in asdict(_collect_config(preset)).items()
-                                               if k in ("town", "routes", "seed", "min_minutes", "max_minutes")):
+        if not isinstance(config, dict) or any(config.get(k, 0.0 if k == "brake_noise" else None) != v
+                                               for k, v in asdict(_collect_config(preset)).items()
+                                               if k in ("town", "routes", "seed", "min_minutes", "max_minutes",
+                                                        "brake_noise")):
             raise ValueError(f"{data} was collected with other settings than preset {preset.name!r}'s: use another "
                              "--out, or --force to start over")
         checksum = log.checksum()
