@@ -74,9 +74,15 @@ def test_evaluate_defaults_are_the_replication_protocol(replicated, tmp_path):
         assert ev["episodes"] == json.loads((d / "final_eval.json").read_text())["episodes"]
 
 
-def test_machine_description():
+def test_machine_description(monkeypatch):
     m = machine()
     assert m["nproc"] >= 1 and m["torch_threads"] >= 1
+    assert m["cpu_capability"] == torch.backends.cpu.get_cpu_capability()
+    for k in ("ATEN_CPU_CAPABILITY", "MKL_ENABLE_INSTRUCTIONS", "ONEDNN_MAX_CPU_ISA", "OMP_NUM_THREADS"):
+        monkeypatch.delenv(k, raising=False)
+    assert machine()["cpu_environment"] == {}
+    monkeypatch.setenv("ATEN_CPU_CAPABILITY", "default")  # what an emulated older CPU's run records
+    assert machine()["cpu_environment"] == {"ATEN_CPU_CAPABILITY": "default"}
 
 
 def test_the_shipped_results_load():

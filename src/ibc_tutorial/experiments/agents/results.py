@@ -57,8 +57,14 @@ def now() -> str:
     return datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
 
 
+CPU_ENVIRONMENT = ("ATEN_CPU_CAPABILITY", "MKL_ENABLE_INSTRUCTIONS", "ONEDNN_MAX_CPU_ISA", "OMP_NUM_THREADS")
+"""Environment variables that change which CPU instructions (and threads) torch's arithmetic uses: a run made with
+them set (an emulated older CPU, CONTRIBUTING.md) records them."""
+
+
 def machine() -> dict:
-    """CPU count and model, OS, Python and torch versions, torch's threads."""
+    """CPU count and model, OS, Python and torch versions, torch's threads, the instruction set torch's kernels use
+    (``torch.backends.cpu.get_cpu_capability()``) and the ``CPU_ENVIRONMENT`` variables that are set."""
     model = platform.processor() or ""
     try:
         for line in Path("/proc/cpuinfo").read_text().splitlines():
@@ -68,7 +74,9 @@ def machine() -> dict:
     except OSError:
         pass
     return {"nproc": os.cpu_count(), "cpu": model, "os": platform.platform(), "python": platform.python_version(),
-            "torch": torch.__version__, "torch_threads": torch.get_num_threads()}
+            "torch": torch.__version__, "torch_threads": torch.get_num_threads(),
+            "cpu_capability": torch.backends.cpu.get_cpu_capability(),
+            "cpu_environment": {k: os.environ[k] for k in CPU_ENVIRONMENT if k in os.environ}}
 
 
 def git_commit() -> str:
@@ -214,7 +222,9 @@ def write_provenance(out, preset: Preset, started: str, invocations: list[dict],
         f"- started: {started}; {'finished: ' + prov['finished'] if complete else 'NOT FINISHED (last update ' + prov['updated'] + ')'}",
         f"- wall time: {wall_s / 60:.1f} min over {len(invocations)} invocation(s)",
         f"- machine: {m['nproc']} CPUs ({m['cpu']}), {m['os']}, Python {m['python']}, torch {m['torch']} "
-        f"with {m['torch_threads']} thread(s)",
+        f"with {m['torch_threads']} thread(s)"
+        + (f", kernels for {m['cpu_capability']}" if m.get("cpu_capability") else "")
+        + ("".join(f", {k}={v}" for k, v in m.get("cpu_environment", {}).items())),
         f"- runs finished: {len(done)} of {len(planned)}" + ("" if complete else f" (missing: {sorted(set(planned) - set(done))})"),
         "", "Differences of this preset from the paper's settings (field: paper -> this preset):", "",
     ]
