@@ -37,6 +37,43 @@ def test_round_trip(saved):
     assert torch.allclose(agent.network.energy(obs, actions[:5]), net.energy(obs, actions[:5]))
 
 
+def test_a_network_on_a_gpu_is_stored_as_cpu_copies(monkeypatch):
+    """A GPU simulated with torch's fake tensors (a device, no data): the stored tensors are CPU copies
+    and the caller's tensors stay where they were."""
+    fake_tensor = pytest.importorskip("torch._subclasses.fake_tensor")
+    import ibc_tutorial.experiments.agents.checkpoints as checkpoints
+
+    stored = {}
+    monkeypatch.setattr(checkpoints, "atomic_torch_save", lambda obj, path: stored.update(obj))
+    cpu_net = build_network("da-ibc", TINY)
+    save_checkpoint("unused.pt", method="da-ibc", preset=TINY, network=cpu_net, data_sha256="ab" * 32, epoch=1,
+                    expert_actions=torch.zeros(30, 2))
+    assert all(stored["model"][k].data_ptr() != v.data_ptr() for k, v in cpu_net.state_dict().items())  # on the CPU too
+    shapes = {k: (v.shape, v.dtype) for k, v in cpu_net.state_dict().items()}
+
+    class OnGPU(torch.nn.Module):
+        def __init__(self, state):
+            super().__init__()
+            self.state = state
+
+        def state_dict(self):
+            return self.state
+
+    with fake_tensor.FakeTensorMode():
+        net = OnGPU({k: torch.zeros(shape, dtype=dtype, device="cuda") for k, (shape, dtype) in shapes.items()})
+        actions, weights = torch.zeros(30, 2, device="cuda"), torch.ones(30, device="cuda")
+        for half in (False, True):
+            save_checkpoint("unused.pt", method="da-ibc", preset=TINY, network=net, data_sha256="ab" * 32, epoch=1,
+                            expert_actions=actions, init_weights=weights, half=half)
+            model = stored["model"]
+            assert set(model) == set(shapes) and all(v.device.type == "cpu" for v in model.values())
+            assert all(v.dtype == (torch.float16 if half and shapes[k][1].is_floating_point else shapes[k][1])
+                       for k, v in model.items())
+            assert stored["expert_actions"].device.type == "cpu" and stored["init_weights"].device.type == "cpu"
+        assert all(v.device.type == "cuda" for v in net.state_dict().values())  # copied, not moved
+        assert actions.device.type == "cuda" and weights.device.type == "cuda"
+
+
 def _rewrite(path, **changes):
     ckpt = torch.load(path, weights_only=True)
     ckpt.update(changes)

@@ -91,6 +91,18 @@ def test_bad_town_and_bad_route_are_refused():
         Route(start_lane, 0.0, ("straight",)).lanes(town)
 
 
+def test_a_bad_chooser_is_refused_naming_choose():
+    town = get_town("town01")
+    rng = np.random.default_rng(0)
+    before = rng.bit_generator.state
+    for bad in ("left", None, 3):  # not callable: refused up front, before the start is drawn
+        with pytest.raises(ValueError, match="choose must be a callable"):
+            random_route(town, rng, n_turns=3, choose=bad)
+    assert rng.bit_generator.state == before
+    with pytest.raises(ValueError, match=r"choose must return one of the exits it is given, \[.*\], got 'up'"):
+        random_route(town, rng, n_turns=3, choose=lambda exits, r: "up")
+
+
 def test_localize_finds_the_lane():
     town = get_town("town01")
     lane = town.lanes[5]

@@ -53,6 +53,24 @@ def test_grid_cross_entropy_matches_torch_with_probability_targets():
     torch.testing.assert_close(grid_cross_entropy(e, t), F.cross_entropy(-e, t))
 
 
+def test_grid_cross_entropy_checks_on_its_inputs_device():
+    """The targets check builds its constant on the targets' device, not torch's default one: with the default
+    device set to another one (meta), a CPU call gives the same number and the same refusals."""
+    g = torch.Generator().manual_seed(0)
+    e = torch.randn(4, 6, generator=g)
+    t = torch.softmax(torch.randn(4, 6, generator=g), 1)
+    want = grid_cross_entropy(e, t)
+    bad = e.clone()
+    bad[1, 2] = float("inf")
+    with torch.device("meta"):
+        got = grid_cross_entropy(e, t)
+        with pytest.raises(ValueError, match="targets must be non-negative with rows summing to 1"):
+            grid_cross_entropy(e, 2 * t)
+        with pytest.raises(ValueError, match="energies must be finite"):
+            grid_cross_entropy(bad, t)
+    assert got.device.type == "cpu" and torch.equal(got, want)
+
+
 def test_one_hot_grid_cross_entropy_is_info_nce_with_the_grid_as_counter_examples():
     g = torch.Generator().manual_seed(1)
     e = torch.randn(5, 9, generator=g)

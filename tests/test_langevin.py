@@ -3,7 +3,9 @@
 import pytest
 import torch
 
+import ibc_tutorial.optimizers.langevin
 from ibc_tutorial.optimizers import ActionOptimizer
+from ibc_tutorial.optimizers.common import bounds
 from ibc_tutorial.optimizers.langevin import LangevinConfig, LangevinOptimizer, langevin, langevin_trace, polynomial_schedule
 
 
@@ -126,3 +128,19 @@ def test_one_ula_step_is_the_textbook_update():
     _ = torch.rand(1, 64, 1, generator=g2)  # the uniform initialisation
     noise = torch.randn(1, 64, 1, generator=g2)[0]
     torch.testing.assert_close(y1, (y0 - 0.05 * 0.5 * 2 * (y0 - c) - 0.05**0.5 * noise).clamp(-1, 1))
+
+
+def test_the_noise_comes_from_the_generator_and_goes_to_the_actions_device(monkeypatch):
+    """The noise is drawn on the generator's device (the CPU) and moved to the chains' device, as DFO's is:
+    "another device" simulated with torch's meta device (shapes, no values, so the finiteness check of the
+    energies is switched off); the CPU run is unchanged (``test_one_step_is_the_reference_update``)."""
+    monkeypatch.setattr(ibc_tutorial.optimizers.langevin, "energies", lambda energy_fn, y: energy_fn(y))
+    energy = lambda y: 20 * ((y - 0.3) ** 2).sum(-1)  # (B, N, D) -> (B, N)
+    c = LangevinConfig(n_samples=16, n_iters=4)
+    lo, hi = bounds(c.low, c.high, 2)  # on the CPU, as ``langevin`` makes them
+    y = torch.rand(3, 16, 2, generator=torch.Generator().manual_seed(0)) * 2 - 1  # (B, N, D)
+    g_cpu, g_meta = torch.Generator().manual_seed(4), torch.Generator().manual_seed(4)
+    on_cpu, _ = ibc_tutorial.optimizers.langevin._langevin_core(energy, y, c, lo, hi, g_cpu, record=False)
+    on_meta, _ = ibc_tutorial.optimizers.langevin._langevin_core(energy, y.to("meta"), c, lo, hi, g_meta, record=False)
+    assert on_cpu.device.type == "cpu" and on_meta.device.type == "meta" and on_meta.shape == on_cpu.shape == (3, 2)
+    assert torch.equal(g_cpu.get_state(), g_meta.get_state())  # the same draws, from the CPU generator

@@ -225,3 +225,9 @@ def test_agents_figures():
     assert_labelled(fig)
     with pytest.raises(ValueError):
         agents.plot_exit_counts({})
+    fig = agents.plot_labels_at_rest({"no held brakes": np.array([-1.0, -1.0, -1.0, 1.0]), "held brakes": [0.9, -1.0]})
+    assert "25% say go" in fig.axes[0].get_title() and "50% say go" in fig.axes[1].get_title()
+    assert sum(p.get_height() for p in fig.axes[0].patches) == pytest.approx(1.0)  # shares of the states at rest
+    assert_labelled(fig)
+    with pytest.raises(ValueError):
+        agents.plot_labels_at_rest({})

@@ -6,6 +6,7 @@ import subprocess
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
 
@@ -130,3 +131,37 @@ def test_an_ablation_is_a_smaller_replication_of_a_variant(tmp_path):
     assert cli.main(["replicate", "--preset", "tiny", "--out", str(out)]) == 2  # the folder holds another preset
     with pytest.raises(ValueError, match="ablation"):
         ablation_preset(TINY, "no-such-thing")
+
+
+def _folder_of_episodes(root: Path, method: str, per_seed: dict[int, list[tuple[float, int]]], starts=(1000, 1001)):
+    """A replication folder holding only final evaluations: per seed, (distance, red lights) per episode."""
+    for seed, eps in per_seed.items():
+        d = run_dir(root, method, seed)
+        d.mkdir(parents=True)
+        rows = [{"seed": s, "steps": 3000, "distance_m": dist, "red_light_infractions": reds,
+                 "score": dist * 0.7 ** reds, "termination": None} for s, (dist, reds) in zip(starts, eps)]
+        (d / "final_eval.json").write_text(json.dumps({"summary": {}, "episodes": rows}))
+    return root
+
+
+def test_compare_folders_reads_shared_seeds_and_counts_standstills(tmp_path):
+    from ibc_tutorial.experiments.agents.ablations import STILL_M, compare_folders
+
+    var = _folder_of_episodes(tmp_path / "var", "bc", {0: [(500, 0), (600, 1)], 1: [(400, 0), (5, 0)]})
+    ref = _folder_of_episodes(tmp_path / "ref", "bc", {0: [(100, 0), (2, 0)], 1: [(3, 0), (200, 2)],
+                                                       7: [(900, 0), (900, 0)]})  # seed 7: not shared
+    (row,) = compare_folders(var, ref, methods=("bc",))
+    assert row.seeds == (0, 1)
+    v_scores = [500, 600 * 0.7, 400, 5]
+    r_scores = [100, 2, 3, 200 * 0.49]
+    assert row.score == pytest.approx((np.mean(v_scores), np.mean(r_scores)))
+    assert row.red_lights == pytest.approx((0.25, 0.5))
+    assert row.standing_still == (1, 2) and STILL_M == 10.0
+    assert row.difference.estimate == pytest.approx(np.mean(v_scores) - np.mean(r_scores))
+    assert row.difference.low <= row.difference.estimate <= row.difference.high
+    other = _folder_of_episodes(tmp_path / "other", "bc", {0: [(1, 0), (1, 0)]}, starts=(5, 6))
+    with pytest.raises(ValueError, match="other starts"):
+        compare_folders(var, other, methods=("bc",))
+    lone = _folder_of_episodes(tmp_path / "lone", "bc", {3: [(1, 0), (1, 0)]})
+    with pytest.raises(ValueError, match="share no seed"):
+        compare_folders(var, lone, methods=("bc",))

@@ -258,7 +258,8 @@ def grid_cross_entropy(energies: torch.Tensor, targets: torch.Tensor) -> torch.T
     averaged over the batch. ``energies`` holds e_k = E(o, a_k) for the K = n + 1 candidates
     (n grid actions and the ground truth); ``targets`` is the one-hot vector of the ground truth
     (then this equals ``info_nce`` with the grid as counter-examples) or soft targets
-    (``soft_targets``, eq. 5).
+    (``soft_targets``, eq. 5). The checks build their constants on ``targets``' device
+    (``ones_like``), so inputs on any device are checked there.
 
     Args:
         energies: (B, K) energies of the candidates.
@@ -269,7 +270,8 @@ def grid_cross_entropy(energies: torch.Tensor, targets: torch.Tensor) -> torch.T
     if energies.shape[1] < 1:
         raise ValueError(f"energies must hold at least one candidate per sample (K >= 1), got shape {tuple(energies.shape)}")
     check_tensor("targets", targets, shape=tuple(energies.shape))
-    if (targets < 0).any() or not torch.allclose(targets.sum(dim=1), torch.ones(len(targets), dtype=targets.dtype), atol=1e-4):
+    sums = targets.sum(dim=1)  # (B,)
+    if (targets < 0).any() or not torch.allclose(sums, torch.ones_like(sums), atol=1e-4):
         raise ValueError("targets must be non-negative with rows summing to 1")
     log_p = torch.log_softmax(-energies, dim=1)  # (B, K)
     return -(targets * log_p).sum(dim=1).mean()

@@ -68,8 +68,12 @@ def random_route(town: Town, rng: np.random.Generator, n_turns: int = 64, start:
     """A route with ``n_turns`` legal turns from a random start (or ``start`` = (lane, s)).
 
     At each junction approach met, ``choose(exits, rng)`` picks the turn among the sorted legal exits
-    (``uniform_exit``: each equally likely; chapter 10's demonstrations keep straight past side roads)."""
+    (``uniform_exit``: each equally likely; chapter 10's demonstrations keep straight past side roads).
+    A ``choose`` that is not callable is refused before anything is drawn, one that returns no legal
+    exit when called; both with a ValueError naming ``choose``."""
     check_int("n_turns", n_turns, minimum=0)
+    if not callable(choose):
+        raise ValueError(f"choose must be a callable choose(exits, rng) -> one of the exits, got {choose!r}")
     if start is None:
         start = random_start(town, rng)
     lane = start[0]
@@ -77,7 +81,10 @@ def random_route(town: Town, rng: np.random.Generator, n_turns: int = 64, start:
     while len(turns) < n_turns:
         ap = town.approach_of_lane.get(lane)
         if ap is not None and town.approaches[ap].is_junction:
-            turn = choose(sorted(town.approaches[ap].exits), rng)
+            exits = sorted(town.approaches[ap].exits)
+            turn = choose(exits, rng)
+            if turn not in exits:
+                raise ValueError(f"choose must return one of the exits it is given, {exits}, got {turn!r}")
             turns.append(turn)
             lane = town.next_lane(lane, turn)
         else:

@@ -30,7 +30,7 @@ from ibc_tutorial.optimizers.common import (
     SELECTIONS, check_box, check_call, energies, select_action, single_observation,
 )
 from ibc_tutorial.optimizers.dfo import INITS, initial_samples, initial_weights
-from ibc_tutorial.utils import check_choice, check_int, check_positive
+from ibc_tutorial.utils import check_choice, check_int, check_positive, draw_device
 
 NOISES = ("ibc", "ula")
 """The noise of a step: "ibc" ε_k · n (the IBC reference) or "ula" √ε_k · n (unadjusted Langevin)."""
@@ -119,8 +119,12 @@ def polynomial_schedule(step: int, n_steps: int, init: float = 1e-1, final: floa
 
 
 def _langevin_core(energy_fn, y: torch.Tensor, config: LangevinConfig, lo, hi, generator, record: bool):
-    """Langevin MCMC of the IBC reference for B observations: y (B, N, D) -> (ŷ (B, D), records)."""
+    """Langevin MCMC of the IBC reference for B observations: y (B, N, D) -> (ŷ (B, D), records).
+
+    The noise is drawn with ``generator`` on its own device (``utils.draw_device``) and moved to y's, as
+    DFO's is: a run on a GPU draws the same numbers from the same seeded CPU generator as on the CPU."""
     c = config
+    lo, hi, where = lo.to(y.device), hi.to(y.device), draw_device(generator)  # bounds (D,) on y's device
     max_delta = c.delta_clip * 0.5 * (hi - lo)  # (D,) the reference scales the clip as if actions were in [-1, 1]
     rec = {"samples": [y.detach().clone()], "steps": []} if record else None
     for k in range(c.n_iters):
@@ -129,7 +133,7 @@ def _langevin_core(energy_fn, y: torch.Tensor, config: LangevinConfig, lo, hi, g
             yk = y.detach().requires_grad_(True)
             e = energies(energy_fn, yk)  # (B, N)
             (grad,) = torch.autograd.grad(e.sum(), yk)  # (B, N, D) dE/dy for each candidate
-        n = torch.randn(y.shape, generator=generator)  # (B, N, D) n ~ N(0, I)
+        n = torch.randn(y.shape, generator=generator, device=where).to(y.device)  # (B, N, D) n ~ N(0, I)
         if c.noise == "ibc":
             delta = eps * (0.5 * grad + c.noise_scale * n)  # the reference's langevin_step
         else:

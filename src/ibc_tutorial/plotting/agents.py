@@ -139,3 +139,21 @@ def plot_exit_counts(counts: dict, *, title: str = "Exits taken at each junction
                    loc="upper right", fontsize=8)
         ax.grid(alpha=0.3, axis="y")
     return finish(fig, True, title=title)
+
+
+def plot_labels_at_rest(labels: dict, *, title: str = "The expert's acceleration labels in states at rest",
+                        bins: int = 20):
+    """One histogram per dataset of the expert's acceleration labels in the states where the car is at rest.
+
+    ``labels``: ``{name: (N,) acceleration labels in [-1, 1]}``; each histogram shows the share of the
+    dataset's states at rest in each bin, so datasets of different sizes compare."""
+    n = check_panels("labels", labels)
+    fig, axes = plt.subplots(1, n, figsize=(4.2 * n, 3.2), squeeze=False, sharey=True)
+    edges = np.linspace(-1, 1, bins + 1)
+    for ax, (name, acc) in zip(axes[0], labels.items()):
+        acc = as_array(acc, float).ravel()  # (N,)
+        ax.hist(acc, bins=edges, weights=np.full(len(acc), 1.0 / max(len(acc), 1)), color="C0")
+        go = float((acc > 0.2).mean()) if len(acc) else 0.0
+        label_axes(ax, ACCEL_LABEL, "share of the states at rest", f"{name}\n{len(acc)} states at rest, {go:.0%} say go")
+        ax.grid(alpha=0.3, axis="y")
+    return finish(fig, True, title=title)

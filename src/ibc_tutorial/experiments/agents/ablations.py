@@ -27,8 +27,9 @@ are equal), and ``intensity-lights`` is the replication of that time.
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
+from ibc_tutorial import stats
 from ibc_tutorial.experiments.agents.presets import Preset
 from ibc_tutorial.utils import check_choice
 
@@ -56,3 +57,54 @@ def ablation_preset(base: Preset, name: str) -> Preset:
     check_choice("ablation", name, tuple(ABLATIONS))
     return replace(base, name=f"{base.name}+{name}", methods=ABLATION_METHODS, seeds=ABLATION_SEEDS,
                    routeless_episodes=0, heldout_episodes=0, **ABLATIONS[name][1])
+
+
+STILL_M = 10.0
+"""An episode of 3000 steps (300 s) in which the car drove less than this many metres: it stood still."""
+
+
+@dataclass(frozen=True)
+class AblationRow:
+    """One method of two replication folders compared on the agents (seeds) and starts they share."""
+
+    method: str
+    """The method compared."""
+    seeds: tuple[int, ...]
+    """The training seeds both folders hold for it."""
+    score: tuple[float, float]
+    """Mean episode score (variant, reference)."""
+    red_lights: tuple[float, float]
+    """Mean red lights run per episode (variant, reference)."""
+    standing_still: tuple[int, int]
+    """Episodes in which the car drove less than ``STILL_M`` (variant, reference)."""
+    difference: stats.Interval
+    """Mean score of the variant minus the reference's, with its 95 % two-level bootstrap interval."""
+    verdict: str
+    """``stats.verdict`` of ``difference`` against 0: does the variant score higher?"""
+
+
+def compare_folders(variant, reference, methods: tuple[str, ...] = ABLATION_METHODS) -> list[AblationRow]:
+    """Compare two replication folders method by method, on their shared seeds and the table's starts.
+
+    Each folder is read with ``stats.episode_table``; ValueError if a method has no shared seeds or
+    the folders' episodes started elsewhere (their columns would not be comparable)."""
+    rows = []
+    for m in methods:
+        tables = {}
+        for key in ("score", "red_light_infractions", "distance_m"):
+            a, b = stats.episode_table(variant, m, key), stats.episode_table(reference, m, key)
+            if a.starts != b.starts:
+                raise ValueError(f"{variant} and {reference} evaluated {m} from other starts: not comparable")
+            seeds = tuple(s for s in a.agents if s in b.agents)
+            if not seeds:
+                raise ValueError(f"{variant} and {reference} share no seed of {m}")
+            pick = lambda t: t.values[[t.agents.index(s) for s in seeds]]  # noqa: E731  (S, E)
+            tables[key] = (pick(a), pick(b))
+        va, vb = tables["score"]
+        diff = stats.difference_interval(va, vb)
+        rows.append(AblationRow(
+            m, seeds, (float(va.mean()), float(vb.mean())),
+            tuple(float(x.mean()) for x in tables["red_light_infractions"]),
+            tuple(int((x < STILL_M).sum()) for x in tables["distance_m"]),
+            diff, stats.verdict(diff)))
+    return rows

@@ -46,6 +46,11 @@ def _minor(version: str) -> str:
     return ".".join(str(version).split(".")[:2])
 
 
+def _cpu_copy(t: torch.Tensor, dtype: torch.dtype | None = None) -> torch.Tensor:
+    """A detached copy of ``t`` on the CPU (in ``dtype``, else its own), whatever its device: ``t`` is not moved."""
+    return t.detach().to("cpu", dtype=t.dtype if dtype is None else dtype, copy=True)
+
+
 def save_checkpoint(path, *, method: str, preset: Preset, network: torch.nn.Module, data_sha256: str, epoch: int,
                     expert_actions: torch.Tensor, init_weights: torch.Tensor | None = None,
                     optimizer: dict | None = None, generator: torch.Tensor | None = None,
@@ -56,7 +61,10 @@ def save_checkpoint(path, *, method: str, preset: Preset, network: torch.nn.Modu
     size; ``train.round_to_half`` rounds the network first, so nothing is lost that it used).
 
     ``optimizer`` and ``generator`` are the states kept for resuming (``Trainer.state_dict()``'s
-    ``"optimizer"`` and ``"generator"``), or None in a final checkpoint.
+    ``"optimizer"`` and ``"generator"``), or None in a final checkpoint; they are stored as given.
+
+    The weights, expert actions and initial weights are stored as CPU copies whatever their device
+    (a network on a GPU is copied, not moved), so the file loads on any machine.
     """
     ckpt = {
         "format": FORMAT,
@@ -68,10 +76,10 @@ def save_checkpoint(path, *, method: str, preset: Preset, network: torch.nn.Modu
         "data_sha256": str(data_sha256),
         "epoch": int(epoch),
         "seed": None if seed is None else int(seed),
-        "model": {k: v.detach().half() if half and v.is_floating_point() else v.detach().clone()
+        "model": {k: _cpu_copy(v, torch.float16 if half and v.is_floating_point() else None)
                   for k, v in network.state_dict().items()},
-        "expert_actions": expert_actions.detach().float().clone(),
-        "init_weights": None if init_weights is None else init_weights.detach().float().clone(),
+        "expert_actions": _cpu_copy(expert_actions, torch.float32),
+        "init_weights": None if init_weights is None else _cpu_copy(init_weights, torch.float32),
         "optimizer": optimizer,
         "generator": generator,
         "metrics": list(metrics or []),
