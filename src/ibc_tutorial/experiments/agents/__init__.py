@@ -10,6 +10,8 @@ Modules, one concern each:
 - ``figures``      the Fig. 5 (free driving) and Fig. 6 (energy landscapes) analogues
 - ``results``      the replication folder: aggregation, provenance, ``load_results`` for the chapters
 - ``replicate``    the whole replication, resumable (``ibc-tutorial replicate``)
+- ``ablations``    the variants of a preset (``replicate --ablation``) and ``compare_folders``
+- ``claims``       the paper's five claims judged on a replication folder (``judge_claims``)
 
 Import from the modules (``from ibc_tutorial.experiments.agents.results import load_results``):
 nothing is imported here, so that ``ibc-tutorial evaluate`` does not load the training code.
