@@ -41,7 +41,7 @@ def data(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def dataset(data):
-    return DemoDataset(data, bev_size=TINY.bev_size, cache=True)
+    return DemoDataset(data, bev_size=TINY.bev_size, cache=True, light_encoding=TINY.light_encoding)
 
 
 # --------------------------------------------------------------------------- names
