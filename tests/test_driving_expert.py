@@ -130,6 +130,9 @@ def test_brake_noise_holds_brakes_and_the_labels_drive_on():
         ExpertConfig(brake_noise=1.5)
     with pytest.raises(ValueError, match="brake_steps"):
         ExpertConfig(brake_steps=(5, 2))
+    for name, bad in (("hesitate_prob", 2.0), ("brake_prob", float("nan")), ("noise_prob", "often")):
+        with pytest.raises(ValueError, match=f"{name} must be a probability"):
+            ExpertConfig(**{name: bad})
 
 
 def test_expert_takes_over_after_another_driver():

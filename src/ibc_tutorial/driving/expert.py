@@ -50,7 +50,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ibc_tutorial.driving.lights import GREEN, RED, STOP_LINE_THICKNESS
-from ibc_tutorial.utils import check_positive
+from ibc_tutorial.utils import check_positive, check_probability
 
 
 @dataclass(frozen=True)
@@ -106,9 +106,8 @@ class ExpertConfig:
         check_positive("ExpertConfig.steer_noise", self.steer_noise, allow_zero=True)
         if not 0.0 <= self.brake_noise <= 1.0:
             raise ValueError(f"ExpertConfig.brake_noise must be in [0, 1], got {self.brake_noise!r}")
-        for name in ("brake_prob", "hesitate_prob"):
-            if not 0.0 <= getattr(self, name) <= 1.0:
-                raise ValueError(f"ExpertConfig.{name} must be in [0, 1], got {getattr(self, name)!r}")
+        for name in ("noise_prob", "brake_prob", "hesitate_prob"):
+            check_probability(f"ExpertConfig.{name}", getattr(self, name))
         if len(self.brake_steps) != 2 or not 1 <= self.brake_steps[0] <= self.brake_steps[1]:
             raise ValueError(f"ExpertConfig.brake_steps must be (low, high) with 1 <= low <= high, got {self.brake_steps!r}")
 
