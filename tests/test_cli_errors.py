@@ -299,6 +299,8 @@ def test_bad_command_lines_are_one_line(shared, tmp_path, capsys):
             roots=roots)
     refused(capsys, ["evaluate", "--checkpoint", run / "final.pt", "--routed", "--routeless"], "not allowed",
             roots=roots)
+    refused(capsys, ["evaluate", "--checkpoint", run / "final.pt", "--crossings"], "--crossings needs --out",
+            roots=roots)
 
 
 def test_interrupt_is_one_line(shared, tmp_path, capsys, monkeypatch):

@@ -41,6 +41,14 @@ def test_train_then_evaluate(method, data, tmp_path, capsys):
     for r in ev["episodes"]:
         assert r["steps"] <= 12
         assert r["score"] == pytest.approx(score(r["distance_m"], r["red_light_infractions"]), abs=0.01)
+    assert ev["commit"] and ev["package_version"] and ev["machine"]["nproc"] >= 1
+    if method == "da-ibc":  # --crossings adds each episode's junction crossings and changes nothing else
+        crossed = tmp_path / "crossings.json"
+        assert cli.main(["evaluate", "--checkpoint", str(out / "final.pt"), "--episodes", "3", "--steps", "12",
+                         "--out", str(crossed), "--crossings"]) == 0
+        rows = json.loads(crossed.read_text())["episodes"]
+        assert all(isinstance(r.pop("junction_crossings"), list) for r in rows)
+        assert rows == ev["episodes"]
 
 
 def test_resume_continues_exactly(data, tmp_path):

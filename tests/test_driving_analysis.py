@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from ibc_tutorial.driving import get_town, rollout
-from ibc_tutorial.driving.analysis import exits_per_approach, junction_visits, road_coverage
+from ibc_tutorial.driving.analysis import exits_per_approach, junction_crossings, junction_visits, road_coverage
 
 
 @pytest.fixture(scope="module")
@@ -45,6 +45,30 @@ def test_junction_visits_read_the_exit_from_the_lanes(expert_drive):
                       {"approach": ap.id, "node": ap.node, "turn": turn, "step": 13}]
     assert exits_per_approach(visits) == {ap.id: {"node": ap.node, "visits": 2, "turns": [turn]}}
     assert all(v["turn"] in ("left", "straight", "right") for v in junction_visits("town02", expert_drive.trace["lane"]))
+
+
+def test_junction_crossings_span_the_connector_and_keep_the_steering(expert_drive):
+    tw = get_town("town02")
+    ap = next(a for a in tw.approaches if a.is_junction and "left" in a.exits)
+    conn = ap.exits["left"]
+    after = tw.lanes[conn].successors[0]
+    lanes = np.array([ap.lane] * 3 + [conn] * 4 + [after] * 2 + [ap.lane] * 2 + [conn] * 3)  # (14,) states
+    steer = np.array([0, 0, 0, -0.3, -0.5, 0.2, -0.1, 0, 0, 0, 0, 0.4, -0.2, 0.7])  # (14,): after each state
+    first, last = junction_crossings(tw, lanes, steer[:13])  # (T + 1,) states, (T,) actions
+    assert first == {"approach": ap.id, "node": ap.node, "start": 3, "stop": 7, "turn": "left", "finished": True,
+                     "steer_min": -0.5, "steer_max": 0.2}
+    # the record ends inside the junction: the crossing is unfinished, its steering up to the last action
+    assert last["start"] == 11 and last["stop"] == 14 and last["turn"] == "" and not last["finished"]
+    assert (last["steer_min"], last["steer_max"]) == (-0.2, 0.4)
+    assert junction_crossings(tw, lanes, steer)[1]["steer_max"] == 0.7  # one steering per state is accepted too
+    assert junction_crossings(tw, np.array([ap.lane] * 4), np.zeros(3)) == []  # never entered the junction
+    with pytest.raises(ValueError, match="steer must hold one value per state or per step"):
+        junction_crossings(tw, lanes, steer[:5])
+    # on a real drive: the crossings are the junction visits, with the same exits
+    t = expert_drive.trace
+    crossed = [c for c in junction_crossings("town02", t["lane"], t["actions"][:, 0]) if c["finished"]]
+    assert [c["turn"] for c in crossed] == [v["turn"] for v in junction_visits("town02", t["lane"])]
+    assert all(c["steer_min"] <= c["steer_max"] for c in crossed)
 
 
 def test_road_coverage_counts_lanes_driven_in_their_direction():

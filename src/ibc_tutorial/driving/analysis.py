@@ -51,6 +51,59 @@ def junction_visits(town, lanes: np.ndarray) -> list[dict]:
     return visits
 
 
+def junction_crossings(town, lanes: np.ndarray, steer: np.ndarray) -> list[dict]:
+    """Every crossing of a junction in an episode's record, with the steering applied during it.
+
+    A crossing starts at the first state off a junction approach lane and lasts until the first
+    state on a road lane again (the exit), or to the end of the record: an episode that ended
+    inside the junction (in a building, off the road) ends its last crossing unfinished.
+
+    Args:
+        town: a town name or ``Town``.
+        lanes: (T + 1,) the lane of each state (``EpisodeResult.trace["lane"]``).
+        steer: (T,) the steering applied after each state (``trace["actions"][:, 0]``; positive
+            turns right, chapter 7).
+
+    Returns:
+        One dict per crossing: ``approach``, ``node``, ``start`` and ``stop`` (its states are
+        ``start .. stop - 1``), ``turn`` (the exit taken; "" if the record ends inside, "?" if the
+        road lane reached is none of the approach's exits),
+        ``finished`` (False for that last one), ``steer_min`` and ``steer_max`` (the most leftward
+        and most rightward steering applied during it).
+    """
+    tw = _town(town)
+    road = set(tw.road_lanes)
+    lanes = np.asarray(lanes).reshape(-1)
+    steer = np.asarray(steer, dtype=float).reshape(-1)
+    if len(steer) not in (len(lanes), len(lanes) - 1):
+        raise ValueError(f"steer must hold one value per state or per step: {len(lanes)} states, got {len(steer)}")
+    out: list[dict] = []
+    open_: dict | None = None
+    prev_road = None  # the last road lane seen
+    for k, lane in enumerate(lanes.tolist()):
+        if lane in road:
+            if open_ is not None:
+                ap = tw.approaches[open_["approach"]]
+                open_["turn"] = next((t for t, c in ap.exits.items() if lane in tw.lanes[c].successors), "?")
+                open_["stop"], open_["finished"] = k, True
+                out.append(open_)
+                open_ = None
+            prev_road = lane
+        elif open_ is None and prev_road is not None:
+            ap_id = tw.approach_of_lane.get(prev_road)
+            if ap_id is not None and tw.approaches[ap_id].is_junction:
+                open_ = {"approach": int(ap_id), "node": int(tw.approaches[ap_id].node), "start": k}
+            prev_road = None
+    if open_ is not None:
+        open_.update(stop=len(lanes), turn="", finished=False)
+        out.append(open_)
+    for c in out:
+        s = steer[c["start"]:min(c["stop"], len(steer))]
+        c["steer_min"] = float(s.min()) if len(s) else 0.0
+        c["steer_max"] = float(s.max()) if len(s) else 0.0
+    return out
+
+
 def exits_per_approach(visits: list[dict]) -> dict[int, dict]:
     """Per junction approach: visits and the different exits taken, ``{approach: {"node", "visits", "turns"}}``."""
     out: dict[int, dict] = {}

@@ -12,6 +12,8 @@ The command's defaults are the book's protocol, the one ``replicate`` uses for t
 routeless episodes from ``EVAL_SEED``, the checkpoint preset's ``final_episodes`` x
 ``final_steps``, and the agent's training seed as the policy seed (``--policy-seed`` changes it).
 So on the machine that made them it reproduces a run's ``final_eval.json`` episode by episode.
+``--crossings`` also writes every junction crossing of every episode to ``--out``, with the steering
+applied during it (chapter 08 reads them to see how the energy-based agents end in buildings).
 ``--device cuda`` runs the network on a GPU (the DFO draws still come from the seeded CPU generator;
 the arithmetic, and so the episodes, may differ from a CPU run's in the last bits and then more).
 """
@@ -25,6 +27,8 @@ import math
 import numpy as np
 import torch
 
+from ibc_tutorial import __version__
+from ibc_tutorial.driving.analysis import junction_crossings
 from ibc_tutorial.driving.rollout import EpisodeResult, rollout
 from ibc_tutorial.cli import UserError, check_input_file, check_output_file
 from ibc_tutorial.experiments.agents.agent import Agent
@@ -68,6 +72,17 @@ def episode_rows(results: list[EpisodeResult]) -> list[dict]:
              "termination": r.termination} for r in results]
 
 
+def crossing_rows(town: str, result: EpisodeResult) -> list[dict]:
+    """JSON rows, one per junction crossing of an episode recorded with ``record_steps``
+    (``driving.analysis.junction_crossings``: approach, node, states, exit, steering extremes)."""
+    if result.trace is None:
+        raise ValueError("result must be recorded with record_steps=True to list its junction crossings")
+    rows = junction_crossings(town, result.trace["lane"], result.trace["actions"][:, 0])
+    for c in rows:
+        c["steer_min"], c["steer_max"] = round(c["steer_min"], 4), round(c["steer_max"], 4)
+    return rows
+
+
 def summarize(rows: list[dict]) -> dict:
     """Mean and (population) standard deviation of score, distance and infractions over episodes."""
     if not rows:
@@ -93,6 +108,9 @@ def run(args: argparse.Namespace) -> int:
         check_int("--steps", args.steps, minimum=1)
     if args.policy_seed is not None:
         check_int("--policy-seed", args.policy_seed, minimum=0)
+    crossings = getattr(args, "crossings", False)
+    if crossings and not args.out:
+        raise UserError("--crossings needs --out (the crossings are written there, not printed)")
     if args.out:
         check_output_file("--out", args.out, force=getattr(args, "force", False))
     agent, ckpt = load_agent(check_input_file("--checkpoint", args.checkpoint, "agent checkpoint (.pt)"))
@@ -105,8 +123,12 @@ def run(args: argparse.Namespace) -> int:
     routeless = not getattr(args, "routed", False)
     if threads:
         torch.set_num_threads(threads)
-    results = evaluate_agent(agent, args.town, episodes, steps, seed=seed, policy_seed=policy_seed, routeless=routeless)
+    results = evaluate_agent(agent, args.town, episodes, steps, seed=seed, policy_seed=policy_seed, routeless=routeless,
+                             record_steps=crossings)
     rows = episode_rows(results)
+    if crossings:
+        for row, r in zip(rows, results):
+            row["junction_crossings"] = crossing_rows(args.town, r)
     print(f"{ckpt['method']} agent (epoch {ckpt['epoch']}) in {args.town}, {episodes} {'routeless' if routeless else 'routed'} "
           f"episodes of {steps} steps from seed {seed}, policy seed {policy_seed}:")
     print(f"{'episode':>8} {'seed':>6} {'steps':>6} {'distance m':>11} {'infractions':>12} {'score':>8}  end")
@@ -117,7 +139,11 @@ def run(args: argparse.Namespace) -> int:
     print(f"mean score {s['score_mean']:.1f} ± {s['score_std']:.1f}, distance {s['distance_m_mean']:.1f} m, "
           f"infractions {s['red_light_infractions_mean']:.2f}")
     if args.out:
+        from ibc_tutorial.experiments.agents.results import git_commit, machine  # deferred: results imports this module
+
         payload = {"checkpoint": str(args.checkpoint), "method": ckpt["method"], "town": args.town, "steps": steps,
-                   "seed": seed, "policy_seed": policy_seed, "routeless": routeless, "summary": s, "episodes": rows}
+                   "seed": seed, "policy_seed": policy_seed, "routeless": routeless,
+                   "package_version": __version__, "commit": git_commit(), "machine": machine(),
+                   "summary": s, "episodes": rows}
         atomic_write_bytes(args.out, json.dumps(payload, indent=1).encode())
     return 0 if all(math.isfinite(r["score"]) for r in rows) else 1
