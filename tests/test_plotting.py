@@ -231,3 +231,11 @@ def test_agents_figures():
     assert_labelled(fig)
     with pytest.raises(ValueError):
         agents.plot_labels_at_rest({})
+    fig = agents.plot_crossing_steering({"IBC": {"left": [[-0.6, -0.1], [-0.5, -0.2]], "ended": [[-0.1, 0.2]]},
+                                         "BC": {"right": np.zeros((0, 2))}})
+    texts = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+    assert texts == ["left (2)", "ended (1)"] and fig.axes[0].get_title() == "IBC"
+    assert_labelled(fig)
+    for bad in ({}, {"IBC": {}}):
+        with pytest.raises(ValueError):
+            agents.plot_crossing_steering(bad)

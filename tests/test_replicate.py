@@ -118,6 +118,21 @@ def test_the_shipped_results_are_a_clean_run_of_an_ancestor_commit(name):
     assert ancestor.returncode == 0, f"the shipped results' commit {commit} is not an ancestor of HEAD"
 
 
+def test_the_shipped_crossings_are_clean_runs_of_an_ancestor_commit():
+    """Chapter 08's ``evaluate --crossings`` files: one per shipped agent, each from a clean ancestor commit."""
+    files = sorted((SHIPPED / "crossings").glob("*.json"))
+    if not files:
+        pytest.skip("no shipped crossings")
+    assert [f.name for f in files] == sorted(f"{m}-seed{s}.json" for m in METHODS for s in LAPTOP.seeds)
+    root = SHIPPED.parents[2]
+    for f in files:
+        commit = json.loads(f.read_text())["commit"]
+        assert "uncommitted" not in commit and re.fullmatch(r"[0-9a-f]{40}", commit), (f.name, commit)
+        if (root / ".git").exists():
+            ancestor = subprocess.run(["git", "-C", str(root), "merge-base", "--is-ancestor", commit, "HEAD"])
+            assert ancestor.returncode == 0, f"{f.name}: commit {commit} is not an ancestor of HEAD"
+
+
 @pytest.mark.parametrize("folder, variant", [("flag-lights", "no-brake-noise"), ("previous-preset", "previous-preset")])
 def test_the_shipped_ablation_folders_are_todays_variants_of_the_laptop_preset(folder, variant):
     """Chapter 08 compares each shipped ablation folder with today's replication as the variant named here: the

@@ -157,3 +157,31 @@ def plot_labels_at_rest(labels: dict, *, title: str = "The expert's acceleration
         label_axes(ax, ACCEL_LABEL, "share of the states at rest", f"{name}\n{len(acc)} states at rest, {go:.0%} say go")
         ax.grid(alpha=0.3, axis="y")
     return finish(fig, True, title=title)
+
+
+
+def plot_crossing_steering(crossings: dict, *, title: str = "Steering during each junction crossing in town02"):
+    """One panel per agent kind: each junction crossing as a point (most leftward, most rightward steering).
+
+    ``crossings``: ``{name: {label: (N, 2)}}``, the (``steer_min``, ``steer_max``) of the crossings of each
+    kind (``driving.analysis.junction_crossings``), e.g. by the exit taken; a label that starts with "ended"
+    is drawn as red crosses (crossings the car did not finish)."""
+    n = check_panels("crossings", crossings)
+    fig, axes = plt.subplots(1, n, figsize=(4.0 * n, 3.9), squeeze=False, sharex=True, sharey=True)
+    for ax, (name, groups) in zip(axes[0], crossings.items()):
+        check_panels(f"crossings[{name!r}]", groups)
+        k = 0
+        for label, points in groups.items():
+            pts = as_array(points, float).reshape(-1, 2)  # (N, 2): most leftward, most rightward steering
+            if label.startswith("ended"):
+                ax.scatter(pts[:, 0], pts[:, 1], s=70, marker="x", color="C3", zorder=3, label=f"{label} ({len(pts)})")
+            else:
+                ax.scatter(pts[:, 0], pts[:, 1], s=8, alpha=0.5, color=f"C{k}", label=f"{label} ({len(pts)})")
+                k += 1
+        ax.plot([-1, 1], [-1, 1], color="0.7", lw=0.8)  # steer_max >= steer_min: points lie above it
+        label_axes(ax, "most leftward steering (−1 … +1)", "most rightward steering (−1 … +1)", name,
+                   legend=True, loc="upper left", fontsize=7)
+        ax.set_xlim(-1.05, 1.05)
+        ax.set_ylim(-1.05, 1.05)
+        ax.grid(alpha=0.3)
+    return finish(fig, True, title=title)
