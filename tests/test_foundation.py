@@ -70,9 +70,29 @@ def test_config_checks_name_the_field():
     with pytest.raises(ValueError, match=r"config\.noise must be a finite number > 0"):
         utils.check_positive_fields(Cfg(), ("speed", "noise"))
     assert utils.check_probability("config.p", Cfg().p) == 0.5
-    for bad in (1.5, -0.1, float("nan"), "x"):
+    for bad in (1.5, -0.1, float("nan"), "x", "0.5"):
         with pytest.raises(ValueError, match=r"config\.p must be a probability in \[0, 1\]"):
             utils.check_probability("config.p", bad)
+    assert utils.check_fraction("config.noise", 1) == 1.0
+    for bad in (1.5, -0.1, float("nan"), "x", None):
+        with pytest.raises(ValueError, match=r"config\.noise must be a fraction in \[0, 1\]"):
+            utils.check_fraction("config.noise", bad)
+
+
+@pytest.mark.parametrize("make, name", [
+    (lambda v: __import__("ibc_tutorial.driving.expert", fromlist=["x"]).ExpertConfig(brake_noise=v),
+     "ExpertConfig.brake_noise"),
+    (lambda v: __import__("ibc_tutorial.driving.collect", fromlist=["x"]).CollectConfig(brake_noise=v),
+     "CollectConfig.brake_noise"),
+    (lambda v: __import__("dataclasses").replace(
+        __import__("ibc_tutorial.experiments.agents.presets", fromlist=["x"]).LAPTOP, brake_noise=v),
+     "Preset.brake_noise"),
+])
+def test_brake_noise_is_checked_as_a_fraction_wherever_it_is_set(make, name):
+    make(0.5)
+    for bad in (1.5, float("nan"), "1"):
+        with pytest.raises(ValueError, match=name.replace(".", r"\.") + r" must be a fraction in \[0, 1\]"):
+            make(bad)
 
 
 def test_atomic_write_replaces_whole_file_and_leaves_no_temp(tmp_path):

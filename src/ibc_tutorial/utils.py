@@ -79,15 +79,27 @@ def check_positive_fields(config, names: Iterable[str], *, allow_zero: bool = Fa
         check_positive(f"{prefix}.{name}", getattr(config, name), allow_zero=allow_zero)
 
 
-def check_probability(name: str, value) -> float:
-    """Return ``value`` as a float in [0, 1], or raise ValueError naming ``name``."""
+def _check_unit_interval(name: str, value, what: str) -> float:
+    """``value`` as a float in [0, 1], or ValueError naming ``name`` and saying what it must be."""
     try:
+        if isinstance(value, (str, bytes)):  # "0.5" is text, not a number: refused, not converted
+            raise TypeError
         v = float(value)
     except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a probability in [0, 1], got {value!r}") from None
+        raise ValueError(f"{name} must be {what} in [0, 1], got {value!r}") from None
     if not 0.0 <= v <= 1.0:  # also rejects NaN
-        raise ValueError(f"{name} must be a probability in [0, 1], got {value!r}")
+        raise ValueError(f"{name} must be {what} in [0, 1], got {value!r}")
     return v
+
+
+def check_probability(name: str, value) -> float:
+    """Return ``value`` as a float in [0, 1], or raise ValueError naming ``name``."""
+    return _check_unit_interval(name, value, "a probability")
+
+
+def check_fraction(name: str, value) -> float:
+    """Return ``value`` as a float in [0, 1] (a share or a scale, not a probability), or raise ValueError naming ``name``."""
+    return _check_unit_interval(name, value, "a fraction")
 
 
 def check_choice(name: str, value, choices: Iterable) -> str:

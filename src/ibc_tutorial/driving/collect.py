@@ -29,7 +29,7 @@ from ibc_tutorial.driving.expert import Expert, ExpertConfig
 from ibc_tutorial.driving.routes import random_route
 from ibc_tutorial.driving.sim import DrivingSim
 from ibc_tutorial.driving.towns import TOWNS
-from ibc_tutorial.utils import check_choice, check_int, check_positive, progress
+from ibc_tutorial.utils import check_choice, check_fraction, check_int, check_positive, progress
 
 
 @dataclass(frozen=True)
@@ -62,8 +62,7 @@ class CollectConfig:
         if self.max_minutes < self.min_minutes:
             raise ValueError(f"max_minutes must be >= min_minutes, got {self.max_minutes} < {self.min_minutes}")
         check_positive("steer_noise", self.steer_noise, allow_zero=True)
-        if not 0.0 <= self.brake_noise <= 1.0:
-            raise ValueError(f"brake_noise must be in [0, 1], got {self.brake_noise!r}")
+        check_fraction("CollectConfig.brake_noise", self.brake_noise)
 
 
 class Recorder:

@@ -50,7 +50,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ibc_tutorial.driving.lights import GREEN, RED, STOP_LINE_THICKNESS
-from ibc_tutorial.utils import check_positive, check_probability
+from ibc_tutorial.utils import check_fraction, check_positive, check_probability
 
 
 @dataclass(frozen=True)
@@ -104,8 +104,7 @@ class ExpertConfig:
         for name in ("lookahead_m", "turn_lookahead_m", "cruise_speed", "turn_speed", "stop_distance_m"):
             check_positive(f"ExpertConfig.{name}", getattr(self, name))
         check_positive("ExpertConfig.steer_noise", self.steer_noise, allow_zero=True)
-        if not 0.0 <= self.brake_noise <= 1.0:
-            raise ValueError(f"ExpertConfig.brake_noise must be in [0, 1], got {self.brake_noise!r}")
+        check_fraction("ExpertConfig.brake_noise", self.brake_noise)
         for name in ("noise_prob", "brake_prob", "hesitate_prob"):
             check_probability(f"ExpertConfig.{name}", getattr(self, name))
         if len(self.brake_steps) != 2 or not 1 <= self.brake_steps[0] <= self.brake_steps[1]:

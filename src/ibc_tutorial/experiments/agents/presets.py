@@ -36,7 +36,7 @@ from dataclasses import asdict, dataclass, fields
 
 from ibc_tutorial.driving.bev import LIGHT_ENCODINGS
 from ibc_tutorial.training import LR_SCHEDULES
-from ibc_tutorial.utils import check_choice, check_int, check_positive
+from ibc_tutorial.utils import check_choice, check_fraction, check_int, check_positive
 
 METHODS = ("bc", "ibc", "da-ibc")
 """The three agents of the DA-IBC paper's sec. 4: Beta BC, conventional IBC and DA-IBC."""
@@ -131,8 +131,7 @@ class Preset:
         check_choice("light_encoding", self.light_encoding, LIGHT_ENCODINGS)
         if not self.methods or any(m not in METHODS for m in self.methods) or len(set(self.methods)) < len(self.methods):
             raise ValueError(f"methods must name distinct methods of {METHODS}, got {self.methods!r}")
-        if not 0.0 <= self.brake_noise <= 1.0:
-            raise ValueError(f"brake_noise must be in [0, 1], got {self.brake_noise!r}")
+        check_fraction("Preset.brake_noise", self.brake_noise)
         for f in ("lr", "kde_bandwidth", "min_minutes", "max_minutes"):
             check_positive(f, getattr(self, f))
         check_choice("lr_schedule", self.lr_schedule, LR_SCHEDULES)
