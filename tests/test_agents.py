@@ -119,3 +119,34 @@ def test_the_network_is_built_from_its_architecture():
         assert list(a.encoder.channels) == arch["cnn_channels"] and a.encoder.bev_size == arch["bev_size"]
     with pytest.raises(ValueError, match="arch"):
         network_from_architecture({"network": "MDNPolicy", "encoder": "BEVStateEncoder"})
+
+
+def test_ended_crossing_energies_replay_the_episode_and_refuse_what_they_cannot_reproduce():
+    from ibc_tutorial.experiments.agents.evaluate import ended_crossing_energies, episode_rows, evaluate_agent
+
+    torch.manual_seed(0)
+    actions = torch.tensor([[0.6, 1.0]] * 100 + [[0.7, 0.9]] * 100)  # DFO starts at hard right turns: crashes
+    agent = Agent("da-ibc", build_network("da-ibc", TINY), TINY, actions)
+    results = evaluate_agent(agent, "town02", episodes=2, steps=60, seed=1000, policy_seed=0, record_steps=True,
+                             keep_obs=True, show_progress=False)
+    assert all(r.terminated for r in results)
+    rows = episode_rows(results)
+    end = rows[0]["steps"]  # pretend episode 0 ended inside a crossing of its last 3 states; episode 1 finished one
+    rows[0]["junction_crossings"] = [{"finished": False, "start": end - 3, "stop": end + 1}]
+    rows[1]["junction_crossings"] = [{"finished": True, "start": 0, "stop": 4}]
+    steer = ended_crossing_energies(agent, "town02", rows, steps=60, seed=1000, policy_seed=0, n_grid=9)
+    assert steer.shape == (9,) and steer[0] == -1.0 and steer[-1] == 1.0
+    profiles = np.array(rows[0]["junction_crossings"][0]["energy_by_steer"])  # (3 states with an action, 9)
+    assert profiles.shape == (3, 9) and (profiles.min(axis=1) == 0).all()
+    tr = results[0].trace
+    _, _, e = agent.energy_grid({"bev": tr["bev"][end - 1][None], "state": tr["state"][end - 1][None]}, 9)
+    np.testing.assert_allclose(profiles[-1], e.min(axis=0) - e.min(), atol=2e-3)  # the last state's, as recorded
+    assert "energy_by_steer" not in rows[1]["junction_crossings"][0]
+    rows[0]["distance_m"] += 1.0  # not what a replay gives
+    with pytest.raises(ValueError, match="the replay of episode 0 ended"):
+        ended_crossing_energies(agent, "town02", rows, steps=60, seed=1000, policy_seed=0, n_grid=9)
+    bc = Agent("bc", build_network("bc", TINY), TINY, actions)
+    with pytest.raises(ValueError, match="needs an energy agent"):
+        ended_crossing_energies(bc, "town02", rows, steps=60, seed=1000, policy_seed=0)
+    rows[0]["termination"] = ""
+    assert ended_crossing_energies(agent, "town02", rows, steps=60, seed=1000, policy_seed=0) is None

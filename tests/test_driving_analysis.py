@@ -122,3 +122,20 @@ def test_stop_line_gaps_nan_off_approaches():
     p = lane.points[-6]
     g, light = stop_line_gaps(town, np.array([[p[0], p[1], float(np.arctan2(*lane.end[::-1] - p[::-1]))]]), [ap.lane])
     assert light[0] == town.light_of_approach.get(ap.id, -1)
+
+
+def test_on_step_sees_what_the_policy_sees_and_must_be_callable():
+    seen, given = [], []
+
+    def policy(batch):
+        given.append((len(batch["state"]), batch["state"].copy()))
+        return np.tile([0.0, 0.3], (len(batch["state"]), 1))
+
+    def hook(t, episodes, batch):
+        seen.append((t, episodes, batch["state"].copy()))
+
+    rollout(policy, town="town02", episodes=2, steps=4, bev_size=32, seed=3, record_xy=False, on_step=hook)
+    assert [s[0] for s in seen] == [0, 1, 2, 3] and all(s[1] == [0, 1] for s in seen)
+    assert all(np.array_equal(s[2], g[1]) for s, g in zip(seen, given))
+    with pytest.raises(ValueError, match="on_step must be callable"):
+        rollout(policy, episodes=1, steps=2, on_step="print")

@@ -162,7 +162,8 @@ def _evaluate_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", default=None, help="optional JSON file for the per-episode results")
     p.add_argument("--crossings", action="store_true",
                    help="also record every junction crossing of every episode, with the steering applied during it "
-                        "(driving.analysis.junction_crossings), in --out (chapter 08)")
+                        "(driving.analysis.junction_crossings), in --out, and for an energy agent its energy over "
+                        "steering in the crossings that ended in a building (driving them again; chapter 08)")
     p.add_argument("--force", action="store_true", help="overwrite --out if it exists")
     p.add_argument("--threads", type=int, default=0, help=THREADS_HELP)
     p.add_argument("--device", default="cpu", help=DEVICE_HELP)

@@ -106,7 +106,8 @@ class _Trace:
 def rollout(policy: Policy | str, town: str = "town02", episodes: int = 10, steps: int = 3000, bev_size: int = 64,
             seed: int = 0, routeless: bool = True, record_xy: bool = True, record_steps: bool = False,
             keep_obs: bool = False, show_progress: bool | None = None,
-            light_encoding: str = "intensity") -> list[EpisodeResult]:
+            light_encoding: str = "intensity",
+            on_step: Callable[[int, list[int], dict[str, np.ndarray]], None] | None = None) -> list[EpisodeResult]:
     """Run ``episodes`` episodes of at most ``steps`` steps side by side; return one result each.
 
     Actions are clipped to [-1, 1] (a NaN still raises the environment's ValueError).
@@ -117,6 +118,9 @@ def rollout(policy: Policy | str, town: str = "town02", episodes: int = 10, step
         record_steps: keep the per-step record in ``EpisodeResult.trace``.
         keep_obs: with ``record_steps``, keep the observations in the trace too.
         light_encoding: how the BEV draws the lights (``driving.bev.LIGHT_ENCODINGS``).
+        on_step: called as ``on_step(t, episodes, batch)`` before the policy acts at step t (0-based),
+            with the indices of the running episodes (the rows of ``batch``) and the observations
+            the policy is about to see; it must not change them (not called for the expert).
     """
     episodes = check_int("episodes", episodes, minimum=1)
     steps = check_int("steps", steps, minimum=1)
@@ -127,6 +131,8 @@ def rollout(policy: Policy | str, town: str = "town02", episodes: int = 10, step
         raise ValueError(f"policy must be a callable or 'expert', got {type(policy).__name__}")
     if keep_obs and not record_steps:
         raise ValueError("keep_obs needs record_steps=True")
+    if on_step is not None and not callable(on_step):
+        raise ValueError(f"on_step must be callable or None, got {type(on_step).__name__}")
     envs = [make_env(town, bev_size=bev_size, routeless=routeless, max_steps=steps, light_encoding=light_encoding)
             for _ in range(episodes)]
     obs, infos = zip(*(env.reset(seed=seed + i) for i, env in enumerate(envs)))
@@ -140,7 +146,7 @@ def rollout(policy: Policy | str, town: str = "town02", episodes: int = 10, step
     active = list(range(episodes))
     done_info: dict[int, dict] = {}
     bar = progress(total=steps, desc=f"{episodes} episodes in {town}", enabled=show_progress)
-    for _ in range(steps):
+    for t in range(steps):
         if not active:
             break
         if experts is not None:
@@ -148,6 +154,8 @@ def rollout(policy: Policy | str, town: str = "town02", episodes: int = 10, step
         else:
             batch = {"bev": np.stack([obs[i]["bev"] for i in active]),  # (B, 5, S, S) float32
                      "state": np.stack([obs[i]["state"] for i in active])}  # (B, 3) float32
+            if on_step is not None:
+                on_step(t, list(active), batch)
             actions = np.asarray(policy(batch), dtype=np.float64).reshape(len(active), 2)
             with np.errstate(invalid="ignore"):
                 actions = np.where(np.isnan(actions), actions, np.clip(actions, -1.0, 1.0))

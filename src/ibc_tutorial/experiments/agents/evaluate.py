@@ -13,7 +13,9 @@ routeless episodes from ``EVAL_SEED``, the checkpoint preset's ``final_episodes`
 ``final_steps``, and the agent's training seed as the policy seed (``--policy-seed`` changes it).
 So on the machine that made them it reproduces a run's ``final_eval.json`` episode by episode.
 ``--crossings`` also writes every junction crossing of every episode to ``--out``, with the steering
-applied during it (chapter 08 reads them to see how the energy-based agents end in buildings).
+applied during it, and, for an energy agent, its energy over steering at each state of the crossings
+that ended in a building or off the road (``ended_crossing_energies``: the episodes are driven again to
+record them). Chapter 08 reads them to see how the agents end in buildings.
 ``--device cuda`` runs the network on a GPU (the DFO draws still come from the seeded CPU generator;
 the arithmetic, and so the episodes, may differ from a CPU run's in the last bits and then more).
 """
@@ -48,11 +50,11 @@ EXPERT_BEV_SIZE = 64
 def evaluate_agent(agent: Agent | str, town: str = "town02", episodes: int = 10, steps: int = 3000, *,
                    seed: int = EVAL_SEED, policy_seed: int = 0, routeless: bool = True, record_xy: bool = False,
                    record_steps: bool = False, keep_obs: bool = False,
-                   show_progress: bool | None = None) -> list[EpisodeResult]:
+                   show_progress: bool | None = None, on_step=None) -> list[EpisodeResult]:
     """Drive ``agent`` (an ``Agent``, or "expert") for ``episodes`` batched episodes; one result each.
 
-    ``policy_seed`` seeds the agent's DFO draws; ``record_xy``, ``record_steps`` and ``keep_obs``
-    are passed to ``driving.rollout``.
+    ``policy_seed`` seeds the agent's DFO draws; ``record_xy``, ``record_steps``, ``keep_obs`` and
+    ``on_step`` are passed to ``driving.rollout``.
     """
     check_int("episodes", episodes, minimum=1)
     check_int("steps", steps, minimum=1)
@@ -62,7 +64,7 @@ def evaluate_agent(agent: Agent | str, town: str = "town02", episodes: int = 10,
         policy, bev_size, encoding = agent.policy(policy_seed), agent.preset.bev_size, agent.preset.light_encoding
     return rollout(policy, town=town, episodes=episodes, steps=steps, bev_size=bev_size, seed=seed, routeless=routeless,
                    record_xy=record_xy, record_steps=record_steps, keep_obs=keep_obs, show_progress=show_progress,
-                   light_encoding=encoding)
+                   light_encoding=encoding, on_step=on_step)
 
 
 def episode_rows(results: list[EpisodeResult]) -> list[dict]:
@@ -81,6 +83,58 @@ def crossing_rows(town: str, result: EpisodeResult) -> list[dict]:
     for c in rows:
         c["steer_min"], c["steer_max"] = round(c["steer_min"], 4), round(c["steer_max"], 4)
     return rows
+
+
+ENERGY_GRID = 41
+"""Values per action dimension of the (steer, acceleration) grid of ``ended_crossing_energies``."""
+
+
+def ended_crossing_energies(agent: Agent, town: str, rows: list[dict], *, steps: int, seed: int, policy_seed: int,
+                            routeless: bool = True, n_grid: int = ENERGY_GRID) -> np.ndarray | None:
+    """The energy over steering at every state of each crossing that ended in a building or off the road.
+
+    ``rows`` are the episode rows of one evaluation (``episode_rows``) with their ``junction_crossings``
+    (``crossing_rows``), in episode order. The episodes are driven again, up to the last of those
+    crossings, with the same starts and policy seed, and at each state of each such crossing the agent's
+    energy is computed on an ``n_grid`` x ``n_grid`` grid of (steer, acceleration) in [-1, 1]². Each
+    ended crossing gets ``energy_by_steer``: per state, the lowest energy over the accelerations at each
+    steering value, minus its minimum over the steering values (so 0 at the preferred steering), in
+    nats. Returns the steering grid (n_grid,), or None when no crossing ended.
+
+    Raises ValueError for a BC agent (it has no energy), or if the replay does not end those episodes
+    as ``rows`` say (e.g. evaluated on another machine, whose arithmetic sent the car elsewhere).
+    """
+    if agent.method == "bc":
+        raise ValueError("ended_crossing_energies needs an energy agent (ibc or da-ibc), got bc")
+    wanted = {i: r["junction_crossings"][-1] for i, r in enumerate(rows)
+              if r["termination"] and r.get("junction_crossings") and not r["junction_crossings"][-1]["finished"]}
+    if not wanted:
+        return None
+    captured: dict[int, list] = {i: [] for i in wanted}
+
+    def keep(t: int, episodes: list[int], batch: dict) -> None:
+        for k, i in enumerate(episodes):
+            c = wanted.get(i)
+            if c is not None and c["start"] <= t < c["stop"]:
+                captured[i].append({"bev": batch["bev"][k:k + 1], "state": batch["state"][k:k + 1]})
+
+    horizon = min(steps, max(c["stop"] for c in wanted.values()))
+    replay = evaluate_agent(agent, town, len(rows), horizon, seed=seed, policy_seed=policy_seed, routeless=routeless,
+                            record_xy=False, show_progress=False, on_step=keep)
+    for i in wanted:
+        if replay[i].termination != rows[i]["termination"] or round(float(replay[i].distance_m), 2) != rows[i]["distance_m"]:
+            raise ValueError(f"the replay of episode {i} ended {replay[i].termination or 'later'} after "
+                             f"{replay[i].distance_m:.2f} m, not as evaluated ({rows[i]['termination']} after "
+                             f"{rows[i]['distance_m']} m): the energies would not be those of the crossing")
+    steer = None
+    for i, c in wanted.items():
+        profiles = []
+        for obs in captured[i]:
+            steer, _accel, e = agent.energy_grid(obs, n_grid)  # e: (G accel, G steer)
+            profile = e.min(axis=0)  # (G,) lowest energy over the accelerations at each steering value
+            profiles.append([round(float(v), 3) for v in profile - profile.min()])
+        c["energy_by_steer"] = profiles  # (states, G)
+    return steer
 
 
 def summarize(rows: list[dict]) -> dict:
@@ -126,9 +180,13 @@ def run(args: argparse.Namespace) -> int:
     results = evaluate_agent(agent, args.town, episodes, steps, seed=seed, policy_seed=policy_seed, routeless=routeless,
                              record_steps=crossings)
     rows = episode_rows(results)
+    energy_steer = None
     if crossings:
         for row, r in zip(rows, results):
             row["junction_crossings"] = crossing_rows(args.town, r)
+        if agent.method != "bc":
+            energy_steer = ended_crossing_energies(agent, args.town, rows, steps=steps, seed=seed,
+                                                   policy_seed=policy_seed, routeless=routeless)
     print(f"{ckpt['method']} agent (epoch {ckpt['epoch']}) in {args.town}, {episodes} {'routeless' if routeless else 'routed'} "
           f"episodes of {steps} steps from seed {seed}, policy seed {policy_seed}:")
     print(f"{'episode':>8} {'seed':>6} {'steps':>6} {'distance m':>11} {'infractions':>12} {'score':>8}  end")
@@ -145,5 +203,7 @@ def run(args: argparse.Namespace) -> int:
                    "seed": seed, "policy_seed": policy_seed, "routeless": routeless,
                    "package_version": __version__, "commit": git_commit(), "machine": machine(),
                    "summary": s, "episodes": rows}
+        if energy_steer is not None:  # the steering values of the ended crossings' energy_by_steer
+            payload["energy_steer_grid"] = [round(float(v), 4) for v in energy_steer]
         atomic_write_bytes(args.out, json.dumps(payload, indent=1).encode())
     return 0 if all(math.isfinite(r["score"]) for r in rows) else 1
