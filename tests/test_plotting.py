@@ -239,3 +239,12 @@ def test_agents_figures():
     for bad in ({}, {"IBC": {}}):
         with pytest.raises(ValueError):
             agents.plot_crossing_steering(bad)
+    steer = np.linspace(-1, 1, 5)
+    fig = agents.plot_crossing_energies({"IBC seed 0": [[3, 1, 0, 2, 9], [2, 0, 1, 5, 20]], "B": np.zeros((1, 5))},
+                                        steer, clip=10)
+    line = fig.axes[0].get_lines()[0]
+    assert list(line.get_xdata()) == [0.0, -0.5] and fig.axes[0].get_title() == "IBC seed 0"
+    assert fig.axes[0].get_images()[0].get_array().max() == 10  # clipped
+    assert_labelled(fig)
+    with pytest.raises(ValueError):
+        agents.plot_crossing_energies({}, steer)

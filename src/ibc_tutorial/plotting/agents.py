@@ -185,3 +185,32 @@ def plot_crossing_steering(crossings: dict, *, title: str = "Steering during eac
         ax.set_ylim(-1.05, 1.05)
         ax.grid(alpha=0.3)
     return finish(fig, True, title=title)
+
+
+def plot_crossing_energies(panels: dict, steer, *, clip: float = 10.0, dt: float = 0.1,
+                           title: str = "Energy over steering in the crossings that ended in a building"):
+    """One panel per crossing: its energy over steering (relative to each state's minimum) against time.
+
+    ``panels``: ``{title: (T, G) energies}`` (``energy_by_steer`` of ``evaluate --crossings``), over the
+    steering values ``steer`` (G,); shown up to ``clip`` nats, darker = lower, with each state's
+    lowest-energy steering as a line. Time runs down, from the first state of the crossing."""
+    n = check_panels("panels", panels)
+    steer = as_array(steer, float).ravel()  # (G,)
+    cols = min(n, 3)
+    rows = (n + cols - 1) // cols
+    fig, axes = plt.subplots(rows, cols, figsize=(4.0 * cols, 3.4 * rows), squeeze=False, sharex=True)
+    for ax in axes.ravel()[n:]:
+        ax.set_visible(False)
+    image = None
+    for ax, (name, energies) in zip(axes.ravel(), panels.items()):
+        e = as_array(energies, float).reshape(-1, len(steer))  # (T, G)
+        t = np.arange(len(e)) * dt
+        image = ax.imshow(np.minimum(e, clip), aspect="auto", cmap="viridis_r", vmin=0, vmax=clip, origin="upper",
+                          extent=(steer[0], steer[-1], t[-1] + dt if len(t) else dt, 0))
+        ax.plot(steer[e.argmin(axis=1)], t + dt / 2, color="C3", lw=1.2, label="lowest energy")
+        label_axes(ax, STEER_LABEL, "time (s)", name, legend=True, loc="lower right", fontsize=7)
+    fig.subplots_adjust(left=0.07, right=0.84, top=0.86 if rows == 1 else 0.9, wspace=0.3, hspace=0.45)
+    cax = fig.add_axes((0.87, 0.15, 0.02, 0.7))
+    fig.colorbar(image, cax=cax, label=f"energy above the state's minimum (nats, ≤ {clip:g})")
+    fig.suptitle(title)
+    return fig
