@@ -10,6 +10,7 @@ tested in ``tests/``. Sub-packages and modules (one concern each):
 - ``kde``          Gaussian KDE and inverse-density weights
 - ``optimizers``   finding the action of lowest energy: grid, DFO (Algorithm 1), Langevin
 - ``training``     the one training loop (resumable), for the chapters and the command line
+- ``parallel``     independent runs (seeds) side by side in worker processes
 - ``objectives``   the losses as training objectives (likelihood, InfoNCE, grid)
 - ``driving``      the pymunk town, lights, BEV, expert, Gymnasium environment, rollouts
 - ``experiments``  the book's studies end to end (``agents``: the driving agents of chapters 08-09)

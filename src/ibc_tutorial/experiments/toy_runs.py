@@ -1,0 +1,116 @@
+"""The training runs of chapters 02 and 03 on the tree and side-road worlds, as self-contained jobs.
+
+Each function builds its networks from ``torch.manual_seed(seed)`` (the initial weights) and
+trains them with the one loop (``ibc_tutorial.training.train``), the minibatches drawn with
+the same ``seed``. A run depends on nothing but its arguments, so ``ibc_tutorial.parallel.
+parallel_map`` can run several of them side by side in worker processes, with the same results
+as one after another in the notebook's own process:
+
+- ``train_explicit``: chapter 02's explicit policies (MAE regression, Beta, a classifier over
+  512 bins, an MDN of 5 Gaussians), built one after another from one seed;
+- ``fit_regression`` and ``fit_ebm``: chapter 03's MAE regression and energy model; the energy
+  model's objective is an argument (InfoNCE with uniform counter-examples, the steering-EBM
+  paper's grid variants), given as a picklable callable, e.g. ``functools.partial`` of
+  ``objectives.info_nce_objective``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import Callable, Sequence
+
+import torch
+
+from ibc_tutorial.objectives import likelihood_objective
+from ibc_tutorial.policies import BetaPolicy, ClassifierPolicy, EnergyModel, MDNPolicy, MLPEncoder, RegressionPolicy
+from ibc_tutorial.policies.explicit import ExplicitPolicy
+from ibc_tutorial.toy.world import Demonstrations
+from ibc_tutorial.training import Objective, TrainConfig, TrainResult, train
+from ibc_tutorial.utils import check_int
+
+EXPLICIT = ("regression", "Beta", "classifier", "MDN")
+"""Chapter 02's explicit policies, in the order ``train_explicit`` builds them."""
+
+EXPLICIT_TRAIN = TrainConfig(steps=2000, batch_size=128, lr=3e-3)
+"""How chapter 02 trains each explicit policy: 2000 Adam steps on minibatches of 128 (the seed is
+``train_explicit``'s)."""
+
+
+def _check_demos(demos) -> Demonstrations:
+    if not isinstance(demos, Demonstrations):
+        raise ValueError(f"demos must be Demonstrations (world.expert_demonstrations), got {type(demos).__name__}")
+    return demos
+
+
+def make_explicit(name: str, obs_dim: int) -> ExplicitPolicy:
+    """One of chapter 02's policies on an MLP encoder of two layers of 64, with one action (steering)."""
+    if name == "regression":
+        return RegressionPolicy.for_vectors(obs_dim, 1, loss_kind="mae")
+    if name == "Beta":
+        return BetaPolicy.for_vectors(obs_dim, 1)
+    if name == "classifier":
+        return ClassifierPolicy.for_vectors(obs_dim, 1, n_bins=512)
+    if name == "MDN":
+        return MDNPolicy.for_vectors(obs_dim, 1, n_components=5)
+    raise ValueError(f"name must be one of {EXPLICIT}, got {name!r}")
+
+
+def train_explicit(demos: Demonstrations, seed: int, names: Sequence[str] = EXPLICIT, *,
+                   config: TrainConfig = EXPLICIT_TRAIN) -> dict[str, tuple[ExplicitPolicy, TrainResult]]:
+    """Chapter 02's policies ``names`` trained on ``demos``: ``{name: (policy, loss curve)}``.
+
+    After ``torch.manual_seed(seed)`` the policies are built one after another in the order of
+    ``EXPLICIT`` (so a policy's initial weights depend on which policies come before it in
+    ``names``), then each is trained with its own loss (``objectives.likelihood_objective``) and
+    ``config`` (default ``EXPLICIT_TRAIN``), its minibatches drawn with ``seed``.
+    """
+    _check_demos(demos)
+    seed = check_int("seed", seed, minimum=0)
+    names = tuple(names)
+    for name in names:
+        if name not in EXPLICIT:
+            raise ValueError(f"names must be among {EXPLICIT}, got {name!r}")
+    if len(set(names)) != len(names) or not names:
+        raise ValueError(f"names must name each policy at most once, and at least one, got {names}")
+    if not isinstance(config, TrainConfig):
+        raise ValueError(f"config must be a TrainConfig, got {type(config).__name__}")
+    torch.manual_seed(seed)  # the initial weights
+    policies = {name: make_explicit(name, demos.obs.shape[1]) for name in EXPLICIT if name in names}
+    config = replace(config, seed=seed)
+    data = demos.training_data()
+    return {name: (p, train(p, likelihood_objective(p), data, config)) for name, p in policies.items()}
+
+
+def fit_regression(demos: Demonstrations, seed: int = 0, *, steps: int = 1000) -> RegressionPolicy:
+    """Chapter 03's MAE regression (two layers of 64), trained on ``demos`` by ``steps`` Adam steps
+    on minibatches of 64 at learning rate 3e-3."""
+    _check_demos(demos)
+    seed = check_int("seed", seed, minimum=0)
+    torch.manual_seed(seed)  # the initial weights
+    policy = RegressionPolicy.for_vectors(demos.obs.shape[1], 1, hidden=64, layers=2, loss_kind="mae")
+    config = TrainConfig(steps=steps, batch_size=64, lr=3e-3, seed=seed)
+    train(policy, likelihood_objective(policy), demos.training_data(), config)
+    return policy
+
+
+def fit_ebm(data: dict[str, torch.Tensor], obs_dim: int, objective: Callable[[EnergyModel], Objective], seed: int = 0, *,
+            steps: int = 1000, batch_size: int = 64, width: int = 64) -> tuple[EnergyModel, TrainResult]:
+    """Chapter 03's energy model for one steering action, trained on ``data`` by ``objective(model)``.
+
+    The model: an MLP encoder of two layers of ``width`` and a head of two layers of ``width``
+    (``EnergyModel``, late fusion). Adam at learning rate 3e-3, ``steps`` steps on minibatches of
+    ``batch_size``. ``objective`` builds the training objective for the model, e.g.
+    ``functools.partial(objectives.info_nce_objective, sampler=negatives.UniformSampler(-1.0, 1.0),
+    n_neg=32)``; it must be picklable to run in a worker process (a partial of a library function
+    is, a lambda is not). Returns the model and its loss curve.
+    """
+    obs_dim = check_int("obs_dim", obs_dim, minimum=1)
+    seed = check_int("seed", seed, minimum=0)
+    width = check_int("width", width, minimum=1)
+    if not callable(objective):
+        raise ValueError(f"objective must be callable as objective(model), got {type(objective).__name__}")
+    torch.manual_seed(seed)  # the initial weights
+    model = EnergyModel(MLPEncoder(obs_dim, embed_dim=width, hidden=width), action_dim=1, hidden=width, layers=2)
+    config = TrainConfig(steps=steps, batch_size=batch_size, lr=3e-3, seed=seed)
+    curve = train(model, objective(model), data, config)
+    return model, curve
