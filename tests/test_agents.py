@@ -148,5 +148,7 @@ def test_ended_crossing_energies_replay_the_episode_and_refuse_what_they_cannot_
     bc = Agent("bc", build_network("bc", TINY), TINY, actions)
     with pytest.raises(ValueError, match="needs an energy agent"):
         ended_crossing_energies(bc, "town02", rows, steps=60, seed=1000, policy_seed=0)
+    with pytest.raises(ValueError, match="n_grid must be"):
+        ended_crossing_energies(agent, "town02", rows, steps=60, seed=1000, policy_seed=0, n_grid=1)
     rows[0]["termination"] = ""
     assert ended_crossing_energies(agent, "town02", rows, steps=60, seed=1000, policy_seed=0) is None

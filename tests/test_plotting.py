@@ -246,5 +246,6 @@ def test_agents_figures():
     assert list(line.get_xdata()) == [0.0, -0.5] and fig.axes[0].get_title() == "IBC seed 0"
     assert fig.axes[0].get_images()[0].get_array().max() == 10  # clipped
     assert_labelled(fig)
-    with pytest.raises(ValueError):
-        agents.plot_crossing_energies({}, steer)
+    for bad in (dict(panels={}), dict(panels={"A": np.zeros((0, 5))}), dict(panels={"A": np.zeros((1, 5))}, clip=0)):
+        with pytest.raises(ValueError):
+            agents.plot_crossing_energies(steer=steer, **bad)

@@ -9,6 +9,7 @@ from matplotlib.patches import FancyBboxPatch
 
 from ibc_tutorial.plotting.common import ACCEL_LABEL, STEER_LABEL, as_array, check_panels, finish, label_axes
 from ibc_tutorial.plotting.town import draw_bev, plot_town
+from ibc_tutorial.utils import check_positive
 
 METHOD_COLORS = {"bc": "C0", "ibc": "C2", "da-ibc": "C3", "expert": "k"}
 """Colour of each method in the figures of chapters 08-09."""
@@ -195,6 +196,8 @@ def plot_crossing_energies(panels: dict, steer, *, clip: float = 10.0, dt: float
     steering values ``steer`` (G,); shown up to ``clip`` nats, darker = lower, with each state's
     lowest-energy steering as a line. Time runs down, from the first state of the crossing."""
     n = check_panels("panels", panels)
+    check_positive("clip", clip)
+    check_positive("dt", dt)
     steer = as_array(steer, float).ravel()  # (G,)
     cols = min(n, 3)
     rows = (n + cols - 1) // cols
@@ -204,9 +207,11 @@ def plot_crossing_energies(panels: dict, steer, *, clip: float = 10.0, dt: float
     image = None
     for ax, (name, energies) in zip(axes.ravel(), panels.items()):
         e = as_array(energies, float).reshape(-1, len(steer))  # (T, G)
+        if len(e) == 0:
+            raise ValueError(f"panels[{name!r}] must hold at least one state's energies")
         t = np.arange(len(e)) * dt
         image = ax.imshow(np.minimum(e, clip), aspect="auto", cmap="viridis_r", vmin=0, vmax=clip, origin="upper",
-                          extent=(steer[0], steer[-1], t[-1] + dt if len(t) else dt, 0))
+                          extent=(steer[0], steer[-1], t[-1] + dt, 0))
         ax.plot(steer[e.argmin(axis=1)], t + dt / 2, color="C3", lw=1.2, label="lowest energy")
         label_axes(ax, STEER_LABEL, "time (s)", name, legend=True, loc="lower right", fontsize=7)
     fig.subplots_adjust(left=0.07, right=0.84, top=0.86 if rows == 1 else 0.9, wspace=0.3, hspace=0.45)

@@ -106,6 +106,8 @@ def ended_crossing_energies(agent: Agent, town: str, rows: list[dict], *, steps:
     """
     if agent.method == "bc":
         raise ValueError("ended_crossing_energies needs an energy agent (ibc or da-ibc), got bc")
+    check_int("n_grid", n_grid, minimum=2)
+    check_int("steps", steps, minimum=1)
     wanted = {i: r["junction_crossings"][-1] for i, r in enumerate(rows)
               if r["termination"] and r.get("junction_crossings") and not r["junction_crossings"][-1]["finished"]}
     if not wanted:
