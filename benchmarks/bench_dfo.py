@@ -90,7 +90,11 @@ def head_flops(model: EnergyModel, factorised: bool) -> tuple[int, int]:
 
 
 def encoder_flops(encoder: MLPEncoder) -> int:
-    return sum(2 * m.in_features * m.out_features + m.out_features for m in encoder.net if isinstance(m, torch.nn.Linear))
+    return sum(
+        2 * m.in_features * m.out_features + m.out_features
+        for m in encoder.net
+        if isinstance(m, torch.nn.Linear)
+    )
 
 
 def time_decisions(energy_fn, experts, weights, config: DFOConfig, n: int) -> list[float]:
@@ -110,14 +114,22 @@ def main(argv=None) -> int:
     p.add_argument("--samples", type=int, default=16384, help="N_samples (the paper: 16,384)")
     p.add_argument("--iters", type=int, default=5, help="N_iters (the paper: 5)")
     p.add_argument("--embed", type=int, default=256, help="observation embedding width (the paper: 256)")
-    p.add_argument("--hidden", type=int, default=256, help="width of the head's hidden layers (the paper: 256)")
+    p.add_argument(
+        "--hidden", type=int, default=256, help="width of the head's hidden layers (the paper: 256)"
+    )
     p.add_argument("--layers", type=int, default=2, help="hidden layers in the head (the paper: 2)")
-    p.add_argument("--obs-dim", type=int, default=8, help="size of the (vector) observation fed to the encoder")
+    p.add_argument(
+        "--obs-dim", type=int, default=8, help="size of the (vector) observation fed to the encoder"
+    )
     p.add_argument("--experts", type=int, default=2000, help="expert actions the initialisation draws from")
     p.add_argument("--decisions", type=int, default=20, help="timed decisions per head")
     p.add_argument("--warmup", type=int, default=3, help="untimed decisions first")
-    p.add_argument("--bf16", action="store_true", help="also time the factorised head under bfloat16 autocast")
-    p.add_argument("--threads", type=int, default=None, help="torch threads (default: torch's own choice, one per core)")
+    p.add_argument(
+        "--bf16", action="store_true", help="also time the factorised head under bfloat16 autocast"
+    )
+    p.add_argument(
+        "--threads", type=int, default=None, help="torch threads (default: torch's own choice, one per core)"
+    )
     args = p.parse_args(argv)
     if args.threads is not None:
         torch.set_num_threads(args.threads)
@@ -138,11 +150,13 @@ def main(argv=None) -> int:
         e_plain = plain_energy_fn(model, z)(cand)
         e_fused = fused_energy_fn(model, z)(cand)
         max_diff = float(max((e_fact - e_plain).abs().max(), (e_fact - e_fused).abs().max()))
-    assert torch.allclose(e_fact, e_plain, rtol=1e-4, atol=1e-4) and torch.allclose(e_fact, e_fused, rtol=1e-4, atol=1e-4), max_diff
+    assert torch.allclose(e_fact, e_plain, rtol=1e-4, atol=1e-4) and torch.allclose(
+        e_fact, e_fused, rtol=1e-4, atol=1e-4
+    ), max_diff
 
     # Each decision embeds the observation once (as dfo_policy does), then runs Algorithm 1.
     heads = {
-        "factorised": lambda: (lambda a, z=model.embed(obs): model.energy_from_embedding(z, a)),
+        "factorised": lambda: lambda a, z=model.embed(obs): model.energy_from_embedding(z, a),
         "plain concatenated": lambda: plain_energy_fn(model, model.embed(obs)),
         "factorised, fused (addmm, in-place ReLU)": lambda: fused_energy_fn(model, model.embed(obs)),
     }
@@ -158,12 +172,16 @@ def main(argv=None) -> int:
             return energy
 
         heads["factorised, bf16 autocast"] = bf16_head
-    heads["no head (DFO bookkeeping only)"] = lambda: (lambda a: a.sum(-1))
+    heads["no head (DFO bookkeeping only)"] = lambda: lambda a: a.sum(-1)
 
-    print(f"DFO benchmark: {args.samples} samples x {args.iters} iterations, 2-D actions, embedding {args.embed}, "
-          f"head {args.layers} hidden layers of {args.hidden}")
-    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, torch {torch.__version__}, "
-          f"{torch.get_num_threads()} threads, load average before: {os.getloadavg()[0]:.2f}")
+    print(
+        f"DFO benchmark: {args.samples} samples x {args.iters} iterations, 2-D actions, embedding {args.embed}, "
+        f"head {args.layers} hidden layers of {args.hidden}"
+    )
+    print(
+        f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, torch {torch.__version__}, "
+        f"{torch.get_num_threads()} threads, load average before: {os.getloadavg()[0]:.2f}"
+    )
     print(f"factorised, plain and fused heads agree: max |ΔE| = {max_diff:.1e}")
     enc = encoder_flops(encoder)
     results = {}

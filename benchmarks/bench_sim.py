@@ -70,7 +70,9 @@ def dataset_rate(size: int, batches: int) -> float:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--town", default="town02", choices=("town01", "town02"))
     parser.add_argument("--steps", type=int, default=5000, help="steps per measurement")
     parser.add_argument("--pin", type=int, default=None, help="pin the process to this CPU core (Linux)")

@@ -48,7 +48,9 @@ def notebooks(paths: list[str], with_exercises: bool) -> list[Path]:
 def run(path: Path, timeout: int) -> tuple[float, str]:
     """Execute a copy of ``path``; return (seconds, "ok" or the error's first line)."""
     nb = nbformat.read(path, as_version=4)
-    client = NotebookClient(nb, timeout=timeout, kernel_name="python3", resources={"metadata": {"path": str(path.parent)}})
+    client = NotebookClient(
+        nb, timeout=timeout, kernel_name="python3", resources={"metadata": {"path": str(path.parent)}}
+    )
     t0 = time.perf_counter()
     try:
         client.execute()
@@ -60,7 +62,9 @@ def run(path: Path, timeout: int) -> tuple[float, str]:
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("paths", nargs="*", help="notebooks or folders (default: book/)")
     parser.add_argument("--exercises", action="store_true", help="also time the exercise notebooks")
     parser.add_argument("--timeout", type=int, default=900, help="seconds allowed per cell")
@@ -71,10 +75,15 @@ def main() -> int:
         secs, status = run(path, args.timeout)
         flag = "  > 90 s" if secs > LIMIT_S else ""
         rows.append((path, secs, status))
-        print(f"{str(path.relative_to(ROOT) if path.is_absolute() else path):45s} {secs:7.1f} s  {status}{flag}", flush=True)
+        print(
+            f"{str(path.relative_to(ROOT) if path.is_absolute() else path):45s} {secs:7.1f} s  {status}{flag}",
+            flush=True,
+        )
     cores = os.cpu_count()
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-    print(f"{len(rows)} notebooks, {sum(r[1] for r in rows):.1f} s in all; {cores} CPU cores, load average {load:.1f} at the end")
+    print(
+        f"{len(rows)} notebooks, {sum(r[1] for r in rows):.1f} s in all; {cores} CPU cores, load average {load:.1f} at the end"
+    )
     return 1 if any(r[2] != "ok" for r in rows) else 0
 
 

@@ -6,15 +6,32 @@ import numpy as np
 import pytest
 import torch
 
-from ibc_tutorial.experiments.agents.agent import Agent, architecture, build_network, network_from_architecture, to_tensor_obs
-from ibc_tutorial.experiments.agents.presets import LAPTOP, PAPER, PRESETS, TINY, Preset, differences, get_preset
-from ibc_tutorial.policies import BEVStateEncoder, BetaPolicy, EnergyModel, ObservationEncoder
+from ibc_tutorial.experiments.agents.agent import (
+    Agent,
+    architecture,
+    build_network,
+    network_from_architecture,
+    to_tensor_obs,
+)
+from ibc_tutorial.experiments.agents.presets import (
+    LAPTOP,
+    PAPER,
+    PRESETS,
+    TINY,
+    Preset,
+    differences,
+    get_preset,
+)
+from ibc_tutorial.policies import BetaPolicy, BEVStateEncoder, EnergyModel, ObservationEncoder
 
 
 def _obs(b, size, seed=0):
     g = torch.Generator().manual_seed(seed)
-    return {"bev": torch.randint(0, 2, (b, 5, size, size), generator=g).float(),
-            "state": torch.rand(b, 3, generator=g) * torch.tensor([15.0, 2.0, 2.0]) - torch.tensor([0.0, 1.0, 1.0])}
+    return {
+        "bev": torch.randint(0, 2, (b, 5, size, size), generator=g).float(),
+        "state": torch.rand(b, 3, generator=g) * torch.tensor([15.0, 2.0, 2.0])
+        - torch.tensor([0.0, 1.0, 1.0]),
+    }
 
 
 def test_encoder_is_an_observation_encoder_with_two_256d_branches():
@@ -82,7 +99,9 @@ def test_energy_grid_matches_the_energy():
     obs = _obs(1, TINY.bev_size)
     steer, accel, e = agent.energy_grid(obs, 5)
     assert e.shape == (5, 5)
-    ref = agent.network.energy(obs, torch.tensor([[steer[1], accel[3]]]))  # row = acceleration, column = steer
+    ref = agent.network.energy(
+        obs, torch.tensor([[steer[1], accel[3]]])
+    )  # row = acceleration, column = steer
     assert abs(float(ref[0, 0].detach()) - e[3, 1]) < 1e-5
     with pytest.raises(ValueError, match="energy agent"):
         Agent("bc", build_network("bc", TINY), TINY, torch.zeros(3, 2)).energy_grid(obs)
@@ -91,7 +110,12 @@ def test_energy_grid_matches_the_energy():
 def test_presets():
     assert set(PRESETS) == {"paper", "laptop", "tiny"}
     assert (PAPER.lr, PAPER.epochs, PAPER.batch_size, PAPER.n_neg) == (1e-5, 400, 128, 1024)
-    assert (PAPER.dfo_samples, PAPER.dfo_iters, PAPER.dfo_sigma_init, PAPER.dfo_shrink) == (16384, 5, 0.5, 0.5)
+    assert (PAPER.dfo_samples, PAPER.dfo_iters, PAPER.dfo_sigma_init, PAPER.dfo_shrink) == (
+        16384,
+        5,
+        0.5,
+        0.5,
+    )
     assert (PAPER.kde_bandwidth, PAPER.bev_size, PAPER.embed_dim) == (0.2, 192, 256)
     assert LAPTOP.bev_size == 64 and "bev_size" in differences(PAPER, LAPTOP)
     assert Preset.from_dict(LAPTOP.to_dict()) == LAPTOP
@@ -114,7 +138,9 @@ def test_the_network_is_built_from_its_architecture():
         a = build_network(m, LAPTOP)
         torch.manual_seed(0)
         b = network_from_architecture(arch)
-        assert type(a) is type(b) and all(torch.equal(x, y) for x, y in zip(a.state_dict().values(), b.state_dict().values()))
+        assert type(a) is type(b) and all(
+            torch.equal(x, y) for x, y in zip(a.state_dict().values(), b.state_dict().values())
+        )
         assert arch["network"] == type(a).__name__ and arch["encoder"] == type(a.encoder).__name__
         assert list(a.encoder.channels) == arch["cnn_channels"] and a.encoder.bev_size == arch["bev_size"]
     with pytest.raises(ValueError, match="arch"):
@@ -127,11 +153,22 @@ def test_ended_crossing_energies_replay_the_episode_and_refuse_what_they_cannot_
     torch.manual_seed(0)
     actions = torch.tensor([[0.6, 1.0]] * 100 + [[0.7, 0.9]] * 100)  # DFO starts at hard right turns: crashes
     agent = Agent("da-ibc", build_network("da-ibc", TINY), TINY, actions)
-    results = evaluate_agent(agent, "town02", episodes=2, steps=60, seed=1000, policy_seed=0, record_steps=True,
-                             keep_obs=True, show_progress=False)
+    results = evaluate_agent(
+        agent,
+        "town02",
+        episodes=2,
+        steps=60,
+        seed=1000,
+        policy_seed=0,
+        record_steps=True,
+        keep_obs=True,
+        show_progress=False,
+    )
     assert all(r.terminated for r in results)
     rows = episode_rows(results)
-    end = rows[0]["steps"]  # pretend episode 0 ended inside a crossing of its last 3 states; episode 1 finished one
+    end = rows[0][
+        "steps"
+    ]  # pretend episode 0 ended inside a crossing of its last 3 states; episode 1 finished one
     rows[0]["junction_crossings"] = [{"finished": False, "start": end - 3, "stop": end + 1}]
     rows[1]["junction_crossings"] = [{"finished": True, "start": 0, "stop": 4}]
     steer = ended_crossing_energies(agent, "town02", rows, steps=60, seed=1000, policy_seed=0, n_grid=9)
@@ -140,7 +177,9 @@ def test_ended_crossing_energies_replay_the_episode_and_refuse_what_they_cannot_
     assert profiles.shape == (3, 9) and (profiles.min(axis=1) == 0).all()
     tr = results[0].trace
     _, _, e = agent.energy_grid({"bev": tr["bev"][end - 1][None], "state": tr["state"][end - 1][None]}, 9)
-    np.testing.assert_allclose(profiles[-1], e.min(axis=0) - e.min(), atol=2e-3)  # the last state's, as recorded
+    np.testing.assert_allclose(
+        profiles[-1], e.min(axis=0) - e.min(), atol=2e-3
+    )  # the last state's, as recorded
     assert "energy_by_steer" not in rows[1]["junction_crossings"][0]
     rows[0]["distance_m"] += 1.0  # not what a replay gives
     with pytest.raises(ValueError, match="the replay of episode 0 ended"):

@@ -19,8 +19,16 @@ def saved(tmp_path):
     torch.manual_seed(0)
     net = build_network("da-ibc", TINY)
     actions = torch.rand(30, 2) * 2 - 1
-    path = save_checkpoint(tmp_path / "a.pt", method="da-ibc", preset=TINY, network=net, data_sha256="ab" * 32,
-                           epoch=3, expert_actions=actions, init_weights=torch.full((30,), 1 / 30))
+    path = save_checkpoint(
+        tmp_path / "a.pt",
+        method="da-ibc",
+        preset=TINY,
+        network=net,
+        data_sha256="ab" * 32,
+        epoch=3,
+        expert_actions=actions,
+        init_weights=torch.full((30,), 1 / 30),
+    )
     return path, net, actions
 
 
@@ -46,9 +54,18 @@ def test_a_network_on_a_gpu_is_stored_as_cpu_copies(monkeypatch):
     stored = {}
     monkeypatch.setattr(checkpoints, "atomic_torch_save", lambda obj, path: stored.update(obj))
     cpu_net = build_network("da-ibc", TINY)
-    save_checkpoint("unused.pt", method="da-ibc", preset=TINY, network=cpu_net, data_sha256="ab" * 32, epoch=1,
-                    expert_actions=torch.zeros(30, 2))
-    assert all(stored["model"][k].data_ptr() != v.data_ptr() for k, v in cpu_net.state_dict().items())  # on the CPU too
+    save_checkpoint(
+        "unused.pt",
+        method="da-ibc",
+        preset=TINY,
+        network=cpu_net,
+        data_sha256="ab" * 32,
+        epoch=1,
+        expert_actions=torch.zeros(30, 2),
+    )
+    assert all(
+        stored["model"][k].data_ptr() != v.data_ptr() for k, v in cpu_net.state_dict().items()
+    )  # on the CPU too
     shapes = {k: (v.shape, v.dtype) for k, v in cpu_net.state_dict().items()}
 
     class OnGPU(torch.nn.Module):
@@ -60,16 +77,31 @@ def test_a_network_on_a_gpu_is_stored_as_cpu_copies(monkeypatch):
             return self.state
 
     with fake_tensor.FakeTensorMode():
-        net = OnGPU({k: torch.zeros(shape, dtype=dtype, device="cuda") for k, (shape, dtype) in shapes.items()})
+        net = OnGPU(
+            {k: torch.zeros(shape, dtype=dtype, device="cuda") for k, (shape, dtype) in shapes.items()}
+        )
         actions, weights = torch.zeros(30, 2, device="cuda"), torch.ones(30, device="cuda")
         for half in (False, True):
-            save_checkpoint("unused.pt", method="da-ibc", preset=TINY, network=net, data_sha256="ab" * 32, epoch=1,
-                            expert_actions=actions, init_weights=weights, half=half)
+            save_checkpoint(
+                "unused.pt",
+                method="da-ibc",
+                preset=TINY,
+                network=net,
+                data_sha256="ab" * 32,
+                epoch=1,
+                expert_actions=actions,
+                init_weights=weights,
+                half=half,
+            )
             model = stored["model"]
             assert set(model) == set(shapes) and all(v.device.type == "cpu" for v in model.values())
-            assert all(v.dtype == (torch.float16 if half and shapes[k][1].is_floating_point else shapes[k][1])
-                       for k, v in model.items())
-            assert stored["expert_actions"].device.type == "cpu" and stored["init_weights"].device.type == "cpu"
+            assert all(
+                v.dtype == (torch.float16 if half and shapes[k][1].is_floating_point else shapes[k][1])
+                for k, v in model.items()
+            )
+            assert (
+                stored["expert_actions"].device.type == "cpu" and stored["init_weights"].device.type == "cpu"
+            )
         assert all(v.device.type == "cuda" for v in net.state_dict().values())  # copied, not moved
         assert actions.device.type == "cuda" and weights.device.type == "cuda"
 
@@ -109,7 +141,9 @@ def test_refuses_other_architectures(saved):
         load_checkpoint(path, preset=dataclasses.replace(TINY, embed_dim=32))
     with pytest.raises(ValueError, match="method 'da-ibc', expected 'bc'"):
         load_checkpoint(path, method="bc")
-    load_checkpoint(path, method="da-ibc", preset=dataclasses.replace(TINY, epochs=9))  # training length is not architecture
+    load_checkpoint(
+        path, method="da-ibc", preset=dataclasses.replace(TINY, epochs=9)
+    )  # training length is not architecture
     ckpt = torch.load(path, weights_only=True)
     ckpt["model"]["obs_proj.weight"] = torch.zeros(3, 3)
     torch.save(ckpt, path)

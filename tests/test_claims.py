@@ -8,8 +8,15 @@ import numpy as np
 import pytest
 
 from ibc_tutorial import cli, stats
-from ibc_tutorial.experiments.agents.claims import (CLAIMS, ClaimVerdicts, combine, compare_verdicts,
-                                                    first_eval_scores, judge_claims, spread_interval)
+from ibc_tutorial.experiments.agents.claims import (
+    CLAIMS,
+    ClaimVerdicts,
+    combine,
+    compare_verdicts,
+    first_eval_scores,
+    judge_claims,
+    spread_interval,
+)
 from ibc_tutorial.experiments.agents.presets import TINY
 
 SHIPPED = Path(__file__).resolve().parents[1] / "book" / "results" / "laptop"
@@ -34,7 +41,11 @@ def test_every_claim_gets_a_verdict(judged, replicated):
     for k, c in judged.claims.items():
         assert c.number == k and c.claim == CLAIMS[k] and c.verdict in VERDICTS
         assert all(isinstance(j, stats.Judgement) and j.verdict in VERDICTS for j in c.parts)
-    assert [len(judged[k].parts) for k in (1, 2, 3)] == [2, 2, 2]  # tiny has held-out starts: both sets judged
+    assert [len(judged[k].parts) for k in (1, 2, 3)] == [
+        2,
+        2,
+        2,
+    ]  # tiny has held-out starts: both sets judged
     assert judged[4].parts == () and isinstance(judged.exit_test, stats.ExitTest)
     assert judged[4].verdict == judged.exit_test.verdict
     assert len(judged[5].parts) + len(judged[5].missing) == 2
@@ -52,7 +63,8 @@ def test_the_parts_are_computed_from_the_folder(judged, replicated):
     line = json.loads((replicated / "runs" / "bc" / "seed0" / "metrics.jsonl").read_text().splitlines()[0])
     assert first[0].tolist() == [e["score"] for e in line["episodes"]]
     assert judged[1].parts[0].interval.estimate == pytest.approx(
-        first.mean() - first_eval_scores(replicated, "ibc", TINY).mean())
+        first.mean() - first_eval_scores(replicated, "ibc", TINY).mean()
+    )
 
 
 def test_a_folder_agrees_with_itself(judged, replicated):
@@ -71,7 +83,9 @@ def test_bad_folders_are_refused(replicated, tmp_path):
     (unfinished / "results.json").write_text(json.dumps(dict(res, complete=False)))
     with pytest.raises(ValueError, match=f"{unfinished}.*not a finished replication"):
         judge_claims(unfinished)
-    (unfinished / "results.json").write_text(json.dumps({k: v for k, v in res.items() if k != "free_driving"}))
+    (unfinished / "results.json").write_text(
+        json.dumps({k: v for k, v in res.items() if k != "free_driving"})
+    )
     with pytest.raises(ValueError, match="no free driving"):
         judge_claims(unfinished)
     with pytest.raises(ValueError, match="folder must be a path"):

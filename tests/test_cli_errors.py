@@ -28,7 +28,10 @@ def snapshot(*roots) -> dict:
     for root in roots:
         root = Path(root)
         for p in [root, *sorted(root.rglob("*"))] if root.exists() else []:
-            out[str(p)] = (hashlib.sha256(p.read_bytes()).hexdigest() if p.is_file() else "dir", p.stat().st_mode)
+            out[str(p)] = (
+                hashlib.sha256(p.read_bytes()).hexdigest() if p.is_file() else "dir",
+                p.stat().st_mode,
+            )
     return out
 
 
@@ -52,25 +55,39 @@ def shared(tmp_path_factory):
     """A small demonstration file (about 100 samples) and a finished tiny bc run trained on it."""
     root = tmp_path_factory.mktemp("shared")
     data = root / "town01.npz"
-    collect(CollectConfig(routes=1, seed=0, min_minutes=0.15, max_minutes=0.2, brake_noise=TINY.brake_noise),
-            show_progress=False).save(data)
+    collect(
+        CollectConfig(routes=1, seed=0, min_minutes=0.15, max_minutes=0.2, brake_noise=TINY.brake_noise),
+        show_progress=False,
+    ).save(data)
     run = root / "run"
-    assert cli.main(["train", "--method", "bc", "--data", str(data), "--preset", "tiny", "--out", str(run)]) == 0
+    assert (
+        cli.main(["train", "--method", "bc", "--data", str(data), "--preset", "tiny", "--out", str(run)]) == 0
+    )
     return root, data, run
 
 
 def _train(data, out, *extra):
-    return [str(a) for a in ("train", "--method", "bc", "--data", data, "--preset", "tiny", "--out", out, *extra)]
+    return [
+        str(a) for a in ("train", "--method", "bc", "--data", data, "--preset", "tiny", "--out", out, *extra)
+    ]
 
 
 # ----------------------------------------------------------------------------- demonstration files
 def _resave(path, log: DemoLog, meta: dict | None = None):
     """``log`` written with a valid checksum of its content (an adversary's re-saved file)."""
-    arrays = {k: getattr(log, k) for k in ("pose", "speed", "prev_action", "action", "executed", "lights", "episode",
-                                           "step", "lane")}
+    arrays = {
+        k: getattr(log, k)
+        for k in ("pose", "speed", "prev_action", "action", "executed", "lights", "episode", "step", "lane")
+    }
     meta = dict(log.meta, town=log.town) if meta is None else meta
-    np.savez(path, format=np.array(FORMAT), version=np.array(VERSION), meta=np.array(json.dumps(meta)),
-             checksum=np.array(log.checksum()), **arrays)
+    np.savez(
+        path,
+        format=np.array(FORMAT),
+        version=np.array(VERSION),
+        meta=np.array(json.dumps(meta)),
+        checksum=np.array(log.checksum()),
+        **arrays,
+    )
     return path
 
 
@@ -109,8 +126,13 @@ def test_demonstrations_damaged_or_incomplete(shared, tmp_path, capsys):
     with np.load(data) as z:
         np.savez(tmp_path / "no_lights.npz", **{k: z[k] for k in z.files if k != "lights"})
     (tmp_path / "folder.npz").mkdir()
-    cases = {"cut.npz": "truncated or damaged", "no_town.npz": "meta", "no_config.npz": "meta lacks",
-             "no_lights.npz": "lacks", "folder.npz": "is a folder"}
+    cases = {
+        "cut.npz": "truncated or damaged",
+        "no_town.npz": "meta",
+        "no_config.npz": "meta lacks",
+        "no_lights.npz": "lacks",
+        "folder.npz": "is a folder",
+    }
     for name, words in cases.items():
         refused(capsys, _train(tmp_path / name, tmp_path / "out"), tmp_path / name, words, roots=[tmp_path])
 
@@ -136,17 +158,27 @@ def test_damaged_checkpoints(shared, tmp_path, capsys):
         tmp_path / "cut.pt": "truncated or damaged",
         _ckpt(shared, tmp_path, "no_preset.pt", lambda c: c.pop("preset")): "lacks the field 'preset'",
         _ckpt(shared, tmp_path, "no_epoch.pt", lambda c: c.pop("epoch")): "lacks the field 'epoch'",
-        _ckpt(shared, tmp_path, "nan.pt", lambda c: next(iter(c["model"].values())).fill_(float("nan"))): "NaN or inf",
-        _ckpt(shared, tmp_path, "empty_actions.pt", lambda c: c.update(expert_actions=torch.zeros(0, 2))): "expert_actions",
-        _ckpt(shared, tmp_path, "short_weights.pt", lambda c: c.update(init_weights=torch.ones(3))): "init_weights",
-        _ckpt(shared, tmp_path, "other_preset.pt", lambda c: c["preset"].update(embed_dim=99)): "preset and its architecture",
+        _ckpt(
+            shared, tmp_path, "nan.pt", lambda c: next(iter(c["model"].values())).fill_(float("nan"))
+        ): "NaN or inf",
+        _ckpt(
+            shared, tmp_path, "empty_actions.pt", lambda c: c.update(expert_actions=torch.zeros(0, 2))
+        ): "expert_actions",
+        _ckpt(
+            shared, tmp_path, "short_weights.pt", lambda c: c.update(init_weights=torch.ones(3))
+        ): "init_weights",
+        _ckpt(
+            shared, tmp_path, "other_preset.pt", lambda c: c["preset"].update(embed_dim=99)
+        ): "preset and its architecture",
         _ckpt(shared, tmp_path, "pickled.pt", lambda c: c.update(extra=Foreign())): "Python objects",
         _ckpt(shared, tmp_path, "list.pt", lambda c: c.update(metrics=7)): "metrics",
     }
     (tmp_path / "folder.pt").mkdir()
     cases[tmp_path / "folder.pt"] = "is a folder"
     for path, words in cases.items():
-        refused(capsys, ["evaluate", "--checkpoint", path, "--steps", "3"], path, words, roots=[tmp_path, run])
+        refused(
+            capsys, ["evaluate", "--checkpoint", path, "--steps", "3"], path, words, roots=[tmp_path, run]
+        )
 
 
 def test_final_checkpoint_as_last_is_not_resumed(shared, tmp_path, capsys):
@@ -154,20 +186,37 @@ def test_final_checkpoint_as_last_is_not_resumed(shared, tmp_path, capsys):
     out = tmp_path / "run"
     shutil.copytree(run, out)
     shutil.copy(out / "final.pt", out / "last.pt")
-    refused(capsys, _train(data, out, "--epochs", "3"), "last.pt", "no optimiser and generator states", roots=[tmp_path])
+    refused(
+        capsys,
+        _train(data, out, "--epochs", "3"),
+        "last.pt",
+        "no optimiser and generator states",
+        roots=[tmp_path],
+    )
 
 
 # ----------------------------------------------------------------------------- reused folders
 def test_train_refuses_a_folder_of_another_run(shared, tmp_path, capsys):
     root, data, run = shared
     other = tmp_path / "other.npz"
-    collect(CollectConfig(routes=1, seed=5, min_minutes=0.15, max_minutes=0.2), show_progress=False).save(other)
+    collect(CollectConfig(routes=1, seed=5, min_minutes=0.15, max_minutes=0.2), show_progress=False).save(
+        other
+    )
     roots = [root, tmp_path]
-    refused(capsys, ["train", "--method", "da-ibc", "--data", data, "--preset", "tiny", "--out", run], "method 'bc'",
-            "--force", roots=roots)
+    refused(
+        capsys,
+        ["train", "--method", "da-ibc", "--data", data, "--preset", "tiny", "--out", run],
+        "method 'bc'",
+        "--force",
+        roots=roots,
+    )
     refused(capsys, _train(data, run, "--seed", "3"), "seed 0, not 3", roots=roots)
-    refused(capsys, ["train", "--method", "bc", "--data", data, "--preset", "laptop", "--out", run], "other settings",
-            roots=roots)
+    refused(
+        capsys,
+        ["train", "--method", "bc", "--data", data, "--preset", "laptop", "--out", run],
+        "other settings",
+        roots=roots,
+    )
     refused(capsys, _train(other, run), "other demonstrations", roots=roots)
     refused(capsys, _train(data, run, "--epochs", "1"), "epoch 2 already", roots=roots)
 
@@ -179,14 +228,39 @@ def test_a_finished_replicated_run_is_never_overwritten(shared, tmp_path, capsys
     shutil.copytree(run, out)
     (out / "last.pt").unlink()
     (out / "final.pt").unlink()
-    (out / "final_eval.json").write_text(json.dumps({"method": "bc", "seed": 0, "summary": {}, "episodes": [
-        {"seed": 1000, "steps": 3, "distance_m": 1.0, "red_light_infractions": 0, "score": 1.0, "termination": ""}]}))
-    refused(capsys, ["train", "--method", "ibc", "--data", data, "--preset", "tiny", "--out", out], "method 'bc'",
-            roots=[tmp_path])
+    (out / "final_eval.json").write_text(
+        json.dumps(
+            {
+                "method": "bc",
+                "seed": 0,
+                "summary": {},
+                "episodes": [
+                    {
+                        "seed": 1000,
+                        "steps": 3,
+                        "distance_m": 1.0,
+                        "red_light_infractions": 0,
+                        "score": 1.0,
+                        "termination": "",
+                    }
+                ],
+            }
+        )
+    )
+    refused(
+        capsys,
+        ["train", "--method", "ibc", "--data", data, "--preset", "tiny", "--out", out],
+        "method 'bc'",
+        roots=[tmp_path],
+    )
     refused(capsys, _train(data, out, "--epochs", "3"), "without its resume state", roots=[tmp_path])
     (out / "run.json").unlink()  # a run of an older version: identified by its metrics
-    refused(capsys, ["train", "--method", "ibc", "--data", data, "--preset", "tiny", "--out", out], "method 'bc'",
-            roots=[tmp_path])
+    refused(
+        capsys,
+        ["train", "--method", "ibc", "--data", data, "--preset", "tiny", "--out", out],
+        "method 'bc'",
+        roots=[tmp_path],
+    )
     assert cli.main(_train(data, out)) == 0 and "nothing to do" in capsys.readouterr().out
 
 
@@ -202,35 +276,71 @@ def _replication(folder: Path, preset=TINY, data=None) -> Path:
 def test_replicate_refuses_other_settings_and_damaged_files(shared, tmp_path, capsys):
     _, data, _ = shared
     rep = _replication(tmp_path / "rep", data=data)
-    refused(capsys, ["replicate", "--preset", "laptop", "--out", rep], "preset 'tiny', not 'laptop'", "--force",
-            roots=[tmp_path])
+    refused(
+        capsys,
+        ["replicate", "--preset", "laptop", "--out", rep],
+        "preset 'tiny', not 'laptop'",
+        "--force",
+        roots=[tmp_path],
+    )
     only_data = tmp_path / "only_data"
     (only_data / "data").mkdir(parents=True)
     shutil.copy(data, only_data / "data" / "town01.npz")
-    refused(capsys, ["replicate", "--preset", "laptop", "--out", only_data], "collected with other settings",
-            roots=[tmp_path])
+    refused(
+        capsys,
+        ["replicate", "--preset", "laptop", "--out", only_data],
+        "collected with other settings",
+        roots=[tmp_path],
+    )
     foreign = tmp_path / "foreign"
     foreign.mkdir()
     (foreign / "notes.txt").write_text("mine")
-    refused(capsys, ["replicate", "--preset", "tiny", "--out", foreign], "not a replication", roots=[tmp_path])
-    refused(capsys, ["replicate", "--preset", "tiny", "--out", foreign, "--force"], "not a replication", roots=[tmp_path])
-    damaged = {"results.json": (b"{\"table\": ", "not readable JSON"), "provenance.json": (b"[1, 2]", "holds a list")}
+    refused(
+        capsys, ["replicate", "--preset", "tiny", "--out", foreign], "not a replication", roots=[tmp_path]
+    )
+    refused(
+        capsys,
+        ["replicate", "--preset", "tiny", "--out", foreign, "--force"],
+        "not a replication",
+        roots=[tmp_path],
+    )
+    damaged = {
+        "results.json": (b'{"table": ', "not readable JSON"),
+        "provenance.json": (b"[1, 2]", "holds a list"),
+    }
     for name, (content, words) in damaged.items():
         (rep / name).write_bytes(content)
         refused(capsys, ["replicate", "--preset", "tiny", "--out", rep], rep / name, words, roots=[tmp_path])
         (rep / name).unlink()
     raw = data.read_bytes()
     (rep / "data" / "town01.npz").write_bytes(raw[:100])
-    refused(capsys, ["replicate", "--preset", "tiny", "--out", rep], rep / "data" / "town01.npz", "truncated",
-            roots=[tmp_path])
+    refused(
+        capsys,
+        ["replicate", "--preset", "tiny", "--out", rep],
+        rep / "data" / "town01.npz",
+        "truncated",
+        roots=[tmp_path],
+    )
     shutil.copy(data, rep / "data" / "town01.npz")
     run = rep / "runs" / "bc" / "seed0"
     run.mkdir(parents=True)
     (run / "final_eval.json").write_text("{")
-    refused(capsys, ["replicate", "--preset", "tiny", "--out", rep], run / "final_eval.json", "damaged", roots=[tmp_path])
+    refused(
+        capsys,
+        ["replicate", "--preset", "tiny", "--out", rep],
+        run / "final_eval.json",
+        "damaged",
+        roots=[tmp_path],
+    )
     (run / "final_eval.json").unlink()
     (run / "metrics.jsonl").write_text('{"epoch": 1}\n')
-    refused(capsys, ["replicate", "--preset", "tiny", "--out", rep], run / "metrics.jsonl", "line 1", roots=[tmp_path])
+    refused(
+        capsys,
+        ["replicate", "--preset", "tiny", "--out", rep],
+        run / "metrics.jsonl",
+        "line 1",
+        roots=[tmp_path],
+    )
 
 
 def test_load_results_names_damaged_files(tmp_path):
@@ -265,10 +375,19 @@ def test_output_paths_are_checked_before_any_work(shared, tmp_path, capsys):
     refused(capsys, _train(data, a_file), "is a file, expected a folder", roots=roots)
     refused(capsys, _train(data, a_file / "run"), "is a file, not a folder", roots=roots)
     refused(capsys, _train(data, UNWRITABLE), "cannot write", roots=roots)
-    refused(capsys, ["replicate", "--preset", "tiny", "--out", a_file], "is a file, expected a folder", roots=roots)
+    refused(
+        capsys,
+        ["replicate", "--preset", "tiny", "--out", a_file],
+        "is a file, expected a folder",
+        roots=roots,
+    )
     refused(capsys, ["replicate", "--preset", "tiny", "--out", UNWRITABLE], "cannot write", roots=roots)
-    refused(capsys, _train(tmp_path / "a_folder", tmp_path / "r"), "is a folder, expected a demonstration file",
-            roots=roots)
+    refused(
+        capsys,
+        _train(tmp_path / "a_folder", tmp_path / "r"),
+        "is a folder, expected a demonstration file",
+        roots=roots,
+    )
     refused(capsys, ["evaluate", "--checkpoint", run], "is a folder", roots=roots)
 
 
@@ -289,18 +408,41 @@ def test_bad_command_lines_are_one_line(shared, tmp_path, capsys):
     _, data, run = shared
     roots = [tmp_path, run]
     refused(capsys, ["train", "--method", "bc", "--data", data], "--out", roots=roots)
-    refused(capsys, ["train", "--method", "sgd", "--data", data, "--out", tmp_path / "x"], "invalid choice", roots=roots)
+    refused(
+        capsys,
+        ["train", "--method", "sgd", "--data", data, "--out", tmp_path / "x"],
+        "invalid choice",
+        roots=roots,
+    )
     refused(capsys, _train(data, tmp_path / "x", "--epochs", "0"), "--epochs must be >= 1", roots=roots)
     refused(capsys, _train(data, tmp_path / "x", "--epochs", "two"), "invalid int value", roots=roots)
-    refused(capsys, ["evaluate", "--checkpoint", run / "final.pt", "--episodes", "0"], "--episodes must be >= 1",
-            roots=roots)
-    refused(capsys, ["collect", "--routes", "0", "--out", tmp_path / "d.npz"], "routes must be >= 1", roots=roots)
-    refused(capsys, ["replicate", "--preset", "tiny", "--out", tmp_path / "r", "--workers", "0"], "--workers",
-            roots=roots)
-    refused(capsys, ["evaluate", "--checkpoint", run / "final.pt", "--routed", "--routeless"], "not allowed",
-            roots=roots)
-    refused(capsys, ["evaluate", "--checkpoint", run / "final.pt", "--crossings"], "--crossings needs --out",
-            roots=roots)
+    refused(
+        capsys,
+        ["evaluate", "--checkpoint", run / "final.pt", "--episodes", "0"],
+        "--episodes must be >= 1",
+        roots=roots,
+    )
+    refused(
+        capsys, ["collect", "--routes", "0", "--out", tmp_path / "d.npz"], "routes must be >= 1", roots=roots
+    )
+    refused(
+        capsys,
+        ["replicate", "--preset", "tiny", "--out", tmp_path / "r", "--workers", "0"],
+        "--workers",
+        roots=roots,
+    )
+    refused(
+        capsys,
+        ["evaluate", "--checkpoint", run / "final.pt", "--routed", "--routeless"],
+        "not allowed",
+        roots=roots,
+    )
+    refused(
+        capsys,
+        ["evaluate", "--checkpoint", run / "final.pt", "--crossings"],
+        "--crossings needs --out",
+        roots=roots,
+    )
 
 
 def test_interrupt_is_one_line(shared, tmp_path, capsys, monkeypatch):

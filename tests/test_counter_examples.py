@@ -45,7 +45,9 @@ def test_evaluate_of_the_expert_density_reaches_the_floor():
 def test_negatives_histogram_and_mode_masses():
     actions = torch.tensor([[0.0, 0.0]]).repeat(10, 1)
     h = negatives_histogram(ExpertSampler(0.0), actions, 4, batches=2, batch_size=4, bins=10)
-    assert h.shape == (10, 10) and float(h.sum()) == pytest.approx(1.0) and float(h[5, 5]) == pytest.approx(1.0)
+    assert (
+        h.shape == (10, 10) and float(h.sum()) == pytest.approx(1.0) and float(h[5, 5]) == pytest.approx(1.0)
+    )
     u = negatives_histogram(UniformSampler(-1.0, 1.0), actions, 100, batches=20, bins=4)
     assert (u > 0.05).all()  # uniform counter-examples visit every cell
 
@@ -67,7 +69,9 @@ def test_negatives_histogram_and_mode_masses():
 
 def test_a_short_run_records_its_measures():
     world = JunctionWorld()
-    config = CounterExampleConfig(n_train=128, n_heldout=16, train=train_config(steps=4, batch_size=8, log_every=2), grid_n=11)
+    config = CounterExampleConfig(
+        n_train=128, n_heldout=16, train=train_config(steps=4, batch_size=8, log_every=2), grid_n=11
+    )
     data = make_datasets(world, config)
     out = run(world, UniformSampler(), config, seed=0, data=data)
     assert isinstance(out, CounterExampleRun) and out.steps == [2, 4]
@@ -85,7 +89,12 @@ def test_counter_example_config_is_checked():
 
 def test_train_config_holds_the_chapters_settings():
     config = CounterExampleConfig()
-    assert (config.train.steps, config.train.batch_size, config.train.lr, config.train.log_every) == (600, 64, 3e-3, 50)
+    assert (config.train.steps, config.train.batch_size, config.train.lr, config.train.log_every) == (
+        600,
+        64,
+        3e-3,
+        50,
+    )
     assert train_config(steps=300).steps == 300 and train_config(steps=300).batch_size == 64
     with pytest.raises(TypeError):
         train_config(step=300)  # a misspelt field is not silently ignored
@@ -103,4 +112,7 @@ def test_run_uses_its_seed_not_the_train_seed():
     a = CounterExampleConfig(**small, train=train_config(steps=2, batch_size=4, log_every=2, seed=0))
     b = CounterExampleConfig(**small, train=TrainConfig(steps=2, batch_size=4, lr=3e-3, log_every=2, seed=7))
     data = make_datasets(world, a)
-    assert run(world, UniformSampler(), a, seed=3, data=data).losses == run(world, UniformSampler(), b, seed=3, data=data).losses
+    assert (
+        run(world, UniformSampler(), a, seed=3, data=data).losses
+        == run(world, UniformSampler(), b, seed=3, data=data).losses
+    )

@@ -35,7 +35,9 @@ NO_MPS = not torch.backends.mps.is_available()
 @pytest.fixture(scope="module")
 def data(tmp_path_factory):
     path = tmp_path_factory.mktemp("demo") / "town01.npz"
-    collect(CollectConfig(routes=1, seed=0, min_minutes=0.15, max_minutes=0.2), show_progress=False).save(path)
+    collect(CollectConfig(routes=1, seed=0, min_minutes=0.15, max_minutes=0.2), show_progress=False).save(
+        path
+    )
     return path
 
 
@@ -76,16 +78,21 @@ def test_mps_is_refused_without_mps():
 
 
 @pytest.mark.skipif(not NO_CUDA, reason="this machine has CUDA")
-@pytest.mark.parametrize("command", [
-    ["train", "--method", "da-ibc", "--data", "missing.npz", "--out", "runs/x"],
-    ["evaluate", "--checkpoint", "missing.pt"],
-    ["replicate", "--out", "results/x"],
-])
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["train", "--method", "da-ibc", "--data", "missing.npz", "--out", "runs/x"],
+        ["evaluate", "--checkpoint", "missing.pt"],
+        ["replicate", "--out", "results/x"],
+    ],
+)
 def test_the_commands_refuse_an_absent_device_first(command, tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     assert cli.main(command + ["--device", "cuda"]) == cli.USER_ERROR
     err = capsys.readouterr().err.splitlines()
-    assert len(err) == 1 and "--device 'cuda': CUDA is not available" in err[0], err  # before the missing file
+    assert len(err) == 1 and "--device 'cuda': CUDA is not available" in err[0], (
+        err
+    )  # before the missing file
     assert cli.main(command + ["--device", "gpu"]) == cli.USER_ERROR
     err = capsys.readouterr().err.splitlines()
     assert len(err) == 1 and "--device must be a torch device name" in err[0], err
@@ -97,8 +104,9 @@ def test_the_commands_refuse_an_absent_device_first(command, tmp_path, monkeypat
 def test_device_cpu_is_bit_identical_to_the_default(method, data, dataset, tmp_path):
     runs = {}
     for name, kwargs in (("default", {}), ("cpu", {"device": "cpu"})):
-        res = train_agent(method, data, TINY, 0, tmp_path / name, dataset=dataset, log=None, show_progress=False,
-                          **kwargs)
+        res = train_agent(
+            method, data, TINY, 0, tmp_path / name, dataset=dataset, log=None, show_progress=False, **kwargs
+        )
         runs[name] = (res, torch.load(tmp_path / name / "final.pt", weights_only=True))
     (a, ca), (b, cb) = runs["default"], runs["cpu"]
     assert [m["loss"] for m in a.metrics] == [m["loss"] for m in b.metrics]
@@ -115,7 +123,9 @@ def _trainer(method: str, dataset, seed: int = 3) -> Trainer:
     net = build_network(method, TINY)
     config = TrainConfig(steps=3, batch_size=TINY.batch_size, seed=seed, log_every=1, progress=False)
     probs = torch.full((len(dataset),), 1.0 / len(dataset))
-    return Trainer(net, objective_for(method, net, TINY), DemoBatches(dataset, "cpu"), config, sample_probs=probs)
+    return Trainer(
+        net, objective_for(method, net, TINY), DemoBatches(dataset, "cpu"), config, sample_probs=probs
+    )
 
 
 @pytest.mark.parametrize("method", ["bc", "ibc", "da-ibc"])
@@ -128,7 +138,9 @@ def test_a_training_step_draws_only_from_the_run_generator(method, dataset):
         before = torch.get_rng_state()
         losses = trainer.run().losses
         assert torch.equal(torch.get_rng_state(), before), "a draw used torch's global generator"
-        assert not torch.equal(trainer.generator.get_state(), start)  # the minibatches (and negatives) were drawn
+        assert not torch.equal(
+            trainer.generator.get_state(), start
+        )  # the minibatches (and negatives) were drawn
         results.append((losses, trainer.model.state_dict()))
     (la, wa), (lb, wb) = results
     assert la == lb and all(torch.equal(wa[k], wb[k]) for k in wa)

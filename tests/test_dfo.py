@@ -9,7 +9,15 @@ import torch
 
 from ibc_tutorial.kde import inverse_density_weights, kde_density
 from ibc_tutorial.optimizers import ActionOptimizer
-from ibc_tutorial.optimizers.dfo import DFOConfig, DFOOptimizer, dfo, dfo_policy, dfo_trace, initial_samples, initial_weights
+from ibc_tutorial.optimizers.dfo import (
+    DFOConfig,
+    DFOOptimizer,
+    dfo,
+    dfo_policy,
+    dfo_trace,
+    initial_samples,
+    initial_weights,
+)
 from ibc_tutorial.widgets import _dfo_iteration_figure, dfo_stepper
 
 TAU = 0.01  # valley width: E = (y − c)² / TAU
@@ -42,7 +50,9 @@ def cfg(**kw):
 def test_equal_valleys_both_reached_with_sample(init):
     g = torch.Generator().manual_seed(0)
     experts = symmetric_experts()
-    actions = torch.stack([dfo(two_valleys(), experts, cfg(init=init), generator=g) for _ in range(200)])  # (200, 1)
+    actions = torch.stack(
+        [dfo(two_valleys(), experts, cfg(init=init), generator=g) for _ in range(200)]
+    )  # (200, 1)
     right = (actions[:, 0] > 0).float().mean()
     assert 0.35 < float(right) < 0.65
     # and every answer lies in a valley (closer to a floor than to the ridge at 0)
@@ -64,7 +74,12 @@ def test_sample_follows_the_sharpened_distribution_on_unequal_valleys():
     experts = symmetric_experts()
     share = {}
     for k in (1, 5):
-        acts = torch.stack([dfo(two_valleys(offset=0.3), experts, cfg(init="uniform", n_iters=k), generator=g) for _ in range(300)])
+        acts = torch.stack(
+            [
+                dfo(two_valleys(offset=0.3), experts, cfg(init="uniform", n_iters=k), generator=g)
+                for _ in range(300)
+            ]
+        )
         share[k] = float((acts[:, 0] > 0).float().mean())
     # equal widths: p(shallow) = e^{-k·0.3} / (1 + e^{-k·0.3}); k = 1: 0.43, k = 5: 0.18
     assert abs(share[1] - 1 / (1 + math.exp(0.3))) < 0.08
@@ -107,7 +122,9 @@ def test_single_is_batched_with_b_equal_1_and_rows_are_independent():
     experts = symmetric_experts()
     c = DFOConfig(n_samples=128)
     a = dfo(two_valleys(), experts, c, generator=torch.Generator().manual_seed(9))
-    b = dfo(lambda y: two_valleys()(y[0])[None], experts, c, n_obs=1, generator=torch.Generator().manual_seed(9))
+    b = dfo(
+        lambda y: two_valleys()(y[0])[None], experts, c, n_obs=1, generator=torch.Generator().manual_seed(9)
+    )
     assert a.shape == (1,) and b.shape == (1, 1) and torch.equal(a, b[0])
     # B = 3 observations, each with its own single valley at c_b
     centres = torch.tensor([-0.6, 0.1, 0.7])
@@ -119,18 +136,26 @@ def test_single_is_batched_with_b_equal_1_and_rows_are_independent():
 
 def test_initialisations_follow_their_weights():
     g = torch.Generator().manual_seed(4)
-    experts = torch.cat([torch.randn(900, 1, generator=g) * 0.05, 0.7 + torch.randn(100, 1, generator=g) * 0.05])
+    experts = torch.cat(
+        [torch.randn(900, 1, generator=g) * 0.05, 0.7 + torch.randn(100, 1, generator=g) * 0.05]
+    )
     gk = kde_density(experts, experts).double()
     for init, w in (("kde", gk / gk.sum()), ("inverse-kde", (1 / gk) / (1 / gk).sum())):
-        torch.testing.assert_close(initial_weights(experts, DFOConfig(init=init)).double(), w, rtol=1e-5, atol=0)
+        torch.testing.assert_close(
+            initial_weights(experts, DFOConfig(init=init)).double(), w, rtol=1e-5, atol=0
+        )
         y = initial_samples(experts, 2, DFOConfig(n_samples=20000, init=init), generator=g)  # (2, N, 1)
         assert y.shape == (2, 20000, 1)
         rare = float((y > 0.35).float().mean())
         assert abs(rare - float(w[900:].sum())) < 0.02
     assert initial_weights(experts, DFOConfig(init="uniform")) is None
     # the text's weights are the KDE module's inverse-density weights, the one place 1/ĝ is computed
-    assert torch.equal(initial_weights(experts, DFOConfig(init="inverse-kde")), inverse_density_weights(experts))
-    u = initial_samples(experts, 1, DFOConfig(n_samples=20000, init="uniform", low=-1.0, high=1.0), generator=g)
+    assert torch.equal(
+        initial_weights(experts, DFOConfig(init="inverse-kde")), inverse_density_weights(experts)
+    )
+    u = initial_samples(
+        experts, 1, DFOConfig(n_samples=20000, init="uniform", low=-1.0, high=1.0), generator=g
+    )
     assert abs(float(u.mean())) < 0.03 and u.min() >= -1 and u.max() <= 1
     # the text's weights spread the samples over the clusters; the algorithm's concentrate them
     y_inv = initial_samples(experts, 1, DFOConfig(n_samples=20000, init="inverse-kde"), generator=g)
@@ -152,8 +177,12 @@ def test_populations_follow_the_default_dtype():
             for init in ("uniform", "expert", "inverse-kde"):
                 w = initial_weights(experts, DFOConfig(init=init))
                 assert w is None or w.dtype == dtype
-                a = dfo(two_valleys(), experts.double(), cfg(init=init),
-                        generator=torch.Generator().manual_seed(0))  # (1,)
+                a = dfo(
+                    two_valleys(),
+                    experts.double(),
+                    cfg(init=init),
+                    generator=torch.Generator().manual_seed(0),
+                )  # (1,)
                 assert a.dtype == dtype
     finally:
         torch.set_default_dtype(old)
@@ -186,7 +215,10 @@ def test_bad_arguments_get_clear_errors():
         DFOConfig(bandwidth=0.0)
     with pytest.raises(dataclasses.FrozenInstanceError):
         c.n_samples = 4
-    assert DFOConfig(low=[-1, -0.5], high=(1, 0.5)).low == (-1.0, -0.5)  # sequences stored as tuples of floats
+    assert DFOConfig(low=[-1, -0.5], high=(1, 0.5)).low == (
+        -1.0,
+        -0.5,
+    )  # sequences stored as tuples of floats
     # what depends on the actions is checked when DFO runs
     with pytest.raises(ValueError, match="action dimension"):
         dfo(e, experts, DFOConfig(low=[-1.0, -1.0], high=[1.0, 1.0]))  # D = 1 actions, D = 2 bounds
@@ -227,7 +259,9 @@ def test_single_and_batched_forms_agree_row_by_row():
     one = dfo(single, experts, c, generator=torch.Generator().manual_seed(4))  # (1,)
     assert acts.shape == (3, 1) and one.shape == (1,)
     assert torch.equal(one, acts[0])
-    torch.testing.assert_close(acts[:, 0], centres, atol=0.05, rtol=0)  # every row in its own valley (256 uniform samples)
+    torch.testing.assert_close(
+        acts[:, 0], centres, atol=0.05, rtol=0
+    )  # every row in its own valley (256 uniform samples)
 
 
 @pytest.mark.parametrize("init", ["uniform", "kde", "inverse-kde", "expert"])
@@ -252,7 +286,9 @@ class _QuadraticModel(torch.nn.Module):
 
 def test_dfo_policy_acts_on_a_batch_of_observations():
     experts = torch.linspace(-0.9, 0.9, 50)[:, None]
-    policy = dfo_policy(_QuadraticModel(), experts, cfg(select="argmax"), generator=torch.Generator().manual_seed(0))
+    policy = dfo_policy(
+        _QuadraticModel(), experts, cfg(select="argmax"), generator=torch.Generator().manual_seed(0)
+    )
     obs = torch.tensor([[-0.3], [0.0], [0.8]])
     acts = policy(obs)
     assert acts.shape == (3, 1)
@@ -268,7 +304,10 @@ class _DictObsModel(_QuadraticModel):
 
 def test_dfo_policy_and_optimizer_take_dict_observations():
     experts = torch.linspace(-0.9, 0.9, 50)[:, None]
-    obs = {"target": torch.tensor([[-0.3], [0.0], [0.8]]), "speed": torch.zeros(3, 1)}  # len(obs) == 2 keys, B = 3
+    obs = {
+        "target": torch.tensor([[-0.3], [0.0], [0.8]]),
+        "speed": torch.zeros(3, 1),
+    }  # len(obs) == 2 keys, B = 3
     model = _DictObsModel().train()
     policy = dfo_policy(model, experts, cfg(select="argmax"), generator=torch.Generator().manual_seed(0))
     acts = policy(obs)

@@ -4,12 +4,19 @@ import numpy as np
 import pytest
 
 from ibc_tutorial.driving import get_town, rollout
-from ibc_tutorial.driving.analysis import exits_per_approach, junction_crossings, junction_visits, road_coverage
+from ibc_tutorial.driving.analysis import (
+    exits_per_approach,
+    junction_crossings,
+    junction_visits,
+    road_coverage,
+)
 
 
 @pytest.fixture(scope="module")
 def expert_drive():
-    (r,) = rollout("expert", town="town02", episodes=1, steps=400, bev_size=32, seed=3, record_steps=True, keep_obs=True)
+    (r,) = rollout(
+        "expert", town="town02", episodes=1, steps=400, bev_size=32, seed=3, record_steps=True, keep_obs=True
+    )
     return r
 
 
@@ -21,7 +28,9 @@ def test_rollout_records_every_step(expert_drive):
     assert t["red_ahead"].dtype == bool and t["entry_dist"].shape == (n,) and t["actions"].shape == (n - 1, 2)
     assert t["bev"].shape == (n, 5, 32, 32) and t["state"].shape == (n, 3)
     np.testing.assert_array_equal(t["pose"][:, :2], r.xy)
-    np.testing.assert_allclose(t["state"][1:, 1:], t["actions"], atol=1e-6)  # the state holds the previous action
+    np.testing.assert_allclose(
+        t["state"][1:, 1:], t["actions"], atol=1e-6
+    )  # the state holds the previous action
     assert np.isinf(t["entry_dist"][~np.isin(t["lane"], list(get_town("town02").approach_of_lane))]).all()
 
 
@@ -41,10 +50,15 @@ def test_junction_visits_read_the_exit_from_the_lanes(expert_drive):
     after = tw.lanes[conn].successors[0]
     lanes = [ap.lane] * 5 + [conn] * 3 + [after] * 4 + [ap.lane] * 2 + [conn, after]
     visits = junction_visits(tw, np.array(lanes))
-    assert visits == [{"approach": ap.id, "node": ap.node, "turn": turn, "step": 4},
-                      {"approach": ap.id, "node": ap.node, "turn": turn, "step": 13}]
+    assert visits == [
+        {"approach": ap.id, "node": ap.node, "turn": turn, "step": 4},
+        {"approach": ap.id, "node": ap.node, "turn": turn, "step": 13},
+    ]
     assert exits_per_approach(visits) == {ap.id: {"node": ap.node, "visits": 2, "turns": [turn]}}
-    assert all(v["turn"] in ("left", "straight", "right") for v in junction_visits("town02", expert_drive.trace["lane"]))
+    assert all(
+        v["turn"] in ("left", "straight", "right")
+        for v in junction_visits("town02", expert_drive.trace["lane"])
+    )
 
 
 def test_junction_crossings_span_the_connector_and_keep_the_steering(expert_drive):
@@ -55,12 +69,22 @@ def test_junction_crossings_span_the_connector_and_keep_the_steering(expert_driv
     lanes = np.array([ap.lane] * 3 + [conn] * 4 + [after] * 2 + [ap.lane] * 2 + [conn] * 3)  # (14,) states
     steer = np.array([0, 0, 0, -0.3, -0.5, 0.2, -0.1, 0, 0, 0, 0, 0.4, -0.2, 0.7])  # (14,): after each state
     first, last = junction_crossings(tw, lanes, steer[:13])  # (T + 1,) states, (T,) actions
-    assert first == {"approach": ap.id, "node": ap.node, "start": 3, "stop": 7, "turn": "left", "finished": True,
-                     "steer_min": -0.5, "steer_max": 0.2}
+    assert first == {
+        "approach": ap.id,
+        "node": ap.node,
+        "start": 3,
+        "stop": 7,
+        "turn": "left",
+        "finished": True,
+        "steer_min": -0.5,
+        "steer_max": 0.2,
+    }
     # the record ends inside the junction: the crossing is unfinished, its steering up to the last action
     assert last["start"] == 11 and last["stop"] == 14 and last["turn"] == "" and not last["finished"]
     assert (last["steer_min"], last["steer_max"]) == (-0.2, 0.4)
-    assert junction_crossings(tw, lanes, steer)[1]["steer_max"] == 0.7  # one steering per state is accepted too
+    assert (
+        junction_crossings(tw, lanes, steer)[1]["steer_max"] == 0.7
+    )  # one steering per state is accepted too
     assert junction_crossings(tw, np.array([ap.lane] * 4), np.zeros(3)) == []  # never entered the junction
     with pytest.raises(ValueError, match="steer must hold one value per state or per step"):
         junction_crossings(tw, lanes, steer[:5])
@@ -101,14 +125,21 @@ def test_light_label_conflicts_counts_each_encoding():
     from ibc_tutorial.driving.analysis import light_label_conflicts
     from ibc_tutorial.driving.collect import CollectConfig, collect
 
-    log = collect(CollectConfig(town="town02", routes=2, seed=0, min_minutes=1.0, max_minutes=1.0),
-                  show_progress=False)
+    log = collect(
+        CollectConfig(town="town02", routes=2, seed=0, min_minutes=1.0, max_minutes=1.0), show_progress=False
+    )
     r = light_label_conflicts(log)
     c = r["counts"]
     assert sum(c.values()) == r["near"] > 0
     assert r["conflicts"]["binary"] == c[("yellow", "go")] + c[("red", "go")] + c[("green", "stop")]
-    assert r["conflicts"]["intensity"] <= r["conflicts"]["binary"] <= r["conflicts"]["red only"] + c[("yellow", "go")]
-    assert c[("red", "stop")] > 0 and r["conflicts"]["intensity"] == 0  # never through red, never stops at green
+    assert (
+        r["conflicts"]["intensity"]
+        <= r["conflicts"]["binary"]
+        <= r["conflicts"]["red only"] + c[("yellow", "go")]
+    )
+    assert (
+        c[("red", "stop")] > 0 and r["conflicts"]["intensity"] == 0
+    )  # never through red, never stops at green
     with pytest.raises(ValueError):
         light_label_conflicts(log, stop_distance=0.0)
 
@@ -120,7 +151,9 @@ def test_stop_line_gaps_nan_off_approaches():
     ap = town.approaches[0]
     lane = town.lanes[ap.lane]
     p = lane.points[-6]
-    g, light = stop_line_gaps(town, np.array([[p[0], p[1], float(np.arctan2(*lane.end[::-1] - p[::-1]))]]), [ap.lane])
+    g, light = stop_line_gaps(
+        town, np.array([[p[0], p[1], float(np.arctan2(*lane.end[::-1] - p[::-1]))]]), [ap.lane]
+    )
     assert light[0] == town.light_of_approach.get(ap.id, -1)
 
 

@@ -6,7 +6,14 @@ import numpy as np
 import pytest
 import torch
 
-from ibc_tutorial.driving.bev import EGO_ROW, FULL_SIZE, SUPPORTED_SIZES, BEVRenderer, get_raster, get_renderer
+from ibc_tutorial.driving.bev import (
+    EGO_ROW,
+    FULL_SIZE,
+    SUPPORTED_SIZES,
+    BEVRenderer,
+    get_raster,
+    get_renderer,
+)
 
 ALL_GREEN = np.zeros((3, 24), dtype=np.uint8)  # light states: 0 green, 1 yellow, 2 red
 
@@ -75,7 +82,9 @@ def test_light_channels_draw_each_state_by_intensity():
     own = bev[4] == np.float32(1.0)  # this lane's line, red now
     assert own.sum() > 20
     rows = np.flatnonzero(own.any(axis=1))
-    assert 10 * 5 - 8 <= EGO_ROW - rows.max() <= 10 * 5 + 2  # the line, 10 m ahead of the centre, is 1.2 m thick
+    assert (
+        10 * 5 - 8 <= EGO_ROW - rows.max() <= 10 * 5 + 2
+    )  # the line, 10 m ahead of the centre, is 1.2 m thick
     assert (bev[3][own] == np.float32(0.6)).all()  # yellow 8 steps ago
     assert (bev[2][own] == np.float32(0.3)).all()  # green 15 steps ago
     assert set(np.unique(bev[2:])) <= {0.0, np.float32(0.3), np.float32(0.6), 1.0}

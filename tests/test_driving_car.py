@@ -38,7 +38,7 @@ def test_braking_stops_without_reversing():
     assert np.isclose(v[4], 8.0 - 8.0 * 0.5)  # 8 m/s^2 of braking
     assert (v >= 0).all() and v[-1] == 0.0
     assert np.all(np.diff(poses[:, 0]) >= -1e-12)  # never rolls backwards
-    assert poses[-1, 0] == pytest.approx(8.0 ** 2 / (2 * 8.0), abs=0.25)  # v^2 / 2a
+    assert poses[-1, 0] == pytest.approx(8.0**2 / (2 * 8.0), abs=0.25)  # v^2 / 2a
 
 
 def test_drag_gives_a_top_speed():
@@ -57,8 +57,8 @@ def test_turning_circle_is_the_kinematic_bicycles(steer):
     # a circle through the poses: fit its centre from the last 60 points
     xy = poses[-60:, :2]
     A = np.c_[2 * xy, np.ones(len(xy))]
-    cx, cy, k = np.linalg.lstsq(A, (xy ** 2).sum(1), rcond=None)[0]
-    fitted = math.sqrt(k + cx ** 2 + cy ** 2)
+    cx, cy, k = np.linalg.lstsq(A, (xy**2).sum(1), rcond=None)[0]
+    fitted = math.sqrt(k + cx**2 + cy**2)
     assert fitted == pytest.approx(radius, rel=0.02)
     # positive steer turns right (clockwise: yaw decreases)
     assert np.sign(poses[-1, 2] - poses[0, 2]) == -np.sign(steer)

@@ -12,7 +12,9 @@ from ibc_tutorial.driving.dataset import VERSION, DemoDataset, DemoLog, exit_cou
 
 @pytest.fixture(scope="module")
 def small_log():
-    return collect(CollectConfig(town="town02", routes=3, seed=1, min_minutes=0.5, max_minutes=1.0), show_progress=False)
+    return collect(
+        CollectConfig(town="town02", routes=3, seed=1, min_minutes=0.5, max_minutes=1.0), show_progress=False
+    )
 
 
 def test_collect_shapes_and_quality(small_log):
@@ -73,7 +75,9 @@ def test_damaged_and_foreign_files_are_refused(small_log, tmp_path):
 
 def test_identical_collections_have_one_checksum(small_log, tmp_path):
     """The demonstrations' hash covers their content: no wall time in the log, whatever the file's bytes."""
-    again = collect(CollectConfig(town="town02", routes=3, seed=1, min_minutes=0.5, max_minutes=1.0), show_progress=False)
+    again = collect(
+        CollectConfig(town="town02", routes=3, seed=1, min_minutes=0.5, max_minutes=1.0), show_progress=False
+    )
     assert again.meta == small_log.meta and "seconds" not in again.meta
     assert again.checksum() == small_log.checksum()
     assert DemoLog.load(again.save(tmp_path / "again.npz")).checksum() == small_log.checksum()
@@ -90,7 +94,10 @@ def test_log_validates_its_arrays(small_log):
 
 
 def _arrays(log):
-    return {k: getattr(log, k) for k in ("pose", "speed", "prev_action", "action", "executed", "lights", "episode", "step", "lane")}
+    return {
+        k: getattr(log, k)
+        for k in ("pose", "speed", "prev_action", "action", "executed", "lights", "episode", "step", "lane")
+    }
 
 
 def test_dataset_samples(small_log):
@@ -103,7 +110,9 @@ def test_dataset_samples(small_log):
     f = DemoDataset(small_log, bev_size=192)[10][0]["bev"]
     assert f.dtype == torch.float32 and f.shape == (5, 192, 192)
     assert torch.equal(torch.nn.functional.max_pool2d(f[None], 3)[0], obs["bev"])
-    loader = torch.utils.data.DataLoader(ds, batch_size=16, shuffle=True, generator=torch.Generator().manual_seed(0))
+    loader = torch.utils.data.DataLoader(
+        ds, batch_size=16, shuffle=True, generator=torch.Generator().manual_seed(0)
+    )
     (bobs, bact) = next(iter(loader))
     assert bobs["bev"].shape == (16, 5, 64, 64) and bobs["state"].shape == (16, 3) and bact.shape == (16, 2)
     with pytest.raises(IndexError):
@@ -132,7 +141,9 @@ def test_dataset_renders_what_the_env_showed():
     batch, _ = ds.batch(np.arange(len(ds)))
     for i, o in enumerate(shown):
         sample, _ = ds[i]
-        assert np.array_equal(sample["bev"].numpy(), o["bev"]) and np.array_equal(sample["state"].numpy(), o["state"])
+        assert np.array_equal(sample["bev"].numpy(), o["bev"]) and np.array_equal(
+            sample["state"].numpy(), o["state"]
+        )
         assert np.array_equal(batch["bev"][i].numpy(), o["bev"])
 
 
@@ -152,15 +163,50 @@ def test_exit_counts_follow_the_route(small_log):
 
 def test_collect_command(tmp_path, capsys):
     out = tmp_path / "d.npz"
-    assert main(["collect", "--town", "town02", "--routes", "2", "--seed", "3", "--min-minutes", "0.2",
-                 "--max-minutes", "0.3", "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "collect",
+                "--town",
+                "town02",
+                "--routes",
+                "2",
+                "--seed",
+                "3",
+                "--min-minutes",
+                "0.2",
+                "--max-minutes",
+                "0.3",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     log = DemoLog.load(out)
     assert log.n_episodes == 2 and 240 <= len(log) <= 360
     assert "2 episodes of town02" in capsys.readouterr().out
-    assert main(["collect", "--routes", "1", "--min-minutes", "2", "--max-minutes", "1", "--out", str(tmp_path / "e.npz")]) == 2
+    assert (
+        main(
+            [
+                "collect",
+                "--routes",
+                "1",
+                "--min-minutes",
+                "2",
+                "--max-minutes",
+                "1",
+                "--out",
+                str(tmp_path / "e.npz"),
+            ]
+        )
+        == 2
+    )
     assert main(["collect", "--town", "town09", "--out", str(tmp_path / "e.npz")]) == 2
     before = out.read_bytes()
-    assert main(["collect", "--town", "town02", "--routes", "1", "--out", str(out)]) == 2  # exists: not overwritten
+    assert (
+        main(["collect", "--town", "town02", "--routes", "1", "--out", str(out)]) == 2
+    )  # exists: not overwritten
     err = capsys.readouterr().err.splitlines()
     assert len(err) == 3 and "max_minutes" in err[0] and "town09" in err[1] and "--force" in err[2]
     assert out.read_bytes() == before

@@ -39,7 +39,7 @@ def test_observation_and_info():
     assert set(np.unique(obs["bev"][2:])) <= {0.0, np.float32(0.3), np.float32(0.6), 1.0}  # light levels
     assert env.observation_space.contains(obs)
     assert obs["state"].dtype == np.float32 and obs["state"].shape == (3,)
-    assert obs["bev"][0, 40 // 3 + 64 - 64 // 3 * 3 - 1:, :].any()  # road under and around the car
+    assert obs["bev"][0, 40 // 3 + 64 - 64 // 3 * 3 - 1 :, :].any()  # road under and around the car
     total = 0.0
     for _ in range(30):
         obs, reward, term, trunc, info = env.step(np.array([0.0, 0.6], dtype=np.float32))
@@ -54,20 +54,34 @@ def test_observation_and_info():
     assert img.shape == (192, 192, 3) and img.dtype == np.uint8
 
 
-@pytest.mark.parametrize("action, match", [
-    ([np.nan, 0.0], "finite"), ([0.0, 0.0, 0.0], "shape"), ([0.0, 1.5], r"\[-1, 1\]"),
-    ([-2.0, 0.0], r"\[-1, 1\]"), ("go", "action"), (None, "action"),
-])
+@pytest.mark.parametrize(
+    "action, match",
+    [
+        ([np.nan, 0.0], "finite"),
+        ([0.0, 0.0, 0.0], "shape"),
+        ([0.0, 1.5], r"\[-1, 1\]"),
+        ([-2.0, 0.0], r"\[-1, 1\]"),
+        ("go", "action"),
+        (None, "action"),
+    ],
+)
 def test_bad_actions_are_refused(action, match):
     env = make_env("town02", bev_size=32, seed=0)
     with pytest.raises(ValueError, match=match):
         env.step(action)
 
 
-@pytest.mark.parametrize("kwargs, match", [
-    (dict(town="town03"), "town"), (dict(bev_size=100), "bev_size"), (dict(bev_size=64.0), "bev_size"),
-    (dict(max_steps=0), "max_steps"), (dict(routeless="yes"), "routeless"), (dict(render_mode="human"), "render_mode"),
-])
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(town="town03"), "town"),
+        (dict(bev_size=100), "bev_size"),
+        (dict(bev_size=64.0), "bev_size"),
+        (dict(max_steps=0), "max_steps"),
+        (dict(routeless="yes"), "routeless"),
+        (dict(render_mode="human"), "render_mode"),
+    ],
+)
 def test_bad_arguments_are_refused(kwargs, match):
     with pytest.raises(ValueError, match=match):
         make_env(**kwargs)
@@ -119,7 +133,9 @@ def test_truncated_at_max_steps():
 def test_termination_off_road_and_at_buildings():
     env = make_env("town02", bev_size=32)
     town = env.town
-    south = next(ln for ln in town.lanes if ln.kind == "road" and np.allclose(ln.start, [9, -2]))  # eastbound, outer edge on its right
+    south = next(
+        ln for ln in town.lanes if ln.kind == "road" and np.allclose(ln.start, [9, -2])
+    )  # eastbound, outer edge on its right
     for steer, reason in [(1.0, "off_road"), (-1.0, "building")]:
         env.reset(seed=0, options={"start": (south.id, 20.0)})
         for t in range(100):
@@ -167,7 +183,9 @@ def test_stopping_at_a_red_light_is_not_an_infraction():
     gaps, states = [], []
     for t in range(500):
         obs, r, term, trunc, info = env.step(expert.act())
-        front = np.array([info["x"], info["y"]]) + 2.3 * np.array([math.cos(info["yaw"]), math.sin(info["yaw"])])
+        front = np.array([info["x"], info["y"]]) + 2.3 * np.array(
+            [math.cos(info["yaw"]), math.sin(info["yaw"])]
+        )
         gaps.append((e - STOP_LINE_THICKNESS * d - front) @ d)  # front bumper to the stop line's near edge
         states.append(env.sim.lights[0])
         assert not term

@@ -71,9 +71,12 @@ def test_expert_follows_its_route():
         env.step(expert.act())
         lanes.append(expert.current_lane)
     town = env.town
-    turns = [town.lanes[b].turn for a, b in zip(lanes[:-1], lanes[1:])
-             if a != b and a in town.approach_of_lane and town.approaches[town.approach_of_lane[a]].is_junction]
-    assert len(turns) >= 2 and turns == list(route.turns[:len(turns)])
+    turns = [
+        town.lanes[b].turn
+        for a, b in zip(lanes[:-1], lanes[1:])
+        if a != b and a in town.approach_of_lane and town.approaches[town.approach_of_lane[a]].is_junction
+    ]
+    assert len(turns) >= 2 and turns == list(route.turns[: len(turns)])
 
 
 def test_same_seed_same_drive_and_noise_changes_only_execution():
@@ -160,9 +163,12 @@ def test_replanning_mid_route_goes_on_with_the_next_turn():
             expert._start()  # as when the car is found off its path: plan again from where it is
         env.step(expert.act())
         lanes.append(expert.current_lane)
-    turns = [town.lanes[b].turn for a, b in zip(lanes[:-1], lanes[1:])
-             if a != b and a in town.approach_of_lane and town.approaches[town.approach_of_lane[a]].is_junction]
-    assert len(turns) >= 3 and turns == list(env.route.turns[:len(turns)])
+    turns = [
+        town.lanes[b].turn
+        for a, b in zip(lanes[:-1], lanes[1:])
+        if a != b and a in town.approach_of_lane and town.approaches[town.approach_of_lane[a]].is_junction
+    ]
+    assert len(turns) >= 3 and turns == list(env.route.turns[: len(turns)])
 
 
 def test_batched_rollout_matches_single_episodes():
@@ -184,7 +190,7 @@ def test_batched_rollout_matches_single_episodes():
     results = rollout(straight, town="town02", episodes=4, steps=300, bev_size=32)
     assert all(r.terminated and r.termination in ("off_road", "building") for r in results)
     assert seen[0] == 4 and seen[-1] < 4  # finished episodes leave the batch
-    assert all(r.score == pytest.approx(r.distance_m * 0.7 ** r.red_light_infractions) for r in results)
+    assert all(r.score == pytest.approx(r.distance_m * 0.7**r.red_light_infractions) for r in results)
     with pytest.raises(ValueError, match="policy"):
         rollout("random")
 

@@ -24,7 +24,11 @@ def test_cycle_timing(schedule):
         start = np.flatnonzero((s == GREEN) & (np.roll(s, 1) != GREEN))
         assert len(start) == 1
         rolled = np.roll(s, -start[0])
-        assert (rolled[:100] == GREEN).all() and (rolled[100:130] == YELLOW).all() and (rolled[130:] == RED).all()
+        assert (
+            (rolled[:100] == GREEN).all()
+            and (rolled[100:130] == YELLOW).all()
+            and (rolled[130:] == RED).all()
+        )
     for j in range(schedule.n_junctions):  # at most one head of a junction is not red at any time
         heads = states[:, schedule.junction == j]
         assert ((heads != RED).sum(axis=1) <= 1).all()

@@ -28,7 +28,9 @@ def test_lanes_join_and_waypoints_are_dense(name):
         for nxt in lane.successors:
             other = town.lanes[nxt]
             assert np.allclose(lane.end, other.start, atol=1e-9)  # positions join
-            assert abs(math.remainder(lane.heading_out - other.heading_in, 2 * math.pi)) < 1e-9  # so do headings
+            assert (
+                abs(math.remainder(lane.heading_out - other.heading_in, 2 * math.pi)) < 1e-9
+            )  # so do headings
         steps = np.linalg.norm(np.diff(np.vstack([lane.points, lane.end]), axis=0), axis=1)
         assert steps.max() <= WAYPOINT_SPACING + 1e-9 and steps.min() > 0.5
         # every waypoint lies on the lane's centre line
@@ -60,7 +62,9 @@ def test_every_approach_has_its_legal_exits(name):
             assert conn.turn == turn and conn.node == ap.node
             road = town.lanes[conn.successors[0]]
             assert road.from_node == ap.node and road.to_node != town.lanes[ap.lane].from_node
-        if ap.is_junction:  # a T-junction: the stem approach turns left or right, the others go straight or turn
+        if (
+            ap.is_junction
+        ):  # a T-junction: the stem approach turns left or right, the others go straight or turn
             assert set(ap.exits) in ({"left", "right"}, {"straight", "left"}, {"straight", "right"})
     for lane in town.lanes:
         if lane.kind == "road":
@@ -72,7 +76,12 @@ def test_route_path_is_continuous(name):
     town = get_town(name)
     route = random_route(town, np.random.default_rng(0), n_turns=20)
     lanes = route.lanes(town)
-    assert sum(town.approaches[town.approach_of_lane[i]].is_junction for i in lanes if i in town.approach_of_lane) >= 20
+    assert (
+        sum(
+            town.approaches[town.approach_of_lane[i]].is_junction for i in lanes if i in town.approach_of_lane
+        )
+        >= 20
+    )
     pts = np.vstack([town.lanes[i].points for i in lanes])
     steps = np.linalg.norm(np.diff(pts, axis=0), axis=1)
     assert steps.max() <= WAYPOINT_SPACING + 1e-9
@@ -99,7 +108,9 @@ def test_a_bad_chooser_is_refused_naming_choose():
         with pytest.raises(ValueError, match="choose must be a callable"):
             random_route(town, rng, n_turns=3, choose=bad)
     assert rng.bit_generator.state == before
-    with pytest.raises(ValueError, match=r"choose must return one of the exits it is given, \[.*\], got 'up'"):
+    with pytest.raises(
+        ValueError, match=r"choose must return one of the exits it is given, \[.*\], got 'up'"
+    ):
         random_route(town, rng, n_turns=3, choose=lambda exits, r: "up")
 
 

@@ -151,23 +151,30 @@ def test_grid_energies_in_blocks_equal_one_pass():
     grid = action_grid(9, 2)
     with torch.no_grad():
         whole = model.energy_from_embedding(z, grid)
-        torch.testing.assert_close(grid_energies(model, z, grid, chunk_elements=500), whole)  # blocks of 3 rows
-        torch.testing.assert_close(grid_energies(model, z, grid, chunk_elements=1), whole)  # one row at a time
+        torch.testing.assert_close(
+            grid_energies(model, z, grid, chunk_elements=500), whole
+        )  # blocks of 3 rows
+        torch.testing.assert_close(
+            grid_energies(model, z, grid, chunk_elements=1), whole
+        )  # one row at a time
 
 
 def test_energy_explorer_widget_builds_and_redraws():
     from ibc_tutorial.widgets import energy_explorer
 
     model = make_model(obs_dim=1, action_dim=1)
-    widget = energy_explorer(model, lambda d: torch.tensor([[d / 10.0]]), action_grid(41), values=(0.0, 20.0, 1.0), value=5.0)
+    widget = energy_explorer(
+        model, lambda d: torch.tensor([[d / 10.0]]), action_grid(41), values=(0.0, 20.0, 1.0), value=5.0
+    )
     slider = widget.children[0]
     slider.value = 12.0  # triggers a redraw without error
     assert slider.value == 12.0
 
 
 def test_grid_sample_policy_draws_from_softmax_of_minus_energy():
-    from ibc_tutorial.policies import GridSamplePolicy
     from scipy import stats
+
+    from ibc_tutorial.policies import GridSamplePolicy
 
     class Fixed(nn.Module):
         """E = 0, log 2, log 4 on a 3-point grid: p = 4/7, 2/7, 1/7 whatever the observation."""
@@ -192,6 +199,7 @@ def test_grid_sample_policy_draws_from_softmax_of_minus_energy():
 def test_inference_form_matches_training_form():
     """Under no_grad the first layer runs fused (baddbmm, in-place ReLU); energies must agree."""
     import torch
+
     from ibc_tutorial.policies import EnergyModel, MLPEncoder
 
     torch.manual_seed(0)

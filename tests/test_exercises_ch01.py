@@ -42,7 +42,9 @@ def test_library_agrees_with_the_solutions():
     w = TreeWorld()
     pts = torch.tensor([[20.0, 2.4], [20.0, 2.6], [0.0, 0.0], [18.0, -1.0]])
     tree = torch.tensor([w.config.tree_x, 0.0])
-    assert torch.equal(w.collides(pts), solutions.ch01_hits_tree(pts, tree, w.config.car_radius, w.config.tree_radius))
+    assert torch.equal(
+        w.collides(pts), solutions.ch01_hits_tree(pts, tree, w.config.car_radius, w.config.tree_radius)
+    )
 
 
 # --------------------------------------------------------------------------- best constant
@@ -53,7 +55,14 @@ def test_library_agrees_with_the_solutions():
         (lambda a: float(a.sum()), "number of actions"),
         (lambda a: 0.0, "does not depend"),
         (lambda a: float(a[0]), "one of the actions"),
-        (lambda a: float(torch.linspace(-1, 1, 101)[((a[None, :] - torch.linspace(-1, 1, 101)[:, None]) ** 2).mean(1).argmin()]), "grid"),
+        (
+            lambda a: float(
+                torch.linspace(-1, 1, 101)[
+                    ((a[None, :] - torch.linspace(-1, 1, 101)[:, None]) ** 2).mean(1).argmin()
+                ]
+            ),
+            "grid",
+        ),
         (lambda a: a, "one number"),
         (lambda a: float(a.mean()) + 0.3, "better constant"),
     ],
@@ -61,7 +70,9 @@ def test_library_agrees_with_the_solutions():
 def test_best_constant_mistakes(wrong, words):
     fb = ch01.check_best_constant_mse(wrong)
     assert fb.status == "hint" and words in fb.message, fb.message
-    assert "mean" not in fb.message.lower().replace("mean squared", "").replace("mean *absolute*", "")  # the answer is not given
+    assert "mean" not in fb.message.lower().replace("mean squared", "").replace(
+        "mean *absolute*", ""
+    )  # the answer is not given
 
 
 def test_best_constant_accepts_a_tensor():
@@ -91,11 +102,17 @@ def test_hits_tree_mistakes(wrong, words):
 
 
 def test_hits_tree_accepts_float_flags():
-    assert ch01.check_hits_tree(lambda xy, t, rc, rt: ((xy - t).norm(dim=1) < rc + rt).float()).status == "correct"
+    assert (
+        ch01.check_hits_tree(lambda xy, t, rc, rt: ((xy - t).norm(dim=1) < rc + rt).float()).status
+        == "correct"
+    )
 
 
 def test_hits_tree_accepts_squared_distances():
-    assert ch01.check_hits_tree(lambda xy, t, rc, rt: ((xy - t) ** 2).sum(1) < (rc + rt) ** 2).status == "correct"
+    assert (
+        ch01.check_hits_tree(lambda xy, t, rc, rt: ((xy - t) ** 2).sum(1) < (rc + rt) ** 2).status
+        == "correct"
+    )
 
 
 def test_touching_is_no_collision_in_the_checker_nor_the_library():
@@ -135,7 +152,9 @@ def test_swerve_matches_the_library_measure():
     ro = w.rollout(lambda obs: 0.1 * torch.ones(len(obs), 1) * (obs < 0.5), 5, seed=0)
     near = ro.states[0, :, 0] >= w.config.branch_x - w.config.swerve_from
     first = int(near.float().argmax())
-    y = ro.states[:, first:, 1]  # every episode reaches the section at the same step here (straight until then)
+    y = ro.states[
+        :, first:, 1
+    ]  # every episode reaches the section at the same step here (straight until then)
     assert torch.allclose(w.swerve(ro), solutions.ch01_swerve(y))
 
 
@@ -145,9 +164,15 @@ def test_predict_mae_side():
     assert check(stub).status == "not attempted"
     mistakes = {
         "the mean": (lambda r, l: "anywhere in the gap", "like the mean"),
-        "smaller mode": (lambda r, l: "right" if r < l else ("left" if l < r else "anywhere in the gap"), "smaller mode"),
+        "smaller mode": (
+            lambda r, l: "right" if r < l else ("left" if l < r else "anywhere in the gap"),
+            "smaller mode",
+        ),
         "no tie": (lambda r, l: "right" if r >= l else "left", "samples above and below"),
-        "tie too wide": (lambda r, l: "right" if r - l > 5 else ("left" if l - r > 5 else "anywhere in the gap"), "breaks the tie"),
+        "tie too wide": (
+            lambda r, l: "right" if r - l > 5 else ("left" if l - r > 5 else "anywhere in the gap"),
+            "breaks the tie",
+        ),
         "not an answer": (lambda r, l: "straight", "answer with one of"),
     }
     for fn, words in mistakes.values():

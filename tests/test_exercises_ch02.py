@@ -16,7 +16,11 @@ def stub(*args):
 # --------------------------------------------------------------------------- Beta NLL
 def _beta_log_f(alpha, beta, actions, eps=1e-4):
     y = ((actions + 1) / 2).clamp(eps, 1 - eps)
-    return (alpha - 1) * torch.log(y) + (beta - 1) * torch.log(1 - y) - (torch.lgamma(alpha) + torch.lgamma(beta) - torch.lgamma(alpha + beta))
+    return (
+        (alpha - 1) * torch.log(y)
+        + (beta - 1) * torch.log(1 - y)
+        - (torch.lgamma(alpha) + torch.lgamma(beta) - torch.lgamma(alpha + beta))
+    )
 
 
 def test_beta_solution_and_library_are_correct():
@@ -35,18 +39,39 @@ BETA_MISTAKES = {
     "sign": (lambda a, b, y: _beta_log_f(a, b, y).sum(1).mean(), "sign"),
     "mean over dims": (lambda a, b, y: -_beta_log_f(a, b, y).mean(), "sums"),
     "sum over batch": (lambda a, b, y: -_beta_log_f(a, b, y).sum(), "over the N samples"),
-    "change of variables": (lambda a, b, y: -(_beta_log_f(a, b, y) - math.log(2)).sum(1).mean(), "change-of-variables"),
+    "change of variables": (
+        lambda a, b, y: -(_beta_log_f(a, b, y) - math.log(2)).sum(1).mean(),
+        "change-of-variables",
+    ),
     "no normaliser": (
-        lambda a, b, y: -((a - 1) * torch.log((y + 1) / 2) + (b - 1) * torch.log(1 - (y + 1) / 2)).sum(1).mean(),
+        lambda a, b, y: (
+            -((a - 1) * torch.log((y + 1) / 2) + (b - 1) * torch.log(1 - (y + 1) / 2)).sum(1).mean()
+        ),
         "normalising constant",
     ),
     "swapped": (lambda a, b, y: -_beta_log_f(b, a, y).sum(1).mean(), "α belongs to y'"),
     "no rescale": (
-        lambda a, b, y: -((a - 1) * torch.log(y) + (b - 1) * torch.log(1 - y) - (torch.lgamma(a) + torch.lgamma(b) - torch.lgamma(a + b))).sum(1).mean(),
+        lambda a, b, y: (
+            -(
+                (a - 1) * torch.log(y)
+                + (b - 1) * torch.log(1 - y)
+                - (torch.lgamma(a) + torch.lgamma(b) - torch.lgamma(a + b))
+            )
+            .sum(1)
+            .mean()
+        ),
         "y' = (y + 1)/2",
     ),
     "no clamp": (
-        lambda a, b, y: -((a - 1) * torch.log((y + 1) / 2) + (b - 1) * torch.log(1 - (y + 1) / 2) - (torch.lgamma(a) + torch.lgamma(b) - torch.lgamma(a + b))).sum(1).mean(),
+        lambda a, b, y: (
+            -(
+                (a - 1) * torch.log((y + 1) / 2)
+                + (b - 1) * torch.log(1 - (y + 1) / 2)
+                - (torch.lgamma(a) + torch.lgamma(b) - torch.lgamma(a + b))
+            )
+            .sum(1)
+            .mean()
+        ),
         "exactly at -1 or +1",
     ),
     "per-sample vector": (lambda a, b, y: -_beta_log_f(a, b, y).sum(1), "scalar"),
@@ -94,19 +119,35 @@ def test_mdn_stub_is_not_attempted():
 
 
 MDN_MISTAKES = {
-    "sign": (lambda l, m, s, y: torch.logsumexp(torch.log_softmax(l, 1) + _log_n(m, s, y).sum(2), 1).mean(), "sign"),
-    "sum of logs": (lambda l, m, s, y: -(torch.log_softmax(l, 1) + _log_n(m, s, y).sum(2)).sum(1).mean(), "log-sum-exp"),
+    "sign": (
+        lambda l, m, s, y: torch.logsumexp(torch.log_softmax(l, 1) + _log_n(m, s, y).sum(2), 1).mean(),
+        "sign",
+    ),
+    "sum of logs": (
+        lambda l, m, s, y: -(torch.log_softmax(l, 1) + _log_n(m, s, y).sum(2)).sum(1).mean(),
+        "log-sum-exp",
+    ),
     "no softmax": (lambda l, m, s, y: -torch.logsumexp(l + _log_n(m, s, y).sum(2), 1).mean(), "softmax"),
-    "mean over dims": (lambda l, m, s, y: -torch.logsumexp(torch.log_softmax(l, 1) + _log_n(m, s, y).mean(2), 1).mean(), "per-dimension log-densities"),
+    "mean over dims": (
+        lambda l, m, s, y: -torch.logsumexp(torch.log_softmax(l, 1) + _log_n(m, s, y).mean(2), 1).mean(),
+        "per-dimension log-densities",
+    ),
     "no log sigma": (
-        lambda l, m, s, y: -torch.logsumexp(torch.log_softmax(l, 1) + (_log_n(m, s, y) + torch.log(s)).sum(2), 1).mean(),
+        lambda l, m, s, y: (
+            -torch.logsumexp(torch.log_softmax(l, 1) + (_log_n(m, s, y) + torch.log(s)).sum(2), 1).mean()
+        ),
         "-log σ",
     ),
     "naive exp": (
         lambda l, m, s, y: -torch.log((torch.softmax(l, 1) * _log_n(m, s, y).sum(2).exp()).sum(1)).mean(),
         "logsumexp",
     ),
-    "hard-coded K": (lambda l, m, s, y: -torch.logsumexp(torch.log_softmax(l[:, :3], 1) + _log_n(m[:, :3], s[:, :3], y).sum(2), 1).mean(), "hard-coding"),
+    "hard-coded K": (
+        lambda l, m, s, y: (
+            -torch.logsumexp(torch.log_softmax(l[:, :3], 1) + _log_n(m[:, :3], s[:, :3], y).sum(2), 1).mean()
+        ),
+        "hard-coding",
+    ),
 }
 
 

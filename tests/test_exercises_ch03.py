@@ -37,18 +37,33 @@ def _terms(pos, neg):
 
 
 NCE_MISTAKES = {
-    "sign of energies": (lambda p, n, w=None: (torch.logsumexp(torch.cat([p[:, None], n], 1), 1) - p).mean(), "softmax of −E"),
+    "sign of energies": (
+        lambda p, n, w=None: (torch.logsumexp(torch.cat([p[:, None], n], 1), 1) - p).mean(),
+        "softmax of −E",
+    ),
     "no positive in denominator": (lambda p, n, w=None: (torch.logsumexp(-n, 1) + p).mean(), "denominator"),
     "sum over batch": (lambda p, n, w=None: _terms(p, n).sum(), "average"),
     "unstable": (
-        lambda p, n, w=None: (-torch.log(torch.exp(-p) / (torch.exp(-p) + torch.exp(-n).sum(1)))).mean() if w is None else (w * -torch.log(torch.exp(-p) / (torch.exp(-p) + torch.exp(-n).sum(1)))).mean(),
+        lambda p, n, w=None: (
+            (-torch.log(torch.exp(-p) / (torch.exp(-p) + torch.exp(-n).sum(1)))).mean()
+            if w is None
+            else (w * -torch.log(torch.exp(-p) / (torch.exp(-p) + torch.exp(-n).sum(1)))).mean()
+        ),
         "log-sum-exp",
     ),
     "ignores weights": (lambda p, n, w=None: _terms(p, n).mean(), "ignores `weights`"),
-    "weighted average": (lambda p, n, w=None: _terms(p, n).mean() if w is None else (w * _terms(p, n)).sum() / w.sum(), "sum of the weights"),
+    "weighted average": (
+        lambda p, n, w=None: _terms(p, n).mean() if w is None else (w * _terms(p, n)).sum() / w.sum(),
+        "sum of the weights",
+    ),
     "vector": (lambda p, n, w=None: _terms(p, n), "scalar"),
     "python float": (lambda p, n, w=None: float(_terms(p, n).mean()), "Python number"),
-    "detached": (lambda p, n, w=None: _terms(p, n).mean().detach() if w is None else (w * _terms(p, n)).mean().detach(), "autograd"),
+    "detached": (
+        lambda p, n, w=None: (
+            _terms(p, n).mean().detach() if w is None else (w * _terms(p, n)).mean().detach()
+        ),
+        "autograd",
+    ),
 }
 
 
@@ -106,7 +121,10 @@ def test_whiteness_stub_and_crash():
 WHITE_MISTAKES = {
     "no dt": (lambda x, dt: float(np.sqrt(np.mean(np.diff(np.asarray(x)) ** 2))), "time step"),
     "no sqrt": (lambda x, dt: float(np.mean((np.diff(np.asarray(x)) / dt) ** 2)), "square root"),
-    "divide by T": (lambda x, dt: float(np.sqrt(np.sum((np.diff(np.asarray(x)) / dt) ** 2) / len(x))), "number of changes"),
+    "divide by T": (
+        lambda x, dt: float(np.sqrt(np.sum((np.diff(np.asarray(x)) / dt) ** 2) / len(x))),
+        "number of changes",
+    ),
     "std of commands": (lambda x, dt: float(np.std(np.asarray(x)) / dt), "changes"),
     "mean abs": (lambda x, dt: float(np.mean(np.abs(np.diff(np.asarray(x)) / dt))), "squared"),
     "returns array": (lambda x, dt: np.diff(np.asarray(x)) / dt, "number"),

@@ -11,7 +11,9 @@ from ibc_tutorial.metrics import grid_nll
 from ibc_tutorial.negatives import expert_negatives, uniform_negatives
 
 
-@pytest.mark.parametrize("checker", [ch04.check_expert_negatives, ch04.check_grid_nll, ch04.check_predicted_shares])
+@pytest.mark.parametrize(
+    "checker", [ch04.check_expert_negatives, ch04.check_grid_nll, ch04.check_predicted_shares]
+)
 def test_stub_is_not_attempted_and_a_crash_is_a_hint(checker, stub_and_crash):
     stub_and_crash(checker)
 
@@ -27,34 +29,84 @@ def _draw(a, b, n, g):
 
 
 SAMPLER_MISTAKES = {
-    "uniform": (lambda a, b, n, s, g=None: uniform_negatives(b, n, [-1.0] * a.shape[1], [1.0] * a.shape[1], generator=g), "exactly one of the expert actions"),
-    "sigma as variance": (lambda a, b, n, s, g=None: _draw(a, b, n, g) + s**2 * torch.randn(b, n, a.shape[1], generator=g), "standard deviation"),
-    "sqrt sigma": (lambda a, b, n, s, g=None: _draw(a, b, n, g) + math.sqrt(s) * torch.randn(b, n, a.shape[1], generator=g), "standard deviation"),
+    "uniform": (
+        lambda a, b, n, s, g=None: uniform_negatives(
+            b, n, [-1.0] * a.shape[1], [1.0] * a.shape[1], generator=g
+        ),
+        "exactly one of the expert actions",
+    ),
+    "sigma as variance": (
+        lambda a, b, n, s, g=None: _draw(a, b, n, g) + s**2 * torch.randn(b, n, a.shape[1], generator=g),
+        "standard deviation",
+    ),
+    "sqrt sigma": (
+        lambda a, b, n, s, g=None: (
+            _draw(a, b, n, g) + math.sqrt(s) * torch.randn(b, n, a.shape[1], generator=g)
+        ),
+        "standard deviation",
+    ),
     "no noise": (lambda a, b, n, s, g=None: _draw(a, b, n, g), "no noise"),
     "without replacement": (
-        lambda a, b, n, s, g=None: torch.stack([a[torch.randperm(len(a), generator=g)[:n]] for _ in range(b)]) + s * torch.randn(b, n, a.shape[1], generator=g),
+        lambda a, b, n, s, g=None: (
+            torch.stack([a[torch.randperm(len(a), generator=g)[:n]] for _ in range(b)])
+            + s * torch.randn(b, n, a.shape[1], generator=g)
+        ),
         "with replacement",
     ),
     "same set for every sample": (
-        lambda a, b, n, s, g=None: (a[torch.randint(0, len(a), (n,), generator=g)] + s * torch.randn(n, a.shape[1], generator=g)).expand(b, n, a.shape[1]),
+        lambda a, b, n, s, g=None: (
+            a[torch.randint(0, len(a), (n,), generator=g)] + s * torch.randn(n, a.shape[1], generator=g)
+        ).expand(b, n, a.shape[1]),
         "fresh set",
     ),
-    "only the first actions": (lambda a, b, n, s, g=None: a[torch.randint(0, max(1, len(a) // 2), (b, n), generator=g)] + s * torch.randn(b, n, a.shape[1], generator=g), "equal probability"),
-    "ignores generator": (lambda a, b, n, s, g=None: _draw(a, b, n, None) + s * torch.randn(b, n, a.shape[1]), "generator"),
-    "wrong order": (lambda a, b, n, s, g=None: (_draw(a, b, n, g) + s * torch.randn(b, n, a.shape[1], generator=g)).transpose(0, 1), "shape"),
-    "biased noise": (lambda a, b, n, s, g=None: _draw(a, b, n, g) + s * torch.rand(b, n, a.shape[1], generator=g), "mean 0"),
+    "only the first actions": (
+        lambda a, b, n, s, g=None: (
+            a[torch.randint(0, max(1, len(a) // 2), (b, n), generator=g)]
+            + s * torch.randn(b, n, a.shape[1], generator=g)
+        ),
+        "equal probability",
+    ),
+    "ignores generator": (
+        lambda a, b, n, s, g=None: _draw(a, b, n, None) + s * torch.randn(b, n, a.shape[1]),
+        "generator",
+    ),
+    "wrong order": (
+        lambda a, b, n, s, g=None: (
+            _draw(a, b, n, g) + s * torch.randn(b, n, a.shape[1], generator=g)
+        ).transpose(0, 1),
+        "shape",
+    ),
+    "biased noise": (
+        lambda a, b, n, s, g=None: _draw(a, b, n, g) + s * torch.rand(b, n, a.shape[1], generator=g),
+        "mean 0",
+    ),
     # the right variance, the wrong shape: uniform on [−√3 σ, √3 σ], Laplace with scale σ/√2
     "uniform noise of variance σ²": (
-        lambda a, b, n, s, g=None: _draw(a, b, n, g) + s * math.sqrt(3) * (2 * torch.rand(b, n, a.shape[1], generator=g) - 1),
+        lambda a, b, n, s, g=None: (
+            _draw(a, b, n, g) + s * math.sqrt(3) * (2 * torch.rand(b, n, a.shape[1], generator=g) - 1)
+        ),
         "Gaussian shape",
     ),
     "Laplace noise of variance σ²": (
-        lambda a, b, n, s, g=None: _draw(a, b, n, g)
-        + s / math.sqrt(2) * torch.sign(torch.rand(b, n, a.shape[1], generator=g) - 0.5) * -torch.log(torch.rand(b, n, a.shape[1], generator=g)),
+        lambda a, b, n, s, g=None: (
+            _draw(a, b, n, g)
+            + s
+            / math.sqrt(2)
+            * torch.sign(torch.rand(b, n, a.shape[1], generator=g) - 0.5)
+            * -torch.log(torch.rand(b, n, a.shape[1], generator=g))
+        ),
         "Gaussian shape",
     ),
-    "one noise value for both coordinates": (lambda a, b, n, s, g=None: _draw(a, b, n, g) + s * torch.randn(b, n, 1, generator=g), "correlated"),
-    "clipped to the box": (lambda a, b, n, s, g=None: (_draw(a, b, n, g) + s * torch.randn(b, n, a.shape[1], generator=g)).clamp(-1, 1), "do not clip"),
+    "one noise value for both coordinates": (
+        lambda a, b, n, s, g=None: _draw(a, b, n, g) + s * torch.randn(b, n, 1, generator=g),
+        "correlated",
+    ),
+    "clipped to the box": (
+        lambda a, b, n, s, g=None: (_draw(a, b, n, g) + s * torch.randn(b, n, a.shape[1], generator=g)).clamp(
+            -1, 1
+        ),
+        "do not clip",
+    ),
 }
 
 
@@ -98,7 +150,10 @@ def _q(modes, actions, s):
 SHARE_MISTAKES = {
     "the expert's thirds": (lambda m, a, s: torch.full((len(m),), 1 / len(m)), "p(y|x)"),
     "proportional to q": (lambda m, a, s: _q(m, a, s) / _q(m, a, s).sum(), "wrong way round"),
-    "chapter 05's bandwidth": (lambda m, a, s: (1 / _q(m, a, 0.2)) / (1 / _q(m, a, 0.2)).sum(), "bandwidth σ"),
+    "chapter 05's bandwidth": (
+        lambda m, a, s: (1 / _q(m, a, 0.2)) / (1 / _q(m, a, 0.2)).sum(),
+        "bandwidth σ",
+    ),
     "not normalised": (lambda m, a, s: 1 / _q(m, a, s), "sum to 1"),
     "fixed sigma": (lambda m, a, s: (1 / _q(m, a, 0.1)) / (1 / _q(m, a, 0.1)).sum(), "σ = 0.3"),
     "wrong shape": (lambda m, a, s: torch.ones(2), "shape"),

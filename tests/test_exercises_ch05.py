@@ -10,14 +10,19 @@ from ibc_tutorial import kde
 from ibc_tutorial.exercises import ch05, solutions
 
 
-@pytest.mark.parametrize("checker", [ch05.check_kde_1d, ch05.check_inverse_weights, ch05.check_choose_bandwidth])
+@pytest.mark.parametrize(
+    "checker", [ch05.check_kde_1d, ch05.check_inverse_weights, ch05.check_choose_bandwidth]
+)
 def test_stub_is_not_attempted_and_a_crash_is_a_hint(checker, stub_and_crash):
     stub_and_crash(checker)
 
 
 def test_kde_1d_solution_and_library_are_correct():
     assert ch05.check_kde_1d(solutions.ch05_kde_1d).status == "correct"
-    assert ch05.check_kde_1d(lambda x, data, h: kde.kde_density(x[:, None], data[:, None], h)).status == "correct"
+    assert (
+        ch05.check_kde_1d(lambda x, data, h: kde.kde_density(x[:, None], data[:, None], h)).status
+        == "correct"
+    )
 
 
 def _k(x, data, h, half=0.5, const=True):
@@ -29,7 +34,10 @@ def _k(x, data, h, half=0.5, const=True):
 KDE_MISTAKES = {
     "no 1/h": (lambda x, d, h: _k(x, d, h).sum(1) / len(d), "1/h is missing"),
     "no 1/N": (lambda x, d, h: _k(x, d, h).sum(1) / h, "number of data points"),
-    "no kernel constant": (lambda x, d, h: _k(x, d, h, const=False).sum(1) / (len(d) * h), "constant in front"),
+    "no kernel constant": (
+        lambda x, d, h: _k(x, d, h, const=False).sum(1) / (len(d) * h),
+        "constant in front",
+    ),
     "exponent without 1/2": (lambda x, d, h: _k(x, d, h, half=1.0).sum(1) / (len(d) * h), "exponent"),
     "h squared": (lambda x, d, h: _k(x, d, h * h).sum(1) / (len(d) * h * h), "not h²"),
     "hard-coded h": (lambda x, d, h: solutions.ch05_kde_1d(x, d, 0.2), "hard-coding"),
@@ -64,7 +72,10 @@ WEIGHT_MISTAKES = {
     "not normalised": (lambda a, h: 1 / _g(a, h), "sum to 1"),
     "proportional to density": (lambda a, h: _g(a, h) / _g(a, h).sum(), "*rare* actions"),
     "uniform": (lambda a, h: torch.full((len(a),), 1 / len(a)), "rare actions should get larger weights"),
-    "first dimension only": (lambda a, h: (1 / _g(a[:, :1], h)) / (1 / _g(a[:, :1], h)).sum(), "D dimensions"),
+    "first dimension only": (
+        lambda a, h: (1 / _g(a[:, :1], h)) / (1 / _g(a[:, :1], h)).sum(),
+        "D dimensions",
+    ),
     "hard-coded h": (lambda a, h: kde.inverse_density_weights(a, 0.2), "use the bandwidth"),
 }
 
@@ -100,7 +111,9 @@ def _ess_without_square(actions, rare, candidates, min_ess):
     best, share = candidates[-1], -1.0
     for h in candidates:
         w = kde.inverse_density_weights(actions, h)
-        if float(1 / w.abs().max()) >= min_ess and float(w[rare].sum()) > share:  # 1/max w, not 1/Σw²: too strict
+        if (
+            float(1 / w.abs().max()) >= min_ess and float(w[rare].sum()) > share
+        ):  # 1/max w, not 1/Σw²: too strict
             best, share = h, float(w[rare].sum())
     return best
 

@@ -22,7 +22,11 @@ def _step(sign=-1.0, resample=True, noise="sigma", clip="clamp", use_gen=True, o
     def fn(samples, energies, sigma, low, high, generator):
         gen = generator if use_gen else None
         p = torch.softmax(sign * energies, dim=0)
-        idx = torch.multinomial(p, len(samples), replacement=True, generator=gen) if resample else torch.arange(len(samples))
+        idx = (
+            torch.multinomial(p, len(samples), replacement=True, generator=gen)
+            if resample
+            else torch.arange(len(samples))
+        )
         scale = {"sigma": sigma, "sigma2": sigma**2, "none": 0.0}[noise]
         n_shape = {"full": samples.shape, "per_sample": (len(samples), 1), "one": (1, 1)}[shape]
         if order == "before":  # noise first, then resampling: copies of noisy samples
@@ -48,7 +52,10 @@ STEP_MISTAKES = {
     "reflect instead of clamp": (_step(clip="redraw"), "clamped onto it"),
     "global generator": (_step(use_gen=False), "generator"),
     "noise before resampling": (_step(order="before"), "*after* resampling"),
-    "one noise value per sample, shared by its coordinates": (_step(shape="per_sample"), "independent N(0, σ) for each coordinate"),
+    "one noise value per sample, shared by its coordinates": (
+        _step(shape="per_sample"),
+        "independent N(0, σ) for each coordinate",
+    ),
     "one noise value for the whole population": (_step(shape="one"), "exact copies"),
     "wrong shape": (lambda s, e, sg, lo, hi, g: solutions.ch06_dfo_step(s, e, sg, lo, hi, g)[:, 0], "shape"),
 }

@@ -11,9 +11,6 @@ from ibc_tutorial.driving.lights import RED, YELLOW, RedLightMonitor
 from ibc_tutorial.driving.towns import get_town
 from ibc_tutorial.exercises import ch07, solutions
 
-
-
-
 CHECKS = [
     (ch07.check_yaw_rate, solutions.ch07_yaw_rate),
     (ch07.check_pid, solutions.ch07_pid_outputs),
@@ -103,6 +100,7 @@ def _pid(integral_dt=True, deriv_dt=True, first=False, length=None):
             prev = e
             out.append(kp * e + ki * i + kd * d)
         return out[:length]
+
     return fn
 
 
@@ -133,6 +131,7 @@ def _rule(yellow=False, no_lateral=False, any_past=False, backwards=False, narro
         crossed = (s1 >= 0) if any_past else ((s0 < 0 <= s1) or (backwards and s1 < 0 <= s0))
         within = True if no_lateral else lat <= (1.0 if narrow else 2.0)
         return bool(red and crossed and within)
+
     return fn
 
 
@@ -164,6 +163,7 @@ def _bev(swap=False, mirror=False, flip=False, no_turn=False, scale=5.0, row0=15
         row = row0 + scale * ahead if flip else row0 - scale * ahead
         col = 96 - scale * right if mirror else 96 + scale * right
         return (col, row) if swap else (row, col)
+
     return fn
 
 
@@ -199,9 +199,14 @@ STOP_MISTAKES = {
     "yellow as red": (lambda st, g, v: g <= 9.5 and st != 0, "yellow is not red"),
     "yellow as green": (lambda st, g, v: g <= 9.5 and st == 2, "yellow is not green"),
     "no distance limit": (lambda st, g, v: st == 2 or (st == 1 and v * v / (2 * g) <= 4.0), "distance"),
-    "full brake at yellow": (lambda st, g, v: g <= 9.5 and (st == 2 or (st == 1 and v * v / (2 * g) <= 8.0)),
-                             "compare the deceleration"),
-    "stops at green": (lambda st, g, v: g <= 9.5 and (st != 1 or v * v / (2 * g) <= 4.0), "red stops, green goes"),
+    "full brake at yellow": (
+        lambda st, g, v: g <= 9.5 and (st == 2 or (st == 1 and v * v / (2 * g) <= 8.0)),
+        "compare the deceleration",
+    ),
+    "stops at green": (
+        lambda st, g, v: g <= 9.5 and (st != 1 or v * v / (2 * g) <= 4.0),
+        "red stops, green goes",
+    ),
     "returns a string": (lambda st, g, v: "stop", "True or False"),
 }
 

@@ -9,9 +9,6 @@ import torch
 
 from ibc_tutorial.exercises import ch08, solutions
 
-
-
-
 CHECKS = [
     (ch08.check_episode_score, solutions.ch08_episode_score),
     (ch08.check_unseen_share, solutions.ch08_unseen_share),
@@ -73,7 +70,9 @@ def test_recipes_are_the_librarys_agents():
     expert = torch.full((16, 2), 0.9)
     for method, recipe in ch08.RECIPES.items():
         cfg = dfo_config(method, TINY)
-        assert (recipe["dfo_init"], recipe["dfo_select"]) == ((None, None) if cfg is None else (cfg.init, cfg.select))
+        assert (recipe["dfo_init"], recipe["dfo_select"]) == (
+            (None, None) if cfg is None else (cfg.init, cfg.select)
+        )
         if method == "bc":
             assert recipe["negatives"] is None
             continue
@@ -82,7 +81,9 @@ def test_recipes_are_the_librarys_agents():
         negatives = net.candidates[:, 1:]  # (B, N, 2)
         near_expert = bool(((negatives - 0.9).abs() < 5 * TINY.neg_sigma).all())
         assert recipe["negatives"] == ("expert + noise" if near_expert else "uniform")
-        assert near_expert or float(negatives.min()) < -0.5  # uniform over the box reaches far from the expert
+        assert (
+            near_expert or float(negatives.min()) < -0.5
+        )  # uniform over the box reaches far from the expert
 
 
 # --------------------------------------------------------------------------- typical mistakes
@@ -127,7 +128,10 @@ UNSEEN_MISTAKES = {
     "floor": (_unseen(draws="floor"), "rounded up"),
     "one minibatch": (_unseen(draws="batch"), "one minibatch"),
     "linear": (_unseen(linear=True), "(1 - p_i) ** n"),
-    "without replacement": (lambda p, b: max(0.0, 1 - math.ceil(len(p) / b) * b / len(p)), "with replacement"),
+    "without replacement": (
+        lambda p, b: max(0.0, 1 - math.ceil(len(p) / b) * b / len(p)),
+        "with replacement",
+    ),
     "count": (_unseen(count=True), "*number*"),
     "simulation": (_simulated, "expectation exactly"),
     "seen share": (lambda p, b: 1 - solutions.ch08_unseen_share(p, b), "none of the epoch's draws"),
@@ -146,13 +150,17 @@ def _recipe(**changes):
         out = dict(solutions.ch08_recipe(method))
         out.update(changes.get(method, {}))
         return out
+
     return fn
 
 
 RECIPE_MISTAKES = {
     "da-ibc argmax": (_recipe(**{"da-ibc": {"dfo_select": "argmax"}}), "draws the action"),
     "ibc from the expert": (_recipe(ibc={"dfo_init": "inverse-kde"}), "without looking at the expert"),
-    "da-ibc uniform negatives": (_recipe(**{"da-ibc": {"negatives": "uniform"}}), "minibatch's own expert actions"),
+    "da-ibc uniform negatives": (
+        _recipe(**{"da-ibc": {"negatives": "uniform"}}),
+        "minibatch's own expert actions",
+    ),
     "bc with DFO": (_recipe(bc={"dfo_init": "uniform"}), "never runs DFO"),
     "bc infonce": (_recipe(bc={"loss": "infonce"}), "Beta head"),
     "unknown word": (_recipe(ibc={"negatives": "random"}), "must be one of"),
@@ -170,4 +178,5 @@ def test_recipe_mistakes(name):
 def test_recipe_accepts_other_capitals():
     def shout(method):
         return {k: v.upper() if isinstance(v, str) else v for k, v in solutions.ch08_recipe(method).items()}
+
     assert ch08.check_recipe(shout).status == "correct"

@@ -8,8 +8,6 @@ from ibc_tutorial import stats
 from ibc_tutorial.exercises import ch09, solutions
 
 
-
-
 def library_difference(a, b, n_resamples, rng):
     """The answer is a library function: ``stats.difference_interval``."""
     iv = stats.difference_interval(a, b, n_resamples=n_resamples, seed=rng)
@@ -43,8 +41,10 @@ def test_solution_stub_and_crash(check, solution, stub_and_crash):
 def test_a_loop_written_bootstrap_and_other_seeds_pass():
     assert ch09.check_bootstrap_difference(looped_difference).status == "correct"
     for seed in range(5):  # the tolerance is not met by luck: other draws of a correct answer pass too
+
         def other_seed(a, b, n, rng, seed=seed):
             return library_difference(a, b, n, np.random.default_rng([seed, int(rng.integers(1 << 30))]))
+
         assert ch09.check_bootstrap_difference(other_seed).status == "correct"
 
 
@@ -60,6 +60,7 @@ def test_exit_shares_solution_matches_the_library_counts():
 def _boot_mistake(**kwargs):
     def fn(a, b, n, rng):
         return ch09._q(ch09._boot(a, n, rng, **kwargs) - ch09._boot(b, n, rng, **kwargs))
+
     return fn
 
 
@@ -77,16 +78,22 @@ BOOT_MISTAKES = {
     "agent means only": (_boot_mistake(episodes=False), "within each drawn agent"),
     "episodes only": (_boot_mistake(agents=False), "draw the agents with replacement"),
     "B - A": (lambda a, b, n, rng: tuple(-v for v in library_difference(a, b, n, rng))[::-1], "the sign"),
-    "90 %": (lambda a, b, n, rng: ch09._q(stats.bootstrap_means(a, n, rng) - stats.bootstrap_means(b, n, rng), 0.9),
-             "2.5th to the 97.5th"),
+    "90 %": (
+        lambda a, b, n, rng: ch09._q(
+            stats.bootstrap_means(a, n, rng) - stats.bootstrap_means(b, n, rng), 0.9
+        ),
+        "2.5th to the 97.5th",
+    ),
     "mean of A only": (lambda a, b, n, rng: ch09._q(stats.bootstrap_means(a, n, rng)), "mean(A) alone"),
     "shared draws": (_shared, "independently"),
     "ignores the generator": (_unseeded, "generator"),
     "high before low": (lambda a, b, n, rng: library_difference(a, b, n, rng)[::-1], "low <= high"),
     "one number": (lambda a, b, n, rng: 3.0, "two numbers"),
     "nan": (lambda a, b, n, rng: (np.nan, 1.0), "NaN"),
-    "a normal interval": (lambda a, b, n, rng: (a.mean() - b.mean() - 200.0, a.mean() - b.mean() + 200.0),
-                          "two levels of the resampling"),
+    "a normal interval": (
+        lambda a, b, n, rng: (a.mean() - b.mean() - 200.0, a.mean() - b.mean() + 200.0),
+        "two levels of the resampling",
+    ),
 }
 
 
@@ -101,6 +108,7 @@ def _shares(**kwargs):
     def fn(visits, approach):
         node = next(v["node"] for v in visits if v["approach"] == approach)
         return ch09._shares_ref(visits, approach, node=node, **kwargs)
+
     return fn
 
 
@@ -115,7 +123,10 @@ SHARE_MISTAKES = {
     "exits never taken left out": (_only_taken, "0 for one that was never taken"),
     "a list": (lambda visits, approach: [0.5, 0.5, 0.0], "must return a dict"),
     "other keys": (lambda visits, approach: {"l": 1.0, "s": 0.0, "r": 0.0}, "keys must be exactly"),
-    "uniform": (lambda visits, approach: {"left": 1 / 3, "straight": 1 / 3, "right": 1 / 3}, "count its visits"),
+    "uniform": (
+        lambda visits, approach: {"left": 1 / 3, "straight": 1 / 3, "right": 1 / 3},
+        "count its visits",
+    ),
 }
 
 
@@ -142,12 +153,21 @@ def _inclusive(est, lo, hi, t):
 
 
 VERDICT_MISTAKES = {
-    "the estimate decides": (lambda est, lo, hi, t: "holds" if est > t else "does not hold",
-                             "ordering does not decide"),
-    "containing means no": (lambda est, lo, hi, t: "holds" if lo > t else "does not hold", "contains the threshold"),
+    "the estimate decides": (
+        lambda est, lo, hi, t: "holds" if est > t else "does not hold",
+        "ordering does not decide",
+    ),
+    "containing means no": (
+        lambda est, lo, hi, t: "holds" if lo > t else "does not hold",
+        "contains the threshold",
+    ),
     "an end on the threshold": (_inclusive, "ends exactly on the threshold"),
-    "swapped": (lambda est, lo, hi, t: {"holds": "does not hold", "does not hold": "holds"}.get(
-        library_verdict(est, lo, hi, t), "cannot tell at this scale"), "whole interval lies"),
+    "swapped": (
+        lambda est, lo, hi, t: {"holds": "does not hold", "does not hold": "holds"}.get(
+            library_verdict(est, lo, hi, t), "cannot tell at this scale"
+        ),
+        "whole interval lies",
+    ),
     "a bool": (lambda est, lo, hi, t: lo > t, "three strings"),
     "another word": (lambda est, lo, hi, t: "unclear", "must return"),
 }

@@ -57,7 +57,9 @@ def test_beta_samples_follow_the_beta_and_leave_the_global_rng_alone():
         c = policy.min_concentration + policy.eps
         policy.head.bias.copy_(torch.stack([inv_softplus(2.0 - c), inv_softplus(5.0 - c)]))
     state = torch.random.get_rng_state()
-    a = policy.act(torch.zeros(4000, 3), mode="sample", generator=torch.Generator().manual_seed(0))  # (4000, 1)
+    a = policy.act(
+        torch.zeros(4000, 3), mode="sample", generator=torch.Generator().manual_seed(0)
+    )  # (4000, 1)
     assert torch.equal(torch.random.get_rng_state(), state)  # the global generator did not move
     z = ((a[:, 0] + 1) / 2).double().numpy()
     assert stats.kstest(z, stats.beta(2.0, 5.0).cdf).pvalue > 1e-3
@@ -99,7 +101,9 @@ def test_beta_head_parameterisation_and_mode():
     # mode of a peaked Beta is the argmax of its density
     with torch.no_grad():
         policy.head.weight.zero_()
-        policy.head.bias.copy_(torch.tensor([1.0, 3.0, 2.0, 0.5]))  # α-1 = softplus(1, 3); β-1 = softplus(2, .5)
+        policy.head.bias.copy_(
+            torch.tensor([1.0, 3.0, 2.0, 0.5])
+        )  # α-1 = softplus(1, 3); β-1 = softplus(2, .5)
     obs = torch.zeros(1, 3)
     values = torch.linspace(-1, 1, 20001)
     dens = policy.action_density(obs, values)[0]  # (G, 2)
@@ -185,14 +189,20 @@ def test_chapter_02_figures_build():
     policies = {name: make(1) for name, make in POLICIES.items()}
     for p in policies.values():
         p.encoder = MLPEncoder(1, embed_dim=16)  # observations of size 1, like the toy worlds'
-    fig = multimodality.plot_action_distributions(policies, torch.zeros(1, 1), torch.rand(50) * 2 - 1, where="here")
+    fig = multimodality.plot_action_distributions(
+        policies, torch.zeros(1, 1), torch.rand(50) * 2 - 1, where="here"
+    )
     assert [ax.get_title() for ax in fig.axes] == list(policies)
     plt.close(fig)
-    fig = multimodality.plot_density_fits(torch.rand(50) * 2 - 1, torch.linspace(-1, 1, 11), {"flat": torch.full((11,), 0.5)}, title="t")
+    fig = multimodality.plot_density_fits(
+        torch.rand(50) * 2 - 1, torch.linspace(-1, 1, 11), {"flat": torch.full((11,), 0.5)}, title="t"
+    )
     assert fig.axes[0].get_xlabel().startswith("steering")
     plt.close(fig)
     for world in (TreeWorld(), SideRoadWorld()):
         r = world.rollout(lambda obs: torch.zeros(len(obs), 1), 3, seed=0)
         fig = multimodality.plot_rollout_grid(world, {"a": r, "b": r, "c": r}, title="grid")
-        assert fig.axes[0].get_title().startswith("a:") and not fig.axes[3].axison  # the empty fourth panel is hidden
+        assert (
+            fig.axes[0].get_title().startswith("a:") and not fig.axes[3].axison
+        )  # the empty fourth panel is hidden
         plt.close(fig)

@@ -19,7 +19,9 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_version_matches_cli():
-    out = subprocess.run([sys.executable, "-m", "ibc_tutorial", "--version"], capture_output=True, text=True, check=True)
+    out = subprocess.run(
+        [sys.executable, "-m", "ibc_tutorial", "--version"], capture_output=True, text=True, check=True
+    )
     assert out.stdout.strip() == f"ibc-tutorial {ibc_tutorial.__version__}"
 
 
@@ -79,15 +81,25 @@ def test_config_checks_name_the_field():
             utils.check_fraction("config.noise", bad)
 
 
-@pytest.mark.parametrize("make, name", [
-    (lambda v: __import__("ibc_tutorial.driving.expert", fromlist=["x"]).ExpertConfig(brake_noise=v),
-     "ExpertConfig.brake_noise"),
-    (lambda v: __import__("ibc_tutorial.driving.collect", fromlist=["x"]).CollectConfig(brake_noise=v),
-     "CollectConfig.brake_noise"),
-    (lambda v: __import__("dataclasses").replace(
-        __import__("ibc_tutorial.experiments.agents.presets", fromlist=["x"]).LAPTOP, brake_noise=v),
-     "Preset.brake_noise"),
-])
+@pytest.mark.parametrize(
+    "make, name",
+    [
+        (
+            lambda v: __import__("ibc_tutorial.driving.expert", fromlist=["x"]).ExpertConfig(brake_noise=v),
+            "ExpertConfig.brake_noise",
+        ),
+        (
+            lambda v: __import__("ibc_tutorial.driving.collect", fromlist=["x"]).CollectConfig(brake_noise=v),
+            "CollectConfig.brake_noise",
+        ),
+        (
+            lambda v: __import__("dataclasses").replace(
+                __import__("ibc_tutorial.experiments.agents.presets", fromlist=["x"]).LAPTOP, brake_noise=v
+            ),
+            "Preset.brake_noise",
+        ),
+    ],
+)
 def test_brake_noise_is_checked_as_a_fraction_wherever_it_is_set(make, name):
     make(0.5)
     for bad in (1.5, float("nan"), "1"):
@@ -135,7 +147,9 @@ def test_train_fits_a_line_and_is_reproducible():
     for _ in range(2):
         torch.manual_seed(0)
         model = torch.nn.Linear(1, 1)
-        res = train(model, _mse(model), _line_data(), TrainConfig(steps=300, batch_size=32, lr=0.05, log_every=100))
+        res = train(
+            model, _mse(model), _line_data(), TrainConfig(steps=300, batch_size=32, lr=0.05, log_every=100)
+        )
         results.append((res.losses, model.weight.item(), model.bias.item()))
     assert results[0] == results[1]
     losses, w, b = results[0]
@@ -194,7 +208,11 @@ def test_executor_runs_a_notebook_in_place(tmp_path):
     nb.cells = [nbformat.v4.new_code_cell("import os\nprint(os.environ.get('TQDM_DISABLE'), 1 + 1)")]
     path = tmp_path / "t.ipynb"
     nbformat.write(nb, path)
-    subprocess.run([sys.executable, str(ROOT / "tools" / "execute_notebooks.py"), str(path)], check=True, capture_output=True)
+    subprocess.run(
+        [sys.executable, str(ROOT / "tools" / "execute_notebooks.py"), str(path)],
+        check=True,
+        capture_output=True,
+    )
     cell = json.loads(path.read_text())["cells"][0]
     assert cell["execution_count"] == 1
     assert "".join(cell["outputs"][0]["text"]) == "1 2\n"
@@ -217,8 +235,10 @@ def test_version_imports_no_subcommand_module():
 
 
 def test_help_lists_every_command_without_importing_them():
-    code = ("import sys; from ibc_tutorial.cli import main\ntry: main(['--help'])\nexcept SystemExit: pass\n"
-            "print([m for m in sys.modules if m.startswith(('ibc_tutorial.driving', 'ibc_tutorial.experiments'))])")
+    code = (
+        "import sys; from ibc_tutorial.cli import main\ntry: main(['--help'])\nexcept SystemExit: pass\n"
+        "print([m for m in sys.modules if m.startswith(('ibc_tutorial.driving', 'ibc_tutorial.experiments'))])"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     for command in ("collect", "train", "evaluate", "replicate"):
         assert command in out.stdout
@@ -226,8 +246,8 @@ def test_help_lists_every_command_without_importing_them():
 
 
 def test_likelihood_objective_is_the_policys_loss_and_rejects_non_policies():
-    from ibc_tutorial.policies import RegressionPolicy
     from ibc_tutorial.objectives import likelihood_objective
+    from ibc_tutorial.policies import RegressionPolicy
 
     torch.manual_seed(0)
     policy = RegressionPolicy.for_vectors(2, 1)

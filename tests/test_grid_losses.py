@@ -8,10 +8,10 @@ import torch
 import torch.nn.functional as F
 from scipy.special import softmax as scipy_softmax
 
-from ibc_tutorial.optimizers import ActionOptimizer
-from ibc_tutorial.optimizers.grid import GridOptimizer, action_grid
 from ibc_tutorial.losses import grid_cross_entropy, info_nce, soft_targets, temporal_smoothing
 from ibc_tutorial.metrics import expert_rank, grid_nll, whiteness
+from ibc_tutorial.optimizers import ActionOptimizer
+from ibc_tutorial.optimizers.grid import GridOptimizer, action_grid
 
 
 # --------------------------------------------------------------------------- soft targets (eq. 5)
@@ -102,7 +102,9 @@ def test_action_grid_is_the_cartesian_product_in_any_dimension():
     g3 = action_grid(4, 3, low=0.0, high=3.0)  # (64, 3): D = 3 is allowed now
     assert g3.shape == (64, 3)
     assert torch.equal(g3[0], torch.zeros(3)) and torch.equal(g3[-1], torch.full((3,), 3.0))
-    assert torch.equal(g3[1 * 16 + 2 * 4 + 3], torch.tensor([1.0, 2.0, 3.0]))  # row i·n² + j·n + k = (a_i, a_j, a_k)
+    assert torch.equal(
+        g3[1 * 16 + 2 * 4 + 3], torch.tensor([1.0, 2.0, 3.0])
+    )  # row i·n² + j·n + k = (a_i, a_j, a_k)
     assert len(torch.unique(g3, dim=0)) == 64
     with pytest.raises(ValueError, match="low must be < high"):
         action_grid(5, low=1.0, high=-1.0)

@@ -18,7 +18,9 @@ def reference_per_sample(pos, neg):
 def test_matches_cross_entropy_unweighted():
     g = torch.Generator().manual_seed(0)
     pos, neg = torch.randn(16, generator=g), torch.randn(16, 9, generator=g)
-    torch.testing.assert_close(info_nce(pos, neg).double(), reference_per_sample(pos, neg).mean(), rtol=1e-6, atol=1e-6)
+    torch.testing.assert_close(
+        info_nce(pos, neg).double(), reference_per_sample(pos, neg).mean(), rtol=1e-6, atol=1e-6
+    )
 
 
 def test_matches_cross_entropy_weighted():
@@ -28,7 +30,9 @@ def test_matches_cross_entropy_weighted():
     want = (w.double() * reference_per_sample(pos, neg)).mean()  # mean over batch of w_i (-log p̃_i)
     torch.testing.assert_close(info_nce(pos, neg, w).double(), want, rtol=1e-6, atol=1e-6)
     # F.cross_entropy's class weights do something else (a weighted mean), so compare to the sum form too
-    torch.testing.assert_close(info_nce(pos, neg, w).double() * 16, (w.double() * reference_per_sample(pos, neg)).sum())
+    torch.testing.assert_close(
+        info_nce(pos, neg, w).double() * 16, (w.double() * reference_per_sample(pos, neg)).sum()
+    )
 
 
 def test_matches_explicit_softmax_of_eq_3():

@@ -104,12 +104,16 @@ def test_inverse_density_weights_sum_to_one_and_rank_rare_actions_higher():
 def test_inverse_density_weights_raise_the_share_of_rare_actions_in_minibatches():
     """Drawn with probabilities w_i (as the training loop draws minibatches), rare actions are seen far more often."""
     g = torch.Generator().manual_seed(4)
-    actions = torch.cat([torch.randn(950, 1, generator=g) * 0.05, 0.8 + torch.randn(50, 1, generator=g) * 0.05])
+    actions = torch.cat(
+        [torch.randn(950, 1, generator=g) * 0.05, 0.8 + torch.randn(50, 1, generator=g) * 0.05]
+    )
     rare = torch.zeros(1000, dtype=torch.bool)
     rare[950:] = True
     inv = inverse_density_weights(actions)
     assert float(inv.sum()) == pytest.approx(1.0, abs=1e-6)
-    idx_u = torch.multinomial(torch.full((1000,), 1e-3), 20000, replacement=True, generator=torch.Generator().manual_seed(0))
+    idx_u = torch.multinomial(
+        torch.full((1000,), 1e-3), 20000, replacement=True, generator=torch.Generator().manual_seed(0)
+    )
     idx_w = torch.multinomial(inv, 20000, replacement=True, generator=torch.Generator().manual_seed(0))
     share_u, share_w = rare[idx_u].float().mean(), rare[idx_w].float().mean()
     assert abs(float(share_u) - 0.05) < 0.01
@@ -136,10 +140,18 @@ def test_tiny_bandwidth_gives_exact_densities_or_names_the_bandwidth():
     query = torch.rand(10, 1, generator=g)
     # no query coincides with a data point: every kernel is e^(−huge), the density is 0 (it was NaN)
     assert torch.equal(kde_density(query, data, 1e-200), torch.zeros(10))
-    assert torch.equal(kde_density(query[:, :1].expand(10, 2).contiguous(), data.expand(20, 2).contiguous(), 1e-200), torch.zeros(10))
+    assert torch.equal(
+        kde_density(query[:, :1].expand(10, 2).contiguous(), data.expand(20, 2).contiguous(), 1e-200),
+        torch.zeros(10),
+    )
     # at the data points themselves: 1 / (M h √(2π)) per coincident point, exact in float64 ...
     dens = kde_density(data.double(), data.double(), 1e-200)
-    torch.testing.assert_close(dens, torch.full((20,), 1 / (20 * 1e-200 * math.sqrt(2 * math.pi)), dtype=torch.float64), rtol=1e-12, atol=0)
+    torch.testing.assert_close(
+        dens,
+        torch.full((20,), 1 / (20 * 1e-200 * math.sqrt(2 * math.pi)), dtype=torch.float64),
+        rtol=1e-12,
+        atol=0,
+    )
     # ... and beyond float32's range: a clear error naming the bandwidth
     with pytest.raises(ValueError, match="bandwidth"):
         kde_density(data, data, 1e-200)
@@ -151,9 +163,13 @@ def test_far_queries_underflow_gracefully_in_log_space():
     """Kernels below float64's range (e^−800) can still give a representable density when h is small."""
     h = 1e-100
     data = torch.tensor([[0.0]], dtype=torch.float64)
-    u = torch.tensor([10.0, 40.0, 45.0], dtype=torch.float64)  # distances in units of h: u²/2 = 50, 800, 1012.5
+    u = torch.tensor(
+        [10.0, 40.0, 45.0], dtype=torch.float64
+    )  # distances in units of h: u²/2 = 50, 800, 1012.5
     got = kde_density((u * h)[:, None], data, h)
-    exact = [math.exp(-0.5 * float(v) ** 2 - math.log(h * math.sqrt(2 * math.pi))) for v in u]  # 8e-124, 1.4e-247, 0
+    exact = [
+        math.exp(-0.5 * float(v) ** 2 - math.log(h * math.sqrt(2 * math.pi))) for v in u
+    ]  # 8e-124, 1.4e-247, 0
     assert got[1] > 0 and got[2] == 0  # e^−800 underflows, e^−800 / (h √(2π)) does not
     torch.testing.assert_close(got, torch.tensor(exact, dtype=torch.float64), rtol=1e-9, atol=0)
 
@@ -163,7 +179,9 @@ def test_many_dimensions_give_finite_weights():
     # each ĝ(y_i) ≈ 1 / (M h^50 (2π)^25) ~ 1e79 overflows float32 (the weights were NaN)
     w = inverse_density_weights(x, 0.01)
     assert torch.isfinite(w).all()
-    torch.testing.assert_close(w, torch.full((10,), 0.1))  # the points are far apart in units of h: equal weights
+    torch.testing.assert_close(
+        w, torch.full((10,), 0.1)
+    )  # the points are far apart in units of h: equal weights
     with pytest.raises(ValueError, match="bandwidth"):
         kde_density(x, x, 0.01)
     assert torch.isfinite(kde_density(x.double(), x.double(), 0.01)).all()
@@ -176,7 +194,10 @@ def test_many_dimensions_give_finite_weights():
 def test_huge_bandwidth_gives_flat_densities():
     # h = 1e200 raised OverflowError (h ** D); the density is 1 / (h^D (2π)^(D/2)): tiny, or 0 below float64
     data = torch.rand(5, 1, dtype=torch.float64)
-    torch.testing.assert_close(kde_density(data, data, 1e200), torch.full((5,), 1 / (1e200 * math.sqrt(2 * math.pi)), dtype=torch.float64))
+    torch.testing.assert_close(
+        kde_density(data, data, 1e200),
+        torch.full((5,), 1 / (1e200 * math.sqrt(2 * math.pi)), dtype=torch.float64),
+    )
     assert torch.equal(kde_density(torch.rand(4, 2), torch.rand(5, 2), 1e200), torch.zeros(4))
     torch.testing.assert_close(inverse_density_weights(torch.rand(4, 2), 1e200), torch.full((4,), 0.25))
 
@@ -224,7 +245,9 @@ def test_reflected_kde_matches_scipy_written_out(d):
     out_seq = kde_density(query, data, 0.2, bounds=([-1.0] * d, [1.0] * d))
     assert torch.allclose(out_seq, out, rtol=1e-12, atol=0)
     centre = torch.zeros(1, d, dtype=torch.float64)
-    assert torch.allclose(kde_density(centre, centre, 0.1, bounds=(-1.0, 1.0)), kde_density(centre, centre, 0.1), rtol=1e-9)
+    assert torch.allclose(
+        kde_density(centre, centre, 0.1, bounds=(-1.0, 1.0)), kde_density(centre, centre, 0.1), rtol=1e-9
+    )
     # float32 in, float32 out, as without bounds
     assert kde_density(query.float(), data.float(), 0.2, bounds=(-1.0, 1.0)).dtype == torch.float32
 

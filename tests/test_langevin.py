@@ -6,7 +6,13 @@ import torch
 import ibc_tutorial.optimizers.langevin
 from ibc_tutorial.optimizers import ActionOptimizer
 from ibc_tutorial.optimizers.common import bounds
-from ibc_tutorial.optimizers.langevin import LangevinConfig, LangevinOptimizer, langevin, langevin_trace, polynomial_schedule
+from ibc_tutorial.optimizers.langevin import (
+    LangevinConfig,
+    LangevinOptimizer,
+    langevin,
+    langevin_trace,
+    polynomial_schedule,
+)
 
 
 def test_polynomial_schedule_matches_the_ibc_formula():
@@ -25,7 +31,9 @@ def test_langevin_descends_to_a_quadratic_minimum():
     energy = lambda y: ((y - torch.tensor([0.3, -0.4])) ** 2).sum(-1) * 20  # (N, 2) -> (N,)
     g = torch.Generator().manual_seed(0)
     experts = torch.zeros(3, 2)
-    tr = langevin_trace(energy, experts, LangevinConfig(n_samples=256, n_iters=50, noise_scale=0.0), generator=g)
+    tr = langevin_trace(
+        energy, experts, LangevinConfig(n_samples=256, n_iters=50, noise_scale=0.0), generator=g
+    )
     final = tr.samples[-1]
     assert (final - torch.tensor([0.3, -0.4])).abs().max() < 0.02
     torch.testing.assert_close(tr.action, torch.tensor([0.3, -0.4]), atol=0.02, rtol=0)
@@ -39,7 +47,12 @@ def test_one_step_is_the_reference_update():
     energy = lambda y: ((y - c) ** 2).sum(-1)  # dE/dy = 2 (y − c)
     experts = torch.zeros(2, 1)
     g1 = torch.Generator().manual_seed(3)
-    tr = langevin_trace(energy, experts, LangevinConfig(n_samples=64, n_iters=1, step_init=0.05, noise_scale=1.0), generator=g1)
+    tr = langevin_trace(
+        energy,
+        experts,
+        LangevinConfig(n_samples=64, n_iters=1, step_init=0.05, noise_scale=1.0),
+        generator=g1,
+    )
     y0, y1 = tr.samples
     g2 = torch.Generator().manual_seed(3)
     _ = torch.rand(1, 64, 1, generator=g2)  # the uniform initialisation
@@ -61,7 +74,13 @@ def test_langevin_stays_in_bounds_and_is_reproducible():
 def test_langevin_batched_form_and_errors():
     centres = torch.tensor([[-0.5], [0.6]])
     energy = lambda y: 20 * ((y - centres[:, None, :]) ** 2).sum(-1)  # (B, N, 1) -> (B, N)
-    acts = langevin(energy, torch.zeros(2, 1), LangevinConfig(n_samples=128, n_iters=60), n_obs=2, generator=torch.Generator().manual_seed(2))
+    acts = langevin(
+        energy,
+        torch.zeros(2, 1),
+        LangevinConfig(n_samples=128, n_iters=60),
+        n_obs=2,
+        generator=torch.Generator().manual_seed(2),
+    )
     torch.testing.assert_close(acts, centres, atol=0.05, rtol=0)
     e = lambda y: (y**2).sum(-1)
     with pytest.raises(ValueError, match="n_samples"):
@@ -82,7 +101,13 @@ def test_single_form_is_batched_with_b_equal_1_and_the_optimizer_protocol():
     energy = lambda y: 20 * ((y - 0.3) ** 2).sum(-1)  # (N, 1) -> (N,)
     c = LangevinConfig(n_samples=64, n_iters=10, select="sample")
     a = langevin(energy, torch.zeros(2, 1), c, generator=torch.Generator().manual_seed(3))
-    b = langevin(lambda y: energy(y[0])[None], torch.zeros(2, 1), c, n_obs=1, generator=torch.Generator().manual_seed(3))
+    b = langevin(
+        lambda y: energy(y[0])[None],
+        torch.zeros(2, 1),
+        c,
+        n_obs=1,
+        generator=torch.Generator().manual_seed(3),
+    )
     assert a.shape == (1,) and b.shape == (1, 1) and torch.equal(a, b[0])
 
     class Model:  # E(x, y) = 20 (y − x)²
@@ -95,17 +120,26 @@ def test_single_form_is_batched_with_b_equal_1_and_the_optimizer_protocol():
     opt = LangevinOptimizer(torch.zeros(2, 1), LangevinConfig(n_samples=128, n_iters=60))
     assert isinstance(opt, ActionOptimizer)
     obs = torch.tensor([[-0.5], [0.6]])
-    torch.testing.assert_close(opt.infer(Model(), obs, generator=torch.Generator().manual_seed(2)), obs, atol=0.05, rtol=0)
+    torch.testing.assert_close(
+        opt.infer(Model(), obs, generator=torch.Generator().manual_seed(2)), obs, atol=0.05, rtol=0
+    )
 
 
 def test_ula_noise_samples_the_boltzmann_distribution_and_ibc_noise_does_not():
     """E = y² / (2 s²) is the Gaussian N(0, s²): ULA's chains spread like it; the reference's collapse."""
     s = 0.2
     energy = lambda y: (y[:, 0] ** 2) / (2 * s * s)  # (N, 1) -> (N,)
-    base = dict(n_samples=4000, n_iters=300, step_init=0.004, step_final=0.004, delta_clip=10.0, low=-5.0, high=5.0)
+    base = dict(
+        n_samples=4000, n_iters=300, step_init=0.004, step_final=0.004, delta_clip=10.0, low=-5.0, high=5.0
+    )
     stds = {}
     for noise in ("ibc", "ula"):
-        tr = langevin_trace(energy, torch.zeros(2, 1), LangevinConfig(**base, noise=noise), generator=torch.Generator().manual_seed(0))
+        tr = langevin_trace(
+            energy,
+            torch.zeros(2, 1),
+            LangevinConfig(**base, noise=noise),
+            generator=torch.Generator().manual_seed(0),
+        )
         assert tr.config.noise == noise
         stds[noise] = float(tr.samples[-1].std())
     # ULA with gradient step η = ε/2 = 0.002 and noise √(2η): stationary variance s² / (1 − η / (2 s²)) ≈ s²
@@ -121,8 +155,12 @@ def test_one_ula_step_is_the_textbook_update():
     """y ← clip(y − (ε/2) dE/dy − √ε n): ULA with gradient step η = ε/2 and noise √(2η)."""
     c = torch.tensor([0.5])
     energy = lambda y: ((y - c) ** 2).sum(-1)  # dE/dy = 2 (y − c)
-    tr = langevin_trace(energy, torch.zeros(2, 1), LangevinConfig(n_samples=64, n_iters=1, step_init=0.05, delta_clip=10.0, noise="ula"),
-                        generator=torch.Generator().manual_seed(3))
+    tr = langevin_trace(
+        energy,
+        torch.zeros(2, 1),
+        LangevinConfig(n_samples=64, n_iters=1, step_init=0.05, delta_clip=10.0, noise="ula"),
+        generator=torch.Generator().manual_seed(3),
+    )
     y0, y1 = tr.samples
     g2 = torch.Generator().manual_seed(3)
     _ = torch.rand(1, 64, 1, generator=g2)  # the uniform initialisation
@@ -141,6 +179,12 @@ def test_the_noise_comes_from_the_generator_and_goes_to_the_actions_device(monke
     y = torch.rand(3, 16, 2, generator=torch.Generator().manual_seed(0)) * 2 - 1  # (B, N, D)
     g_cpu, g_meta = torch.Generator().manual_seed(4), torch.Generator().manual_seed(4)
     on_cpu, _ = ibc_tutorial.optimizers.langevin._langevin_core(energy, y, c, lo, hi, g_cpu, record=False)
-    on_meta, _ = ibc_tutorial.optimizers.langevin._langevin_core(energy, y.to("meta"), c, lo, hi, g_meta, record=False)
-    assert on_cpu.device.type == "cpu" and on_meta.device.type == "meta" and on_meta.shape == on_cpu.shape == (3, 2)
+    on_meta, _ = ibc_tutorial.optimizers.langevin._langevin_core(
+        energy, y.to("meta"), c, lo, hi, g_meta, record=False
+    )
+    assert (
+        on_cpu.device.type == "cpu"
+        and on_meta.device.type == "meta"
+        and on_meta.shape == on_cpu.shape == (3, 2)
+    )
     assert torch.equal(g_cpu.get_state(), g_meta.get_state())  # the same draws, from the CPU generator

@@ -28,7 +28,12 @@ def test_beta_nll_matches_torch_beta_inside_interval(d):
     gen = torch.Generator().manual_seed(d)
     alpha, beta = _random_beta_params(gen, d=d)
     actions = torch.empty(64, d).uniform_(-0.999, 0.999, generator=gen)
-    ref = -torch.distributions.Beta(alpha.double(), beta.double()).log_prob((actions.double() + 1) / 2).sum(1).mean()
+    ref = (
+        -torch.distributions.Beta(alpha.double(), beta.double())
+        .log_prob((actions.double() + 1) / 2)
+        .sum(1)
+        .mean()
+    )
     got = beta_nll(alpha, beta, actions)
     assert got.shape == ()
     torch.testing.assert_close(got.double(), ref, rtol=1e-4, atol=1e-4)
@@ -44,7 +49,11 @@ def test_beta_nll_sums_dimensions_and_averages_batch():
     gen = torch.Generator().manual_seed(3)
     alpha, beta = _random_beta_params(gen, b=5, d=2)
     actions = torch.empty(5, 2).uniform_(-0.9, 0.9, generator=gen)
-    per = [beta_nll(alpha[i : i + 1, j : j + 1], beta[i : i + 1, j : j + 1], actions[i : i + 1, j : j + 1]) for i in range(5) for j in range(2)]
+    per = [
+        beta_nll(alpha[i : i + 1, j : j + 1], beta[i : i + 1, j : j + 1], actions[i : i + 1, j : j + 1])
+        for i in range(5)
+        for j in range(2)
+    ]
     torch.testing.assert_close(beta_nll(alpha, beta, actions), torch.stack(per).sum() / 5)
 
 

@@ -16,14 +16,17 @@ def test_crashes_per_km_by_hand():
     assert crashes_per_km([1, 1], [0.0, 1000.0]) == pytest.approx(2.0)
 
 
-@pytest.mark.parametrize("crashes, distance, match", [
-    (-1, 100.0, "crashes"),
-    (1.5, 100.0, "crashes"),
-    (1, 0.0, "distance_m"),
-    (1, -5.0, "distance_m"),
-    (1, float("nan"), "distance_m"),
-    ([1, 2], [100.0], "equally long"),
-])
+@pytest.mark.parametrize(
+    "crashes, distance, match",
+    [
+        (-1, 100.0, "crashes"),
+        (1.5, 100.0, "crashes"),
+        (1, 0.0, "distance_m"),
+        (1, -5.0, "distance_m"),
+        (1, float("nan"), "distance_m"),
+        ([1, 2], [100.0], "equally long"),
+    ],
+)
 def test_crashes_per_km_checks_its_arguments(crashes, distance, match):
     with pytest.raises(ValueError, match=match):
         crashes_per_km(crashes, distance)

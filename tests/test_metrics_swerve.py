@@ -12,14 +12,16 @@ from ibc_tutorial.toy import SideRoadWorld
 
 def test_swerve_rate_by_hand():
     nan = math.nan
-    traces = torch.tensor([
-        [nan, 0.00, 0.10, 0.05],   # peak 0.10 < slight: no swerve, 0
-        [nan, 0.10, 0.40, 0.20],   # peak 0.40 in [slight, clear): slight swerve, 1/2
-        [0.0, 0.50, 1.20, 0.30],   # peak 1.20 >= clear: a swerve, 1
-        [0.0, -0.8, -1.5, -0.2],   # away from the side road only: 0
-        [0.0, 0.30, 0.30, 0.30],   # exactly at slight: 1/2
-        [0.0, 1.00, 0.00, 0.00],   # exactly at clear: 1
-    ])
+    traces = torch.tensor(
+        [
+            [nan, 0.00, 0.10, 0.05],  # peak 0.10 < slight: no swerve, 0
+            [nan, 0.10, 0.40, 0.20],  # peak 0.40 in [slight, clear): slight swerve, 1/2
+            [0.0, 0.50, 1.20, 0.30],  # peak 1.20 >= clear: a swerve, 1
+            [0.0, -0.8, -1.5, -0.2],  # away from the side road only: 0
+            [0.0, 0.30, 0.30, 0.30],  # exactly at slight: 1/2
+            [0.0, 1.00, 0.00, 0.00],  # exactly at clear: 1
+        ]
+    )
     scores = swerve_rate(traces, slight=0.3, clear=1.0, per_pass=True)
     assert scores.tolist() == [0.0, 0.5, 1.0, 0.0, 0.5, 1.0]
     # (0 + 1/2 + 1 + 0 + 1/2 + 1) / 6 = 3 / 6

@@ -9,8 +9,8 @@ import pytest
 import torch
 
 from ibc_tutorial import parallel
-from ibc_tutorial.objectives import info_nce_objective
 from ibc_tutorial.negatives import UniformSampler
+from ibc_tutorial.objectives import info_nce_objective
 from ibc_tutorial.policies import EnergyModel, MLPEncoder
 from ibc_tutorial.training import TrainConfig, train
 
@@ -22,8 +22,12 @@ def train_tiny(seed, steps=20):
     model = EnergyModel(MLPEncoder(1, embed_dim=8, hidden=8), 1, hidden=8)
     g = torch.Generator().manual_seed(100)
     data = {"obs": torch.rand(64, 1, generator=g), "actions": torch.rand(64, 1, generator=g) * 2 - 1}
-    curve = train(model, info_nce_objective(model, UniformSampler(-1.0, 1.0), 8), data,
-                  TrainConfig(steps=steps, batch_size=16, lr=1e-2, seed=seed, log_every=5, progress=False))
+    curve = train(
+        model,
+        info_nce_objective(model, UniformSampler(-1.0, 1.0), 8),
+        data,
+        TrainConfig(steps=steps, batch_size=16, lr=1e-2, seed=seed, log_every=5, progress=False),
+    )
     return model.state_dict(), curve.losses
 
 
@@ -114,7 +118,9 @@ def test_bad_jobs():
 
 @pytest.mark.parametrize("workers", [1, 2])
 def test_a_job_that_raises(workers):
-    with pytest.raises(RuntimeError, match=r"fail_on_two raised ValueError on call 2 \(of 4\): two is not allowed") as info:
+    with pytest.raises(
+        RuntimeError, match=r"fail_on_two raised ValueError on call 2 \(of 4\): two is not allowed"
+    ) as info:
         parallel.parallel_map(fail_on_two, [0, 1, 2, 3], workers=workers)
     assert isinstance(info.value.__cause__, ValueError)
     # the next call works (with workers, on a fresh pool)
@@ -123,8 +129,11 @@ def test_a_job_that_raises(workers):
 
 @pytest.mark.parametrize("workers", [1, 2])
 def test_calls_of_different_functions(workers, float64):
-    calls = [functools.partial(combine, 1, 2, c=3), functools.partial(train_tiny, 1, steps=10),
-             functools.partial(where_am_i, "x")]
+    calls = [
+        functools.partial(combine, 1, 2, c=3),
+        functools.partial(train_tiny, 1, steps=10),
+        functools.partial(where_am_i, "x"),
+    ]
     out = parallel.parallel_calls(calls, workers=workers)
     assert out[0] == (1, 2, 3) and out[2][0] == "x" and out[2][3] == torch.float64
     weights, losses = train_tiny(1, steps=10)

@@ -65,13 +65,44 @@ def test_no_steering_label_in_the_old_convention():
 # --------------------------------------------------------------------------- common
 def test_common_figures_have_titles_and_labels():
     x = [1, 2, 4, 8]
-    assert_labelled(common.plot_lines(x, {"a": [0.1, 0.2, 0.3, 0.4], "b": [0.4, 0.3, 0.2, 0.1]}, xlabel="samples", ylabel="rate", title="t", logx=True, logy=True))
-    assert_labelled(common.plot_lines({"a": [1, 2], "b": [1, 3, 5]}, {"a": [0, 1], "b": [1, 0, 1]}, xlabel="x", ylabel="y", title="t", markers=False))
-    fig = common.plot_bars(["cruise", "junction"], {"A": [0.5, 0.5], "B": [0.9, 0.1]}, ylabel="share", title="t",
-                           points={"A": np.full((3, 2), 0.5)}, reference={"data": [0.7, 0.3]})
+    assert_labelled(
+        common.plot_lines(
+            x,
+            {"a": [0.1, 0.2, 0.3, 0.4], "b": [0.4, 0.3, 0.2, 0.1]},
+            xlabel="samples",
+            ylabel="rate",
+            title="t",
+            logx=True,
+            logy=True,
+        )
+    )
+    assert_labelled(
+        common.plot_lines(
+            {"a": [1, 2], "b": [1, 3, 5]},
+            {"a": [0, 1], "b": [1, 0, 1]},
+            xlabel="x",
+            ylabel="y",
+            title="t",
+            markers=False,
+        )
+    )
+    fig = common.plot_bars(
+        ["cruise", "junction"],
+        {"A": [0.5, 0.5], "B": [0.9, 0.1]},
+        ylabel="share",
+        title="t",
+        points={"A": np.full((3, 2), 0.5)},
+        reference={"data": [0.7, 0.3]},
+    )
     assert [t.get_text() for t in fig.axes[0].get_xticklabels()] == ["cruise", "junction"]
     plt.close(fig)  # bars have no x label: the categories name them
-    fig = common.plot_learning_curves(np.arange(5), {"IBC": np.random.default_rng(0).random((3, 5))}, ylabel="NLL", title="t", references={"expert": 0.5})
+    fig = common.plot_learning_curves(
+        np.arange(5),
+        {"IBC": np.random.default_rng(0).random((3, 5))},
+        ylabel="NLL",
+        title="t",
+        references={"expert": 0.5},
+    )
     assert "mean of 3 seeds" in fig.axes[0].get_legend().get_texts()[0].get_text()
     assert_labelled(fig)
 
@@ -90,20 +121,32 @@ def test_common_helpers():
 def test_multimodality_figures():
     actions = torch.linspace(-1, 1, 21)
     energies = (actions[None, :] - torch.linspace(-0.5, 0.5, 6)[:, None]) ** 2  # (6, 21)
-    fig = multimodality.plot_energy_landscape(torch.linspace(10, 0, 6), actions, energies, path=torch.zeros(6), expert=(np.ones(3), np.zeros(3)))
+    fig = multimodality.plot_energy_landscape(
+        torch.linspace(10, 0, 6), actions, energies, path=torch.zeros(6), expert=(np.ones(3), np.zeros(3))
+    )
     assert fig.axes[0].get_ylabel() == common.STEER_LABEL == "steering (−1 left … +1 right)"
     assert_labelled(fig)
     fig = multimodality.plot_energy_curves(actions, {"near": energies[0], "far": energies[-1]}, title="t")
     assert fig.axes[0].get_xlabel() == common.STEER_LABEL
     assert_labelled(fig)
     assert_labelled(multimodality.plot_command_traces(0.1, {"a": np.zeros(10), "b": np.ones(10)}))
-    fig = multimodality.plot_command_traces(0.1, {"a": np.zeros(10), "b": np.ones(10), "c": -np.ones(10)}, reference="a")
+    fig = multimodality.plot_command_traces(
+        0.1, {"a": np.zeros(10), "b": np.ones(10), "c": -np.ones(10)}, reference="a"
+    )
     assert len(fig.axes) == 3  # one panel per trace, so that nearly equal traces do not overlap
-    assert [len(ax.lines) for ax in fig.axes] == [2, 3, 3]  # zero line, trace, and the reference in the others
+    assert [len(ax.lines) for ax in fig.axes] == [
+        2,
+        3,
+        3,
+    ]  # zero line, trace, and the reference in the others
     assert_labelled(fig)
     with pytest.raises(ValueError, match="reference"):
         multimodality.plot_command_traces(0.1, {"a": np.zeros(10)}, reference="b")
-    assert_labelled(multimodality.plot_density_fits(torch.rand(30) * 2 - 1, actions, {"flat": torch.full((21,), 0.5)}, title="t"))
+    assert_labelled(
+        multimodality.plot_density_fits(
+            torch.rand(30) * 2 - 1, actions, {"flat": torch.full((21,), 0.5)}, title="t"
+        )
+    )
     assert_labelled(multimodality.plot_beta_shapes([(2, 2)]))
     prev = torch.linspace(-1, 1, 5)
     fig = multimodality.plot_response_map(prev, {"copy": prev, "zero": torch.zeros(5)}, title="t")
@@ -126,10 +169,17 @@ def test_rollout_figures_share_one_drawing():
     fig = multimodality.plot_rollout_grid(road, {"a": r_road}, title="grid", ncols=1)
     assert fig.axes[0].get_title().startswith("a: main")
     assert_labelled(fig)
-    assert multimodality.rollout_colors(tree, r_tree) == [multimodality.TREE_SIDE_COLORS[int(v)] for v in tree.pass_side(r_tree)]
+    assert multimodality.rollout_colors(tree, r_tree) == [
+        multimodality.TREE_SIDE_COLORS[int(v)] for v in tree.pass_side(r_tree)
+    ]
     # every closed-loop figure has a colour key of the outcomes
     labels = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
-    assert labels == ["ended on the main road", "ended on the side road", "left the road", "where it collided"]
+    assert labels == [
+        "ended on the main road",
+        "ended on the side road",
+        "left the road",
+        "where it collided",
+    ]
     fig = multimodality.plot_tree_closed_loop(tree, {"zero": r_tree})
     labels = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
     assert labels[:3] == ["passed on the left", "passed on the right", "collided"]
@@ -141,14 +191,18 @@ def test_rollout_figures_share_one_drawing():
 def test_ingredients_figures():
     axis = torch.linspace(-1, 1, 9)
     e = axis[:, None] ** 2 + axis[None, :] ** 2  # (9, 9)
-    fig = ingredients.plot_energy_2d(e, axis, title="t", unvisited=e > 1, modes=np.zeros((1, 2)), argmin=(0.0, 0.0))
+    fig = ingredients.plot_energy_2d(
+        e, axis, title="t", unvisited=e > 1, modes=np.zeros((1, 2)), argmin=(0.0, 0.0)
+    )
     assert fig.axes[0].get_xlabel() == common.STEER_LABEL
     assert_labelled(fig)
     # the hatching of unvisited cells has its legend entry
     assert any("never visited" in t.get_text() for t in fig.axes[0].get_legend().get_texts())
     acts = np.random.default_rng(0).uniform(-1, 1, (20, 2))
     assert_labelled(ingredients.plot_counter_examples(acts, np.arange(20) % 3, {"uniform": acts}))
-    assert_labelled(ingredients.plot_sigma_sweep([0.1, 0.3], np.ones((2, 3)), uniform=np.ones(3), ylabel="NLL", title="t"))
+    assert_labelled(
+        ingredients.plot_sigma_sweep([0.1, 0.3], np.ones((2, 3)), uniform=np.ones(3), ylabel="NLL", title="t")
+    )
     assert_labelled(ingredients.plot_kde_by_hand([0.0, 0.5], np.linspace(-1, 1, 11), 0.2, np.ones(11)))
     assert_labelled(ingredients.plot_kde_bandwidths({0.1: np.ones((9, 9)), 0.2: np.ones((9, 9))}, axis, acts))
     assert_labelled(ingredients.plot_populations_2d(e, axis, {"DFO": acts}, title="t"))
@@ -157,8 +211,12 @@ def test_ingredients_figures():
 def test_dfo_iteration_figure():
     g = torch.Generator().manual_seed(0)
     samples = [torch.rand(50, 1, generator=g) * 2 - 1 for _ in range(3)]
-    trace = SimpleNamespace(samples=samples, sigmas=[0.3, 0.1, float("nan")], action=torch.tensor([0.2]),
-                            config=DFOConfig(select="sample"))
+    trace = SimpleNamespace(
+        samples=samples,
+        sigmas=[0.3, 0.1, float("nan")],
+        action=torch.tensor([0.2]),
+        config=DFOConfig(select="sample"),
+    )
     grid = np.linspace(-1, 1, 21)
     fig = ingredients.plot_dfo_iterations(trace, grid, grid**2, bins=10)
     assert fig.axes[0].get_title().startswith("iteration 1") and "last" in fig.axes[2].get_title()
@@ -185,7 +243,11 @@ def test_town_figures():
     fig = town.plot_light_timeline(np.zeros((20, 3), dtype=int), labels=["a", "b", "c"])
     assert [t.get_text() for t in fig.axes[0].get_yticklabels()] == ["a", "b", "c"]
     assert_labelled(fig, ylabel=False)  # the heads' names label the y axis
-    assert_labelled(town.plot_light_stop(t, 10 - t, np.ones(20), np.r_[np.zeros(10), 2 * np.ones(10)], gap_no_brake=10 - 2 * t))
+    assert_labelled(
+        town.plot_light_stop(
+            t, 10 - t, np.ones(20), np.r_[np.zeros(10), 2 * np.ones(10)], gap_no_brake=10 - 2 * t
+        )
+    )
     fig = town.plot_action_histograms(np.zeros((10, 2)))
     assert fig.axes[0].get_xlabel() == common.STEER_LABEL
     assert_labelled(fig)
@@ -207,17 +269,24 @@ def test_town_figures():
 def test_agents_figures():
     assert agents.plot_agent_architecture().axes[0].get_title()
     plt.close("all")
-    curves = {"bc": {0: {"epoch": [1, 2], "score": [1.0, 2.0]}, 1: {"epoch": [1, 2], "score": [2.0, 3.0]}}, "ibc": {}}
+    curves = {
+        "bc": {0: {"epoch": [1, 2], "score": [1.0, 2.0]}, 1: {"epoch": [1, 2], "score": [2.0, 3.0]}},
+        "ibc": {},
+    }
     assert_labelled(agents.plot_training_curves(curves))
     fig = agents.plot_loss_curves({"bc": ([1, 2], [1.0, 0.5]), "da-ibc": ([1, 2], [2.0, 1.0])})
     assert [ax.get_title() for ax in fig.axes] == ["BC (Beta)", "DA-IBC"]
     assert_labelled(fig)
     steer, accel = np.linspace(-1, 1, 5), np.linspace(-1, 1, 4)
-    fig = agents.plot_energy_landscapes([("p", np.ones((4, 5)) + accel[:, None], np.zeros((3, 2)), None)], steer, accel)
+    fig = agents.plot_energy_landscapes(
+        [("p", np.ones((4, 5)) + accel[:, None], np.zeros((3, 2)), None)], steer, accel
+    )
     assert common.STEER_LABEL in fig.axes[1].get_xlabel()
     assert_labelled(fig)
-    counts = {"bc": {3: {"left": 1, "straight": 2, "right": 0}},
-              "da-ibc": {3: {"left": 0, "straight": 1, "right": 1}, 5: {"left": 2, "straight": 0, "right": 0}}}
+    counts = {
+        "bc": {3: {"left": 1, "straight": 2, "right": 0}},
+        "da-ibc": {3: {"left": 0, "straight": 1, "right": 1}, 5: {"left": 2, "straight": 0, "right": 0}},
+    }
     fig = agents.plot_exit_counts(counts)
     assert [ax.get_title() for ax in fig.axes] == ["BC (Beta)", "DA-IBC"]
     assert [t.get_text() for t in fig.axes[1].get_xticklabels()] == ["3", "5"]
@@ -225,14 +294,22 @@ def test_agents_figures():
     assert_labelled(fig)
     with pytest.raises(ValueError):
         agents.plot_exit_counts({})
-    fig = agents.plot_labels_at_rest({"no held brakes": np.array([-1.0, -1.0, -1.0, 1.0]), "held brakes": [0.9, -1.0]})
+    fig = agents.plot_labels_at_rest(
+        {"no held brakes": np.array([-1.0, -1.0, -1.0, 1.0]), "held brakes": [0.9, -1.0]}
+    )
     assert "25% say go" in fig.axes[0].get_title() and "50% say go" in fig.axes[1].get_title()
-    assert sum(p.get_height() for p in fig.axes[0].patches) == pytest.approx(1.0)  # shares of the states at rest
+    assert sum(p.get_height() for p in fig.axes[0].patches) == pytest.approx(
+        1.0
+    )  # shares of the states at rest
     assert_labelled(fig)
     with pytest.raises(ValueError):
         agents.plot_labels_at_rest({})
-    fig = agents.plot_crossing_steering({"IBC": {"left": [[-0.6, -0.1], [-0.5, -0.2]], "ended": [[-0.1, 0.2]]},
-                                         "BC": {"right": np.zeros((0, 2))}})
+    fig = agents.plot_crossing_steering(
+        {
+            "IBC": {"left": [[-0.6, -0.1], [-0.5, -0.2]], "ended": [[-0.1, 0.2]]},
+            "BC": {"right": np.zeros((0, 2))},
+        }
+    )
     texts = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
     assert texts == ["left (2)", "ended (1)"] and fig.axes[0].get_title() == "IBC"
     assert_labelled(fig)
@@ -240,12 +317,17 @@ def test_agents_figures():
         with pytest.raises(ValueError):
             agents.plot_crossing_steering(bad)
     steer = np.linspace(-1, 1, 5)
-    fig = agents.plot_crossing_energies({"IBC seed 0": [[3, 1, 0, 2, 9], [2, 0, 1, 5, 20]], "B": np.zeros((1, 5))},
-                                        steer, clip=10)
+    fig = agents.plot_crossing_energies(
+        {"IBC seed 0": [[3, 1, 0, 2, 9], [2, 0, 1, 5, 20]], "B": np.zeros((1, 5))}, steer, clip=10
+    )
     line = fig.axes[0].get_lines()[0]
     assert list(line.get_xdata()) == [0.0, -0.5] and fig.axes[0].get_title() == "IBC seed 0"
     assert fig.axes[0].get_images()[0].get_array().max() == 10  # clipped
     assert_labelled(fig)
-    for bad in (dict(panels={}), dict(panels={"A": np.zeros((0, 5))}), dict(panels={"A": np.zeros((1, 5))}, clip=0)):
+    for bad in (
+        dict(panels={}),
+        dict(panels={"A": np.zeros((0, 5))}),
+        dict(panels={"A": np.zeros((1, 5))}, clip=0),
+    ):
         with pytest.raises(ValueError):
             agents.plot_crossing_energies(steer=steer, **bad)

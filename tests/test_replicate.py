@@ -3,7 +3,6 @@
 import json
 import re
 import subprocess
-
 from pathlib import Path
 
 import numpy as np
@@ -43,10 +42,14 @@ def test_replicate_tiny(replicated):
     # every agent is kept, its weights in float16; no optimiser states
     for m in METHODS:
         ckpt = torch.load(run_dir(out, m, 0) / "final.pt", weights_only=True)
-        assert ckpt["optimizer"] is None and all(v.dtype == torch.float16 for v in ckpt["model"].values()
-                                                 if v.is_floating_point())
+        assert ckpt["optimizer"] is None and all(
+            v.dtype == torch.float16 for v in ckpt["model"].values() if v.is_floating_point()
+        )
         held = json.loads((run_dir(out, m, 0) / "heldout_eval.json").read_text())
-        assert held["start_seed"] != json.loads((run_dir(out, m, 0) / "final_eval.json").read_text())["start_seed"]
+        assert (
+            held["start_seed"]
+            != json.loads((run_dir(out, m, 0) / "final_eval.json").read_text())["start_seed"]
+        )
     assert not list(out.glob("runs/*/*/last.pt"))
     prov = json.loads((out / "provenance.json").read_text())
     assert prov["complete"] and prov["runs_done"] == prov["runs_planned"] and prov["machine"]["nproc"] >= 1
@@ -94,11 +97,19 @@ def test_the_shipped_results_load():
     assert Preset.from_dict(res["preset"]) == LAPTOP and res["complete"]
     assert shipped["provenance"]["complete"] and set(res["table"]) == set(METHODS) | {"expert"}
     assert shipped["free_driving"] and "junction_energy" in shipped["landscapes"]
-    assert collect_results(SHIPPED, LAPTOP)["table"] == res["table"]  # the aggregation reads the shipped runs alike
+    assert (
+        collect_results(SHIPPED, LAPTOP)["table"] == res["table"]
+    )  # the aggregation reads the shipped runs alike
 
 
-SHIPPED_RUNS = ["laptop", "laptop-emulated", "ablations/flag-lights", "ablations/previous-preset",
-                "ablations/intensity-lights", "steering-laptop"]
+SHIPPED_RUNS = [
+    "laptop",
+    "laptop-emulated",
+    "ablations/flag-lights",
+    "ablations/previous-preset",
+    "ablations/intensity-lights",
+    "steering-laptop",
+]
 """Every replication folder the book ships (each made by one clean run of a committed state)."""
 
 
@@ -133,7 +144,9 @@ def test_the_shipped_crossings_are_clean_runs_of_an_ancestor_commit():
             assert ancestor.returncode == 0, f"{f.name}: commit {commit} is not an ancestor of HEAD"
 
 
-@pytest.mark.parametrize("folder, variant", [("flag-lights", "no-brake-noise"), ("previous-preset", "previous-preset")])
+@pytest.mark.parametrize(
+    "folder, variant", [("flag-lights", "no-brake-noise"), ("previous-preset", "previous-preset")]
+)
 def test_the_shipped_ablation_folders_are_todays_variants_of_the_laptop_preset(folder, variant):
     """Chapter 08 compares each shipped ablation folder with today's replication as the variant named here: the
     folder's preset must be that variant of today's laptop preset in every setting (its name aside)."""
@@ -143,27 +156,44 @@ def test_the_shipped_ablation_folders_are_todays_variants_of_the_laptop_preset(f
 
 def test_an_ablation_is_a_smaller_replication_of_a_variant(tmp_path):
     out = tmp_path / "intensity"
-    assert cli.main(["replicate", "--preset", "tiny", "--ablation", "intensity-lights", "--out", str(out)]) == 0
+    assert (
+        cli.main(["replicate", "--preset", "tiny", "--ablation", "intensity-lights", "--out", str(out)]) == 0
+    )
     res = json.loads((out / "results.json").read_text())
     preset = Preset.from_dict(res["preset"])
     assert TINY.light_encoding == "flag"
     assert preset == ablation_preset(TINY, "intensity-lights") and preset.light_encoding == "intensity"
-    assert set(res["table"]) == {"bc", "da-ibc", "expert"} and not res["heldout"] and "free_driving" not in res
+    assert (
+        set(res["table"]) == {"bc", "da-ibc", "expert"} and not res["heldout"] and "free_driving" not in res
+    )
     assert len(res["final_per_seed"]["bc"]) == len(ABLATION_SEEDS)
     agent, ckpt = load_agent(run_dir(out, "da-ibc", 0) / "final.pt")
     assert agent.preset.light_encoding == "intensity"
-    assert cli.main(["replicate", "--preset", "tiny", "--out", str(out)]) == 2  # the folder holds another preset
+    assert (
+        cli.main(["replicate", "--preset", "tiny", "--out", str(out)]) == 2
+    )  # the folder holds another preset
     with pytest.raises(ValueError, match="ablation"):
         ablation_preset(TINY, "no-such-thing")
 
 
-def _folder_of_episodes(root: Path, method: str, per_seed: dict[int, list[tuple[float, int]]], starts=(1000, 1001)):
+def _folder_of_episodes(
+    root: Path, method: str, per_seed: dict[int, list[tuple[float, int]]], starts=(1000, 1001)
+):
     """A replication folder holding only final evaluations: per seed, (distance, red lights) per episode."""
     for seed, eps in per_seed.items():
         d = run_dir(root, method, seed)
         d.mkdir(parents=True)
-        rows = [{"seed": s, "steps": 3000, "distance_m": dist, "red_light_infractions": reds,
-                 "score": dist * 0.7 ** reds, "termination": None} for s, (dist, reds) in zip(starts, eps)]
+        rows = [
+            {
+                "seed": s,
+                "steps": 3000,
+                "distance_m": dist,
+                "red_light_infractions": reds,
+                "score": dist * 0.7**reds,
+                "termination": None,
+            }
+            for s, (dist, reds) in zip(starts, eps)
+        ]
         (d / "final_eval.json").write_text(json.dumps({"summary": {}, "episodes": rows}))
     return root
 
@@ -172,8 +202,9 @@ def test_compare_folders_reads_shared_seeds_and_counts_standstills(tmp_path):
     from ibc_tutorial.experiments.agents.ablations import STILL_M, compare_folders
 
     var = _folder_of_episodes(tmp_path / "var", "bc", {0: [(500, 0), (600, 1)], 1: [(400, 0), (5, 0)]})
-    ref = _folder_of_episodes(tmp_path / "ref", "bc", {0: [(100, 0), (2, 0)], 1: [(3, 0), (200, 2)],
-                                                       7: [(900, 0), (900, 0)]})  # seed 7: not shared
+    ref = _folder_of_episodes(
+        tmp_path / "ref", "bc", {0: [(100, 0), (2, 0)], 1: [(3, 0), (200, 2)], 7: [(900, 0), (900, 0)]}
+    )  # seed 7: not shared
     (row,) = compare_folders(var, ref, methods=("bc",))
     assert row.seeds == (0, 1)
     v_scores = [500, 600 * 0.7, 400, 5]

@@ -64,8 +64,14 @@ def test_one_level_cases_match_scipy_percentile_bootstrap(shape):
     rng = np.random.default_rng(6)
     x = rng.gamma(2.0, 300.0, size=shape)
     ours = stats.mean_interval(x, n_resamples=40_000, seed=7)
-    ref = scipy.stats.bootstrap((x.ravel(),), np.mean, n_resamples=40_000, method="percentile",
-                                confidence_level=0.95, random_state=np.random.default_rng(8)).confidence_interval
+    ref = scipy.stats.bootstrap(
+        (x.ravel(),),
+        np.mean,
+        n_resamples=40_000,
+        method="percentile",
+        confidence_level=0.95,
+        random_state=np.random.default_rng(8),
+    ).confidence_interval
     width = ref.high - ref.low
     assert ours.low == pytest.approx(ref.low, abs=0.03 * width)
     assert ours.high == pytest.approx(ref.high, abs=0.03 * width)
@@ -75,9 +81,14 @@ def test_difference_of_one_level_cases_matches_scipy():
     rng = np.random.default_rng(9)
     a, b = rng.normal(5.0, 2.0, size=(30, 1)), rng.normal(4.0, 1.0, size=(25, 1))
     ours = stats.difference_interval(a, b, n_resamples=40_000, seed=10)
-    ref = scipy.stats.bootstrap((a.ravel(), b.ravel()), lambda u, v, axis: u.mean(axis) - v.mean(axis),
-                                n_resamples=40_000, method="percentile", vectorized=True,
-                                random_state=np.random.default_rng(11)).confidence_interval
+    ref = scipy.stats.bootstrap(
+        (a.ravel(), b.ravel()),
+        lambda u, v, axis: u.mean(axis) - v.mean(axis),
+        n_resamples=40_000,
+        method="percentile",
+        vectorized=True,
+        random_state=np.random.default_rng(11),
+    ).confidence_interval
     width = ref.high - ref.low
     assert ours.estimate == pytest.approx(a.mean() - b.mean())
     assert ours.low == pytest.approx(ref.low, abs=0.03 * width)
@@ -125,20 +136,27 @@ def test_seeds_reproduce_and_generators_are_accepted():
     assert stats.mean_interval(x, seed=3) == stats.mean_interval(x, seed=3)
     assert stats.mean_interval(x, seed=3) != stats.mean_interval(x, seed=4)
     g1, g2 = np.random.default_rng(5), np.random.default_rng(5)
-    assert stats.mean_interval(x, seed=g1, n_resamples=500) == stats.mean_interval(x, seed=g2, n_resamples=500)
-    assert stats.mean_interval(x, n_resamples=500, level=0.5).high < stats.mean_interval(x, n_resamples=500).high
+    assert stats.mean_interval(x, seed=g1, n_resamples=500) == stats.mean_interval(
+        x, seed=g2, n_resamples=500
+    )
+    assert (
+        stats.mean_interval(x, n_resamples=500, level=0.5).high < stats.mean_interval(x, n_resamples=500).high
+    )
 
 
 # --------------------------------------------------------------------------- the verdict rule
-@pytest.mark.parametrize("low, high, threshold, expected", [
-    (0.1, 2.0, 0.0, "holds"),
-    (-2.0, -0.1, 0.0, "does not hold"),
-    (-1.0, 1.0, 0.0, "cannot tell at this scale"),
-    (0.0, 1.0, 0.0, "cannot tell at this scale"),  # an end on the threshold: not above it
-    (-1.0, 0.0, 0.0, "cannot tell at this scale"),
-    (0.86, 0.95, 0.85, "holds"),
-    (0.70, 0.84, 0.85, "does not hold"),
-])
+@pytest.mark.parametrize(
+    "low, high, threshold, expected",
+    [
+        (0.1, 2.0, 0.0, "holds"),
+        (-2.0, -0.1, 0.0, "does not hold"),
+        (-1.0, 1.0, 0.0, "cannot tell at this scale"),
+        (0.0, 1.0, 0.0, "cannot tell at this scale"),  # an end on the threshold: not above it
+        (-1.0, 0.0, 0.0, "cannot tell at this scale"),
+        (0.86, 0.95, 0.85, "holds"),
+        (0.70, 0.84, 0.85, "does not hold"),
+    ],
+)
 def test_verdict(low, high, threshold, expected):
     iv = stats.Interval((low + high) / 2, low, high)
     assert stats.verdict(iv, threshold) == expected
@@ -153,9 +171,11 @@ def visits(*pairs):
 
 def test_exit_counts_and_spread_by_hand():
     v = visits((3, "left"), (3, "left"), (3, "right"), (5, "straight"), (7, "left"), (7, "straight"))
-    assert stats.exit_counts(v) == {3: {"left": 2, "straight": 0, "right": 1},
-                                    5: {"left": 0, "straight": 1, "right": 0},
-                                    7: {"left": 1, "straight": 1, "right": 0}}
+    assert stats.exit_counts(v) == {
+        3: {"left": 2, "straight": 0, "right": 1},
+        5: {"left": 0, "straight": 1, "right": 0},
+        7: {"left": 1, "straight": 1, "right": 0},
+    }
     assert stats.exit_spread(v) == (2, 5)  # approach 5 (one visit) left out; 1 + 1 minority visits
     assert stats.exit_spread(v, min_visits=3) == (1, 3)
     assert stats.exit_spread(v, min_visits=1) == (2, 6)
@@ -164,8 +184,12 @@ def test_exit_counts_and_spread_by_hand():
 def test_exit_test_one_approach_by_hand():
     # A: left, straight; B: straight, straight. Shuffled, A's pair holds the left half the time
     # (T = 1/2, as observed) and otherwise T = -1/2: p_greater = 1/2, p_less = 1
-    t = stats.exit_spread_test(visits((1, "left"), (1, "straight")), visits((1, "straight"), (1, "straight")),
-                               n_permutations=20_000, seed=17)
+    t = stats.exit_spread_test(
+        visits((1, "left"), (1, "straight")),
+        visits((1, "straight"), (1, "straight")),
+        n_permutations=20_000,
+        seed=17,
+    )
     assert t.statistic == 0.5 and t.approaches == 1 and t.visits == (2, 2)
     assert t.p_greater == pytest.approx(0.5, abs=0.015) and t.p_less == 1.0
     assert t.verdict == "cannot tell at this scale"
@@ -203,8 +227,17 @@ def test_exit_test_is_calibrated_under_the_null():
 def write_eval(folder, method, seed, rows, name="final_eval.json"):
     d = Path(folder) / "runs" / method / ("" if seed is None else f"seed{seed}")
     d.mkdir(parents=True, exist_ok=True)
-    eps = [{"seed": s, "steps": 3000, "distance_m": dist, "red_light_infractions": n,
-            "score": dist * 0.7**n, "termination": ""} for s, dist, n in rows]
+    eps = [
+        {
+            "seed": s,
+            "steps": 3000,
+            "distance_m": dist,
+            "red_light_infractions": n,
+            "score": dist * 0.7**n,
+            "termination": "",
+        }
+        for s, dist, n in rows
+    ]
     (d / name).write_text(json.dumps({"summary": {"episodes": len(eps)}, "episodes": eps}))
 
 
@@ -223,7 +256,11 @@ def test_episode_table_reads_the_expert_and_the_heldout_starts(tmp_path):
     write_eval(tmp_path, "expert", None, [(1000, 400.0, 0), (1001, 500.0, 0)])
     write_eval(tmp_path, "expert", None, [(30000, 600.0, 0)], name="heldout_eval.json")
     agents, expert = stats.episode_table(tmp_path, "da-ibc"), stats.episode_table(tmp_path, "expert")
-    assert expert.values.tolist() == [[400.0, 500.0]] and expert.agents == (0,) and expert.starts == agents.starts
+    assert (
+        expert.values.tolist() == [[400.0, 500.0]]
+        and expert.agents == (0,)
+        and expert.starts == agents.starts
+    )
     r = stats.ratio_interval(agents.values, expert.values[0], n_resamples=200)
     assert r.estimate == pytest.approx((100 + 140) / 900)
     held = stats.episode_table(tmp_path, "da-ibc", evaluation="heldout")
@@ -249,8 +286,10 @@ def test_episode_table_refuses_other_starts_and_missing_runs(tmp_path):
         stats.episode_table(tmp_path, "ibc")
 
 
-shipped = pytest.mark.skipif(not (SHIPPED / "results.json").is_file(),
-                             reason="no shipped replication in book/results/laptop (remade by ibc-tutorial replicate)")
+shipped = pytest.mark.skipif(
+    not (SHIPPED / "results.json").is_file(),
+    reason="no shipped replication in book/results/laptop (remade by ibc-tutorial replicate)",
+)
 
 
 @shipped
@@ -274,24 +313,27 @@ def test_exit_test_runs_on_the_shipped_free_driving():
 
 
 # --------------------------------------------------------------------------- bad arguments
-@pytest.mark.parametrize("call, name", [
-    (lambda: stats.mean_interval([1.0, 2.0]), "scores"),
-    (lambda: stats.mean_interval([[1.0, np.nan]]), "scores"),
-    (lambda: stats.mean_interval(np.zeros((0, 3))), "scores"),
-    (lambda: stats.mean_interval([["a"]]), "scores"),
-    (lambda: stats.mean_interval([[1.0]], n_resamples=0), "n_resamples"),
-    (lambda: stats.mean_interval([[1.0]], level=1.0), "level"),
-    (lambda: stats.mean_interval([[1.0]], seed=-1), "seed"),
-    (lambda: stats.difference_interval([[1.0]], [1.0]), "scores_b"),
-    (lambda: stats.ratio_interval([[1.0, 2.0]], [1.0]), "expert"),
-    (lambda: stats.ratio_interval([[1.0, 2.0]], [1.0, 0.0]), "expert"),
-    (lambda: stats.verdict((0.0, 1.0)), "interval"),
-    (lambda: stats.verdict(stats.Interval(0.5, 0.0, 1.0), float("nan")), "threshold"),
-    (lambda: stats.exit_counts([{"approach": 1, "turn": "u-turn"}]), "turn"),
-    (lambda: stats.exit_counts([{"turn": "left"}]), "visits"),
-    (lambda: stats.exit_spread([], min_visits=0), "min_visits"),
-    (lambda: stats.exit_spread_test([], [], n_permutations=0), "n_permutations"),
-])
+@pytest.mark.parametrize(
+    "call, name",
+    [
+        (lambda: stats.mean_interval([1.0, 2.0]), "scores"),
+        (lambda: stats.mean_interval([[1.0, np.nan]]), "scores"),
+        (lambda: stats.mean_interval(np.zeros((0, 3))), "scores"),
+        (lambda: stats.mean_interval([["a"]]), "scores"),
+        (lambda: stats.mean_interval([[1.0]], n_resamples=0), "n_resamples"),
+        (lambda: stats.mean_interval([[1.0]], level=1.0), "level"),
+        (lambda: stats.mean_interval([[1.0]], seed=-1), "seed"),
+        (lambda: stats.difference_interval([[1.0]], [1.0]), "scores_b"),
+        (lambda: stats.ratio_interval([[1.0, 2.0]], [1.0]), "expert"),
+        (lambda: stats.ratio_interval([[1.0, 2.0]], [1.0, 0.0]), "expert"),
+        (lambda: stats.verdict((0.0, 1.0)), "interval"),
+        (lambda: stats.verdict(stats.Interval(0.5, 0.0, 1.0), float("nan")), "threshold"),
+        (lambda: stats.exit_counts([{"approach": 1, "turn": "u-turn"}]), "turn"),
+        (lambda: stats.exit_counts([{"turn": "left"}]), "visits"),
+        (lambda: stats.exit_spread([], min_visits=0), "min_visits"),
+        (lambda: stats.exit_spread_test([], [], n_permutations=0), "n_permutations"),
+    ],
+)
 def test_bad_arguments_name_the_argument(call, name):
     with pytest.raises(ValueError, match=name):
         call()

@@ -40,7 +40,9 @@ def test_reference_and_its_side_road_section(reference):
     assert ref.sections.shape == (1, 4) and ref.sections[0, 2] == -1
     a, b, _, k = ref.sections[0]
     assert ref.path_step[a] < k <= ref.path_step[b]  # the section starts before the junction's entry
-    assert (b - a) * ev.PATH_SPACING_M == pytest.approx(ev.SECTION_BEFORE_M + 18.0, abs=1.5)  # 15 m + the crossing
+    assert (b - a) * ev.PATH_SPACING_M == pytest.approx(
+        ev.SECTION_BEFORE_M + 18.0, abs=1.5
+    )  # 15 m + the crossing
     arrays = ref.to_arrays()
     again = ev.Reference.from_arrays("y82-west", arrays)
     assert np.array_equal(again.path, ref.path) and np.array_equal(again.sections, ref.sections)
@@ -61,12 +63,16 @@ def test_one_swerve_is_one_crash_and_a_restart_two_seconds_on(reference):
         return 0.5 if len(calls) <= 15 else 0.0
 
     r = ev.drive_route(policy, reference, TINY)
-    assert r["crashes"] == 1 and 15 < r["crash_steps"][0] <= 40 and not r["timeout"]  # it drifts on after 1.5 s
+    assert (
+        r["crashes"] == 1 and 15 < r["crash_steps"][0] <= 40 and not r["timeout"]
+    )  # it drifts on after 1.5 s
     k = r["crash_steps"][0]
     assert calls[k] == 0.0  # restarted at rest (the speed seen right after the crash)
     # the car skipped 2 s of the expert's drive (about 12 m at 6 m/s, less while it sped up)
     assert 40.0 < r["distance_m"] < 70.0 - 5.0
-    assert r["crashes_per_km"] == pytest.approx(1000.0 / r["distance_m"], rel=1e-3)  # distance rounded to 1 cm
+    assert r["crashes_per_km"] == pytest.approx(
+        1000.0 / r["distance_m"], rel=1e-3
+    )  # distance rounded to 1 cm
 
 
 def test_always_right_crashes_again_and_again(reference):

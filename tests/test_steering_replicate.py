@@ -87,12 +87,15 @@ def test_an_interrupted_run_resumes_from_last_pt(tmp_path, monkeypatch):
 
     monkeypatch.setattr(T, "save_checkpoint", spy)
     for name in ("ebm-smooth", "mdn"):
-        full, losses, _, resumed = T.train_model(name, 0, ds, TINY, tmp_path / name / "a", data_sha256=log.checksum())
+        full, losses, _, resumed = T.train_model(
+            name, 0, ds, TINY, tmp_path / name / "a", data_sha256=log.checksum()
+        )
         assert resumed == 0 and [s for s, _ in losses] == [2, 4, 6]
         (tmp_path / name / "b").mkdir(parents=True)
         shutil.copy(snapshot, tmp_path / name / "b" / "last.pt")
-        again, losses_b, _, resumed = T.train_model(name, 0, ds, TINY, tmp_path / name / "b",
-                                                    data_sha256=log.checksum())
+        again, losses_b, _, resumed = T.train_model(
+            name, 0, ds, TINY, tmp_path / name / "b", data_sha256=log.checksum()
+        )
         assert resumed == 2 and losses_b == losses
         a, b = full.network.state_dict(), again.network.state_dict()
         assert all(torch.equal(a[k], b[k]) for k in a)  # bit for bit

@@ -6,10 +6,22 @@ import torch
 
 from ibc_tutorial.driving.dataset import DemoDataset
 from ibc_tutorial.driving.towns import get_town
-from ibc_tutorial.experiments.steering.models import MODELS, SteeringModel, build_network, objective_for, uses_pairs
+from ibc_tutorial.experiments.steering.models import (
+    MODELS,
+    SteeringModel,
+    build_network,
+    objective_for,
+    uses_pairs,
+)
 from ibc_tutorial.experiments.steering.presets import LAPTOP, TINY, SteeringPreset, book_temperature
 from ibc_tutorial.experiments.steering.task import (
-    SteeringBatches, collect_demonstrations, demo_route, longitudinal_config, side_road_counts, steering_observation)
+    SteeringBatches,
+    collect_demonstrations,
+    demo_route,
+    longitudinal_config,
+    side_road_counts,
+    steering_observation,
+)
 from ibc_tutorial.training import TrainConfig, Trainer
 
 
@@ -17,7 +29,9 @@ def _choices(town, route):
     """(had a straight exit, turn) at every junction the route's turns are taken."""
     out, lane = [], route.start_lane
     for turn in route.turns:
-        while not (lane in town.approach_of_lane and town.approaches[town.approach_of_lane[lane]].is_junction):
+        while not (
+            lane in town.approach_of_lane and town.approaches[town.approach_of_lane[lane]].is_junction
+        ):
             lane = town.next_lane(lane)
         out.append(("straight" in town.approaches[town.approach_of_lane[lane]].exits, turn))
         lane = town.next_lane(lane, turn)
@@ -86,8 +100,12 @@ def test_every_model_trains_and_steers(demos, name):
     ds = DemoDataset(demos, bev_size=TINY.bev_size)
     torch.manual_seed(0)
     net = build_network(name, TINY)
-    Trainer(net, objective_for(name, net, TINY), SteeringBatches(ds, pairs=uses_pairs(name)),
-            TrainConfig(steps=2, batch_size=4, progress=False)).run()
+    Trainer(
+        net,
+        objective_for(name, net, TINY),
+        SteeringBatches(ds, pairs=uses_pairs(name)),
+        TrainConfig(steps=2, batch_size=4, progress=False),
+    ).run()
     m = SteeringModel(name, net, TINY)
     obs = SteeringBatches(ds).batch(torch.arange(3))["obs"]
     steer = m.steer(obs)

@@ -22,7 +22,12 @@ def test_density_matches_torch_distributions():
             torch.distributions.Categorical(torch.ones(len(m))),
             torch.distributions.Independent(torch.distributions.Normal(m, s), 1),
         )
-        torch.testing.assert_close(world.log_density(data["obs"][i : i + 1], data["actions"][i : i + 1])[0], mix.log_prob(data["actions"][i]), atol=1e-4, rtol=1e-5)
+        torch.testing.assert_close(
+            world.log_density(data["obs"][i : i + 1], data["actions"][i : i + 1])[0],
+            mix.log_prob(data["actions"][i]),
+            atol=1e-4,
+            rtol=1e-5,
+        )
     # junctions have three valid actions, the rest one
     assert (valid.sum(1) == torch.where(data["situation"] == 1, 3, 1)).all()
 
@@ -56,4 +61,10 @@ def test_bad_config_and_arguments_raise():
         JunctionWorld().modes(torch.zeros(3, 2))
     with pytest.raises(ValueError, match="n"):
         JunctionWorld().sample(0, torch.Generator())
-    assert math.isfinite(float(JunctionWorld(JunctionConfig(curvature_std=0.0)).sample(5, torch.Generator().manual_seed(0))["actions"].sum()))
+    assert math.isfinite(
+        float(
+            JunctionWorld(JunctionConfig(curvature_std=0.0))
+            .sample(5, torch.Generator().manual_seed(0))["actions"]
+            .sum()
+        )
+    )

@@ -22,7 +22,10 @@ def test_road_geometry():
             [5.0, -1.9],  # on the main road
             [5.0, -2.1],  # off it, and before the branch
             [c.branch_x + 10.0, -10.0 * k],  # on the side road's centre line
-            [c.branch_x + 10.0, -10.0 * k - 2.0 / math.cos(math.radians(c.side_angle_deg)) - 0.1],  # just beyond its edge
+            [
+                c.branch_x + 10.0,
+                -10.0 * k - 2.0 / math.cos(math.radians(c.side_angle_deg)) - 0.1,
+            ],  # just beyond its edge
             [c.branch_x - 3.0, -3.0],  # beside the main road before the branch
             [c.branch_x + 10.0, 10.0 * k],  # where a side road to the left would be: off the road
         ]
@@ -30,7 +33,9 @@ def test_road_geometry():
     assert w.on_main_road(pts).tolist() == [True, False, False, False, False, False]
     assert w.on_side_road(pts).tolist() == [False, False, True, False, False, False]
     assert w.on_road(pts).tolist() == [True, False, True, False, False, False]
-    assert torch.allclose(w.side_road_lateral(torch.tensor([0.0, c.branch_x + 4.0])), torch.tensor([0.0, -4.0 * k]))
+    assert torch.allclose(
+        w.side_road_lateral(torch.tensor([0.0, c.branch_x + 4.0])), torch.tensor([0.0, -4.0 * k])
+    )
     u = w.side_direction
     assert u[0] > 0 and u[1] < 0 and torch.isclose(u.norm(), torch.tensor(1.0))
 
@@ -38,7 +43,9 @@ def test_road_geometry():
 def test_observation_is_the_distance_to_the_branch():
     w = SideRoadWorld()
     assert w.obs_dim == 1
-    assert torch.allclose(w.observe(torch.tensor([[0.0, 0.5, 0.0]])), torch.tensor([[w.config.branch_x / 10.0]]))
+    assert torch.allclose(
+        w.observe(torch.tensor([[0.0, 0.5, 0.0]])), torch.tensor([[w.config.branch_x / 10.0]])
+    )
 
 
 @pytest.fixture(scope="module")

@@ -267,7 +267,11 @@ def test_rollout_of_200_episodes_is_batched():
 
     ro = w.rollout(counting, 200, seed=0)
     assert len(calls) == w.config.horizon and calls[0] == (200, 1)
-    assert ro.states.shape == (200, w.config.horizon + 1, 3) and ro.actions.shape == (200, w.config.horizon, 1)
+    assert ro.states.shape == (200, w.config.horizon + 1, 3) and ro.actions.shape == (
+        200,
+        w.config.horizon,
+        1,
+    )
 
 
 @pytest.mark.parametrize(
@@ -314,9 +318,13 @@ def test_chapter_01_figures_have_titles_and_labels():
     grid = torch.linspace(-1, 1, 11)
     figs = [
         multimodality.plot_tree_scene(w, demos.states, demos.episode_mode),
-        multimodality.plot_actions_by_distance(w, demos, window=(7.0, 9.0), predictions={"zero": (torch.tensor([0.0, 10.0]), torch.zeros(2))}),
+        multimodality.plot_actions_by_distance(
+            w, demos, window=(7.0, 9.0), predictions={"zero": (torch.tensor([0.0, 10.0]), torch.zeros(2))}
+        ),
         multimodality.plot_action_histogram(a, demos.mode, title="actions"),
-        multimodality.plot_constant_losses(grid, {"MSE": grid**2, "MAE": grid.abs()}, minimisers={"MSE": 0.0}, flat={"MAE": (-0.1, 0.1)}),
+        multimodality.plot_constant_losses(
+            grid, {"MSE": grid**2, "MAE": grid.abs()}, minimisers={"MSE": 0.0}, flat={"MAE": (-0.1, 0.1)}
+        ),
         multimodality.plot_tree_closed_loop(w, {"zero": ro, "again": ro}),
     ]
     for fig in figs:

@@ -3,11 +3,11 @@
 import pytest
 import torch
 
-from ibc_tutorial.optimizers.grid import action_grid, grid_argmin
 from ibc_tutorial.losses import grid_cross_entropy, info_nce, soft_targets, temporal_smoothing
 from ibc_tutorial.negatives import ExpertSampler, UniformSampler
-from ibc_tutorial.policies import EnergyModel, MLPEncoder
 from ibc_tutorial.objectives import consecutive_pairs, grid_objective, info_nce_objective
+from ibc_tutorial.optimizers.grid import action_grid, grid_argmin
+from ibc_tutorial.policies import EnergyModel, MLPEncoder
 from ibc_tutorial.training import TrainConfig, Trainer, draw_minibatch, train
 
 
@@ -29,14 +29,23 @@ def small_model(seed=0, action_dim=1):
 def test_info_nce_objective_learns_two_modes(sampler):
     data = bimodal_data()
     model = small_model()
-    result = train(model, info_nce_objective(model, sampler, 32), data, TrainConfig(steps=300, batch_size=64, lr=5e-3, log_every=100))
+    result = train(
+        model,
+        info_nce_objective(model, sampler, 32),
+        data,
+        TrainConfig(steps=300, batch_size=64, lr=5e-3, log_every=100),
+    )
     assert result.losses[-1] < result.losses[0]
     grid = action_grid(101)
     _, e = grid_argmin(model, torch.tensor([[0.6], [-0.6]]), grid, return_energies=True)
     ys = grid[:, 0]
     # bimodal where the expert is: both ±0.5 are local minima far below the energy at 0
     e_pos = e[0]
-    left, right, mid = e_pos[(ys + 0.5).abs().argmin()], e_pos[(ys - 0.5).abs().argmin()], e_pos[ys.abs().argmin()]
+    left, right, mid = (
+        e_pos[(ys + 0.5).abs().argmin()],
+        e_pos[(ys - 0.5).abs().argmin()],
+        e_pos[ys.abs().argmin()],
+    )
     assert left < mid - 1 and right < mid - 1
     # unimodal at 0 elsewhere
     assert abs(float(grid[e[1].argmin(), 0])) < 0.15
@@ -97,7 +106,13 @@ def test_training_is_seeded_and_records_evaluations():
     for _ in range(2):
         model = small_model(seed=3)
         evals = lambda: float(model.energy(torch.zeros(1, 1), torch.zeros(1, 1, 1)))  # noqa: E731
-        res = train(model, info_nce_objective(model, ExpertSampler(0.1), 8), data, TrainConfig(steps=40, batch_size=16, log_every=10), evaluate=evals)
+        res = train(
+            model,
+            info_nce_objective(model, ExpertSampler(0.1), 8),
+            data,
+            TrainConfig(steps=40, batch_size=16, log_every=10),
+            evaluate=evals,
+        )
         runs.append(res)
     assert runs[0].losses == runs[1].losses and runs[0].evals == runs[1].evals
     assert len(runs[0].evals) == 4 and runs[0].steps == [10, 20, 30, 40]
@@ -108,7 +123,12 @@ def test_grid_objective_with_smoothing_trains():
     data["episode"] = torch.arange(200) // 20
     pairs = consecutive_pairs(data)
     model = small_model()
-    res = train(model, grid_objective(model, action_grid(32), temperature=0.01, smoothing=1.0), pairs, TrainConfig(steps=60, batch_size=32, log_every=20))
+    res = train(
+        model,
+        grid_objective(model, action_grid(32), temperature=0.01, smoothing=1.0),
+        pairs,
+        TrainConfig(steps=60, batch_size=32, log_every=20),
+    )
     assert all(torch.isfinite(torch.tensor(res.losses)))
 
 
@@ -133,7 +153,12 @@ def test_a_resumed_run_is_bit_identical(tmp_path):
     res_whole = train(whole, info_nce_objective(whole, ExpertSampler(0.1), 8), data, config)
     # stop after 33 steps (mid log interval), save the state to disk, continue in a fresh model and trainer
     first = small_model(seed=5)
-    trainer = Trainer(first, info_nce_objective(first, ExpertSampler(0.1), 8), data, TrainConfig(**{**config.__dict__, "steps": 33}))
+    trainer = Trainer(
+        first,
+        info_nce_objective(first, ExpertSampler(0.1), 8),
+        data,
+        TrainConfig(**{**config.__dict__, "steps": 33}),
+    )
     res_a = trainer.run()
     torch.save(trainer.state_dict(), tmp_path / "state.pt")
     state = torch.load(tmp_path / "state.pt", weights_only=True)
@@ -153,7 +178,7 @@ def test_trainer_takes_any_data_with_batch():
 
         def batch(self, indices):
             x = indices.float()[:, None] / 50
-            return {"obs": x, "actions": x ** 2}
+            return {"obs": x, "actions": x**2}
 
     seen = []
     model = torch.nn.Linear(1, 1)
@@ -181,13 +206,21 @@ def test_draw_minibatch_is_the_draw_training_makes():
         seen.append(batch["i"])
         return model.weight.sum() * 0.0
 
-    train(model, objective, {"i": torch.arange(4)}, TrainConfig(steps=1, batch_size=32, seed=3), sample_probs=probs)
+    train(
+        model,
+        objective,
+        {"i": torch.arange(4)},
+        TrainConfig(steps=1, batch_size=32, seed=3),
+        sample_probs=probs,
+    )
     assert torch.equal(seen[0], draw_minibatch(probs, 4, 32, torch.Generator().manual_seed(3)))
 
 
 def test_trainer_refuses_a_foreign_state():
     model = small_model()
-    trainer = Trainer(model, info_nce_objective(model, UniformSampler(), 4), bimodal_data(32), TrainConfig(steps=5))
+    trainer = Trainer(
+        model, info_nce_objective(model, UniformSampler(), 4), bimodal_data(32), TrainConfig(steps=5)
+    )
     with pytest.raises(ValueError, match="state must hold"):
         trainer.load_state_dict({"model": model.state_dict()})
     with pytest.raises(ValueError, match=r"state\['step'\] must be <="):
@@ -200,8 +233,12 @@ def test_cosine_schedule_decays_and_resumes_bit_identically():
     whole = small_model(seed=5)
     train(whole, info_nce_objective(whole, ExpertSampler(0.1), 8), data, config)
     constant = small_model(seed=5)
-    train(constant, info_nce_objective(constant, ExpertSampler(0.1), 8), data,
-          TrainConfig(**{**config.__dict__, "lr_schedule": "constant"}))
+    train(
+        constant,
+        info_nce_objective(constant, ExpertSampler(0.1), 8),
+        data,
+        TrainConfig(**{**config.__dict__, "lr_schedule": "constant"}),
+    )
     assert not all(torch.equal(a, b) for a, b in zip(_params(whole), _params(constant)))  # the schedule acts
 
     class Killed(Exception):
@@ -224,4 +261,6 @@ def test_cosine_schedule_decays_and_resumes_bit_identically():
     assert trainer.learning_rate(0) == 1e-2 and trainer.learning_rate(30) == pytest.approx(5e-3)
     assert 0 < trainer.learning_rate(59) < 1e-4
     with pytest.raises(ValueError, match="lr_schedule"):
-        Trainer(first, info_nce_objective(first, ExpertSampler(0.1), 8), data, TrainConfig(lr_schedule="step"))
+        Trainer(
+            first, info_nce_objective(first, ExpertSampler(0.1), 8), data, TrainConfig(lr_schedule="step")
+        )

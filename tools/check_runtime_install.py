@@ -33,8 +33,12 @@ def main() -> int:
     for args in commands:
         done = subprocess.run(["ibc-tutorial", *args], capture_output=True, text=True)
         if done.returncode != 0 or done.stderr.strip():
-            failures.append(f"ibc-tutorial {' '.join(args)}: exit {done.returncode}: {done.stderr.strip()[-300:]}")
-    print(f"runtime install: imported {len(names)} modules, ran {len(commands)} --help commands, {len(failures)} failures")
+            failures.append(
+                f"ibc-tutorial {' '.join(args)}: exit {done.returncode}: {done.stderr.strip()[-300:]}"
+            )
+    print(
+        f"runtime install: imported {len(names)} modules, ran {len(commands)} --help commands, {len(failures)} failures"
+    )
     for f in failures:
         print("  " + f)
     return 1 if failures else 0

@@ -37,8 +37,7 @@ def fit_regression(demos, loss_kind: str, seed: int = 0, steps: int = 600) -> Re
     """As in chapter 01: a RegressionPolicy (MLP 2 x 64, tanh head) trained by Adam with the MSE or
     the MAE."""
     torch.manual_seed(seed)
-    policy = RegressionPolicy.for_vectors(demos.obs.shape[1], 1, hidden=64, layers=2,
-                                          loss_kind=loss_kind)
+    policy = RegressionPolicy.for_vectors(demos.obs.shape[1], 1, hidden=64, layers=2, loss_kind=loss_kind)
     config = TrainConfig(steps=steps, batch_size=128, lr=3e-3, seed=seed)
     train(policy, likelihood_objective(policy), demos.training_data(), config)
     return policy

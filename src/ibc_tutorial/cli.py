@@ -65,7 +65,9 @@ def _check_writable_dir(name: str, folder: Path, target: Path) -> None:
         os.close(fd)
         os.unlink(probe)
     except OSError as exc:
-        raise UserError(f"{name}: cannot write to {folder} ({exc.strerror or exc}): choose another location") from None
+        raise UserError(
+            f"{name}: cannot write to {folder} ({exc.strerror or exc}): choose another location"
+        ) from None
 
 
 def check_input_file(name: str, path, what: str = "file") -> Path:
@@ -101,9 +103,12 @@ def check_output_dir(name: str, path) -> Path:
     _check_writable_dir(name, _nearest_existing(path), path)
     return path
 
+
 THREADS_HELP = "torch CPU threads (default 0: torch's choice; 1 is fastest on a busy machine)"
-DEVICE_HELP = ("where the networks run: cpu, cuda, cuda:N or mps (default: %(default)s; the random draws stay on "
-               "the CPU's seeded generators)")
+DEVICE_HELP = (
+    "where the networks run: cpu, cuda, cuda:N or mps (default: %(default)s; the random draws stay on "
+    "the CPU's seeded generators)"
+)
 
 # The argument functions below import their defaults and choices from the modules that own them,
 # inside the function: those modules load torch and the simulator, and only the chosen
@@ -116,16 +121,31 @@ def _collect_arguments(p: argparse.ArgumentParser) -> None:
 
     d = CollectConfig()
     p.add_argument("--town", default=d.town, choices=TOWNS, help="town to drive (default: %(default)s)")
-    p.add_argument("--routes", type=int, default=d.routes, help="number of routes / episodes (default: %(default)s)")
+    p.add_argument(
+        "--routes", type=int, default=d.routes, help="number of routes / episodes (default: %(default)s)"
+    )
     p.add_argument("--seed", type=int, default=d.seed, help="random seed (default: %(default)s)")
     p.add_argument("--out", required=True, help="where to write the demonstrations (.npz)")
     p.add_argument("--force", action="store_true", help="overwrite --out if it exists")
     p.add_argument("--routeless", action="store_true", help="no fixed routes: random exits chosen on the way")
-    p.add_argument("--min-minutes", type=float, default=d.min_minutes, help="shortest route (default: %(default)s)")
-    p.add_argument("--max-minutes", type=float, default=d.max_minutes, help="longest route (default: %(default)s)")
-    p.add_argument("--steer-noise", type=float, default=d.steer_noise, help="steering perturbation size (default: %(default)s)")
-    p.add_argument("--brake-noise", type=float, default=d.brake_noise,
-                   help="braking perturbation strength in [0, 1] (default: %(default)s; the laptop preset's data: 1.0)")
+    p.add_argument(
+        "--min-minutes", type=float, default=d.min_minutes, help="shortest route (default: %(default)s)"
+    )
+    p.add_argument(
+        "--max-minutes", type=float, default=d.max_minutes, help="longest route (default: %(default)s)"
+    )
+    p.add_argument(
+        "--steer-noise",
+        type=float,
+        default=d.steer_noise,
+        help="steering perturbation size (default: %(default)s)",
+    )
+    p.add_argument(
+        "--brake-noise",
+        type=float,
+        default=d.brake_noise,
+        help="braking perturbation strength in [0, 1] (default: %(default)s; the laptop preset's data: 1.0)",
+    )
 
 
 def _train_arguments(p: argparse.ArgumentParser) -> None:
@@ -135,8 +155,12 @@ def _train_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--data", required=True, help="demonstrations written by 'ibc-tutorial collect'")
     p.add_argument("--preset", default="laptop", choices=PRESETS, help="settings (default: %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="training seed (default: %(default)s)")
-    p.add_argument("--out", required=True, help="folder for the checkpoints and metrics.jsonl; an interrupted "
-                   "run of the same settings there is resumed")
+    p.add_argument(
+        "--out",
+        required=True,
+        help="folder for the checkpoints and metrics.jsonl; an interrupted "
+        "run of the same settings there is resumed",
+    )
     p.add_argument("--epochs", type=int, default=None, help="override the preset's number of epochs")
     p.add_argument("--force", action="store_true", help="start over: delete the run already in --out")
     p.add_argument("--threads", type=int, default=0, help=THREADS_HELP)
@@ -149,21 +173,42 @@ def _evaluate_arguments(p: argparse.ArgumentParser) -> None:
 
     p.add_argument("--checkpoint", required=True, help="an agent checkpoint written by 'ibc-tutorial train'")
     p.add_argument("--town", default="town02", choices=TOWNS, help="town to drive (default: %(default)s)")
-    p.add_argument("--episodes", type=int, default=None,
-                   help="episodes, run side by side (default: the checkpoint preset's final_episodes, as the table)")
-    p.add_argument("--steps", type=int, default=None,
-                   help="steps per episode, 0.1 s each (default: the checkpoint preset's final_steps, as the table)")
-    p.add_argument("--seed", type=int, default=EVAL_SEED, help="seed of the first episode (default: %(default)s)")
-    p.add_argument("--policy-seed", type=int, default=None,
-                   help="seed of the agent's DFO draws (default: the agent's training seed, as the table)")
+    p.add_argument(
+        "--episodes",
+        type=int,
+        default=None,
+        help="episodes, run side by side (default: the checkpoint preset's final_episodes, as the table)",
+    )
+    p.add_argument(
+        "--steps",
+        type=int,
+        default=None,
+        help="steps per episode, 0.1 s each (default: the checkpoint preset's final_steps, as the table)",
+    )
+    p.add_argument(
+        "--seed", type=int, default=EVAL_SEED, help="seed of the first episode (default: %(default)s)"
+    )
+    p.add_argument(
+        "--policy-seed",
+        type=int,
+        default=None,
+        help="seed of the agent's DFO draws (default: the agent's training seed, as the table)",
+    )
     routes = p.add_mutually_exclusive_group()
-    routes.add_argument("--routed", action="store_true", help="draw a route for each episode (not the book's protocol)")
-    routes.add_argument("--routeless", action="store_true", help="no route drawn, as the book's protocol (the default)")
+    routes.add_argument(
+        "--routed", action="store_true", help="draw a route for each episode (not the book's protocol)"
+    )
+    routes.add_argument(
+        "--routeless", action="store_true", help="no route drawn, as the book's protocol (the default)"
+    )
     p.add_argument("--out", default=None, help="optional JSON file for the per-episode results")
-    p.add_argument("--crossings", action="store_true",
-                   help="also record every junction crossing of every episode, with the steering applied during it "
-                        "(driving.analysis.junction_crossings), in --out, and for an energy agent its energy over "
-                        "steering in the crossings that ended in a building (driving them again; chapter 08)")
+    p.add_argument(
+        "--crossings",
+        action="store_true",
+        help="also record every junction crossing of every episode, with the steering applied during it "
+        "(driving.analysis.junction_crossings), in --out, and for an energy agent its energy over "
+        "steering in the crossings that ended in a building (driving them again; chapter 08)",
+    )
     p.add_argument("--force", action="store_true", help="overwrite --out if it exists")
     p.add_argument("--threads", type=int, default=0, help=THREADS_HELP)
     p.add_argument("--device", default="cpu", help=DEVICE_HELP)
@@ -174,14 +219,25 @@ def _replicate_arguments(p: argparse.ArgumentParser) -> None:
     from ibc_tutorial.experiments.agents.presets import PRESETS
 
     p.add_argument("--preset", default="laptop", choices=PRESETS, help="settings (default: %(default)s)")
-    p.add_argument("--out", required=True, help="folder for the data, runs, results and provenance; an interrupted "
-                   "replication of the same preset there is resumed")
+    p.add_argument(
+        "--out",
+        required=True,
+        help="folder for the data, runs, results and provenance; an interrupted "
+        "replication of the same preset there is resumed",
+    )
     p.add_argument("--force", action="store_true", help="start over: delete the replication already in --out")
-    p.add_argument("--threads", type=int, default=0,
-                   help=THREADS_HELP.replace("threads", "threads per process", 1))
-    p.add_argument("--workers", type=int, default=1, help="training runs in parallel processes (default: %(default)s)")
-    p.add_argument("--ablation", default=None, choices=ABLATIONS,
-                   help="replicate a variant of the preset instead (chapter 08's ablations; BC and DA-IBC, 3 seeds)")
+    p.add_argument(
+        "--threads", type=int, default=0, help=THREADS_HELP.replace("threads", "threads per process", 1)
+    )
+    p.add_argument(
+        "--workers", type=int, default=1, help="training runs in parallel processes (default: %(default)s)"
+    )
+    p.add_argument(
+        "--ablation",
+        default=None,
+        choices=ABLATIONS,
+        help="replicate a variant of the preset instead (chapter 08's ablations; BC and DA-IBC, 3 seeds)",
+    )
     p.add_argument("--device", default="cpu", help=DEVICE_HELP + "; every worker uses it")
 
 
@@ -193,14 +249,31 @@ def _replicate_steering_arguments(p: argparse.ArgumentParser) -> None:
 
 # name -> (module with ``run(args)``, function adding the arguments, help)
 SUBCOMMANDS: dict[str, tuple[str, object, str]] = {
-    "collect": ("ibc_tutorial.driving.collect", _collect_arguments, "drive the expert and store demonstrations"),
-    "train": ("ibc_tutorial.experiments.agents.train", _train_arguments, "train a BC, IBC or DA-IBC driving agent"),
-    "evaluate": ("ibc_tutorial.experiments.agents.evaluate", _evaluate_arguments,
-                 "drive a trained agent in closed loop and score it"),
-    "replicate": ("ibc_tutorial.experiments.agents.replicate", _replicate_arguments,
-                  "collect, train, evaluate: every result of chapters 08-09"),
-    "replicate-steering": ("ibc_tutorial.experiments.steering.replicate", _replicate_steering_arguments,
-                           "the steering-EBM paper's road-following study: every result of chapter 10"),
+    "collect": (
+        "ibc_tutorial.driving.collect",
+        _collect_arguments,
+        "drive the expert and store demonstrations",
+    ),
+    "train": (
+        "ibc_tutorial.experiments.agents.train",
+        _train_arguments,
+        "train a BC, IBC or DA-IBC driving agent",
+    ),
+    "evaluate": (
+        "ibc_tutorial.experiments.agents.evaluate",
+        _evaluate_arguments,
+        "drive a trained agent in closed loop and score it",
+    ),
+    "replicate": (
+        "ibc_tutorial.experiments.agents.replicate",
+        _replicate_arguments,
+        "collect, train, evaluate: every result of chapters 08-09",
+    ),
+    "replicate-steering": (
+        "ibc_tutorial.experiments.steering.replicate",
+        _replicate_steering_arguments,
+        "the steering-EBM paper's road-following study: every result of chapter 10",
+    ),
 }
 
 
@@ -243,10 +316,17 @@ def main(argv: list[str] | None = None) -> int:
         if debug:
             raise
         resumable = args.command in ("train", "replicate", "replicate-steering")
-        print(f"{prog}: interrupted; " + ("re-run the same command to resume" if resumable else "nothing was written"),
-              file=sys.stderr)
+        print(
+            f"{prog}: interrupted; "
+            + ("re-run the same command to resume" if resumable else "nothing was written"),
+            file=sys.stderr,
+        )
         return INTERRUPTED
-    except (UserError, ValueError, OSError) as exc:  # ValueError: the library's checks name the argument or file
+    except (
+        UserError,
+        ValueError,
+        OSError,
+    ) as exc:  # ValueError: the library's checks name the argument or file
         if debug:
             raise
         print(f"{prog}: {_one_line(exc)}", file=sys.stderr)

@@ -60,7 +60,9 @@ def _kernel_sums(q_all: torch.Tensor, x_all: torch.Tensor, chunk_elements: int) 
         for m0 in range(0, m, m_chunk):
             x = x_all[m0 : m0 + m_chunk]  # (Mc, D)
             # Σ_d u_d² = |q|² + |x|² − 2 q·x with u = (q − x_j) / h; clamp rounding below 0
-            sq = torch.addmm(q_sq[q0 : q0 + q_chunk, None] + x_sq[None, m0 : m0 + m_chunk], q, x.T, alpha=-2.0)  # (Qc, Mc)
+            sq = torch.addmm(
+                q_sq[q0 : q0 + q_chunk, None] + x_sq[None, m0 : m0 + m_chunk], q, x.T, alpha=-2.0
+            )  # (Qc, Mc)
             # Π_d K(u_d) = (2π)^(−D/2) exp(−Σ_d u_d² / 2); the constant is applied by the caller
             out[q0 : q0 + q_chunk] += torch.exp_(sq.clamp_min_(0.0).mul_(-0.5)).sum(dim=1)
     return out
@@ -93,7 +95,9 @@ def _check_bounds(bounds, d: int) -> tuple[torch.Tensor, torch.Tensor] | None:
     lo, hi = (torch.as_tensor(b, dtype=torch.float64).reshape(-1) for b in bounds)
     lo, hi = (t.expand(d) if t.numel() == 1 else t for t in (lo, hi))
     if lo.shape != (d,) or hi.shape != (d,):
-        raise ValueError(f"bounds must hold one number or D = {d} numbers per side, got {tuple(lo.shape)} and {tuple(hi.shape)}")
+        raise ValueError(
+            f"bounds must hold one number or D = {d} numbers per side, got {tuple(lo.shape)} and {tuple(hi.shape)}"
+        )
     if not (torch.isfinite(lo).all() and torch.isfinite(hi).all() and (lo < hi).all()):
         raise ValueError(f"bounds must be finite with low < high, got low={lo.tolist()}, high={hi.tolist()}")
     return lo, hi
@@ -120,7 +124,11 @@ def _reflect(data: torch.Tensor, bounds: tuple[torch.Tensor, torch.Tensor]) -> t
 
 
 def _density64(
-    query: torch.Tensor, data: torch.Tensor, h: float, chunk_elements: int, bounds: tuple[torch.Tensor, torch.Tensor] | None = None
+    query: torch.Tensor,
+    data: torch.Tensor,
+    h: float,
+    chunk_elements: int,
+    bounds: tuple[torch.Tensor, torch.Tensor] | None = None,
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """(ĝ, log ĝ) at each query point, both (Q,) float64; see ``kde_density``."""
     # Work in units of h, centred on the data's mean (keeps the squared distances below exact
@@ -149,17 +157,23 @@ def _density64(
     return dens, log_s - log_norm
 
 
-def _check_kde_args(name: str, query: torch.Tensor, data: torch.Tensor, bandwidth, chunk_elements: int) -> float:
+def _check_kde_args(
+    name: str, query: torch.Tensor, data: torch.Tensor, bandwidth, chunk_elements: int
+) -> float:
     check_tensor(name, query, ndim=2)
     check_tensor("data", data, ndim=2)
     if query.shape[1] != data.shape[1]:
-        raise ValueError(f"{name} and data must have the same number of dimensions D, got {name} {tuple(query.shape)} and data {tuple(data.shape)}")
+        raise ValueError(
+            f"{name} and data must have the same number of dimensions D, got {name} {tuple(query.shape)} and data {tuple(data.shape)}"
+        )
     if len(query) == 0:
         raise ValueError(f"{name} must hold at least one point, got shape {tuple(query.shape)}")
     if len(data) == 0:
         raise ValueError("data must hold at least one point, got shape " + str(tuple(data.shape)))
     if query.shape[1] == 0:
-        raise ValueError(f"{name} and data must have at least one dimension (D >= 1), got shape {tuple(query.shape)}")
+        raise ValueError(
+            f"{name} and data must have at least one dimension (D >= 1), got shape {tuple(query.shape)}"
+        )
     check_int("chunk_elements", chunk_elements, minimum=1)
     return check_positive("bandwidth", bandwidth)
 
@@ -221,7 +235,9 @@ def kde_density(
     return out
 
 
-def inverse_density_weights(actions: torch.Tensor, bandwidth: float = DEFAULT_BANDWIDTH, *, bounds=None) -> torch.Tensor:
+def inverse_density_weights(
+    actions: torch.Tensor, bandwidth: float = DEFAULT_BANDWIDTH, *, bounds=None
+) -> torch.Tensor:
     """Weights w_i ∝ 1 / ĝ(y_i) of eq. 5 of the DA-IBC paper, normalised to sum to 1.
 
     ĝ is the KDE of eq. 4 over the same actions (each action counts itself, so ĝ(y_i) > 0).

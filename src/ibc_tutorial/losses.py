@@ -39,11 +39,15 @@ def _check_actions(name: str, actions: torch.Tensor) -> torch.Tensor:
     if not actions.is_floating_point():
         raise ValueError(f"{name} must be a floating-point tensor, got dtype {actions.dtype}")
     if (actions < -1).any() or (actions > 1).any():
-        raise ValueError(f"{name} must lie in [-1, 1], got values in [{float(actions.min()):.3g}, {float(actions.max()):.3g}]")
+        raise ValueError(
+            f"{name} must lie in [-1, 1], got values in [{float(actions.min()):.3g}, {float(actions.max()):.3g}]"
+        )
     return actions
 
 
-def beta_nll(alpha: torch.Tensor, beta: torch.Tensor, actions: torch.Tensor, *, eps: float = BETA_EPS) -> torch.Tensor:
+def beta_nll(
+    alpha: torch.Tensor, beta: torch.Tensor, actions: torch.Tensor, *, eps: float = BETA_EPS
+) -> torch.Tensor:
     """Negative log-likelihood of actions under per-dimension Beta distributions: eq. 1 of the DA-IBC paper.
 
     The paper rescales each action y in [-1, 1] to y' = (y + 1)/2 in [0, 1] and scores it with
@@ -138,7 +142,9 @@ def classification_loss(logits: torch.Tensor, actions: torch.Tensor) -> torch.Te
     return nll.sum(dim=1).mean()
 
 
-def mdn_nll(logits: torch.Tensor, means: torch.Tensor, stds: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
+def mdn_nll(
+    logits: torch.Tensor, means: torch.Tensor, stds: torch.Tensor, actions: torch.Tensor
+) -> torch.Tensor:
     """Negative log-likelihood under a mixture density network's Gaussian mixture (Bishop 1994).
 
     The steering-EBM paper's MDN baseline outputs K triplets (mixture weight π_k, mean μ_k,
@@ -177,14 +183,18 @@ def _check_energies(pos_energy: torch.Tensor, neg_energy: torch.Tensor, weights:
     b = len(pos_energy)
     check_tensor("neg_energy", neg_energy, shape=(b, None))
     if neg_energy.shape[1] < 1:
-        raise ValueError(f"neg_energy must hold at least one counter-example per sample, got shape {tuple(neg_energy.shape)}")
+        raise ValueError(
+            f"neg_energy must hold at least one counter-example per sample, got shape {tuple(neg_energy.shape)}"
+        )
     if weights is not None:
         check_tensor("weights", weights, shape=(b,))
         if (weights < 0).any():
             raise ValueError(f"weights must be >= 0, got minimum {float(weights.min()):.3g}")
 
 
-def info_nce(pos_energy: torch.Tensor, neg_energy: torch.Tensor, weights: torch.Tensor | None = None) -> torch.Tensor:
+def info_nce(
+    pos_energy: torch.Tensor, neg_energy: torch.Tensor, weights: torch.Tensor | None = None
+) -> torch.Tensor:
     """InfoNCE over counter-examples: eqs. 2-3 of the DA-IBC paper, weighted as in its eq. 5.
 
     For sample i with expert action y_i and counter-examples ỹ_i^1..ỹ_i^N (eq. 3):
@@ -268,7 +278,9 @@ def grid_cross_entropy(energies: torch.Tensor, targets: torch.Tensor) -> torch.T
     check_tensor("energies", energies, ndim=2)
     _check_batch("energies", energies)
     if energies.shape[1] < 1:
-        raise ValueError(f"energies must hold at least one candidate per sample (K >= 1), got shape {tuple(energies.shape)}")
+        raise ValueError(
+            f"energies must hold at least one candidate per sample (K >= 1), got shape {tuple(energies.shape)}"
+        )
     check_tensor("targets", targets, shape=tuple(energies.shape))
     sums = targets.sum(dim=1)  # (B,)
     if (targets < 0).any() or not torch.allclose(sums, torch.ones_like(sums), atol=1e-4):
@@ -278,7 +290,10 @@ def grid_cross_entropy(energies: torch.Tensor, targets: torch.Tensor) -> torch.T
 
 
 def temporal_smoothing(
-    energies_t: torch.Tensor, energies_next: torch.Tensor, alpha: float = 1.0, mask: torch.Tensor | None = None
+    energies_t: torch.Tensor,
+    energies_next: torch.Tensor,
+    alpha: float = 1.0,
+    mask: torch.Tensor | None = None,
 ) -> torch.Tensor:
     """Temporal smoothing loss, eq. 4 of the steering-EBM paper: L_temp = α ‖e_t − e_{t+1}‖.
 
@@ -299,8 +314,14 @@ def temporal_smoothing(
     check_tensor("energies_next", energies_next, shape=tuple(energies_t.shape))
     diff = energies_t - energies_next  # (B, K)
     if mask is not None:
-        if not isinstance(mask, torch.Tensor) or mask.dtype != torch.bool or mask.shape not in (diff.shape[1:], diff.shape):
+        if (
+            not isinstance(mask, torch.Tensor)
+            or mask.dtype != torch.bool
+            or mask.shape not in (diff.shape[1:], diff.shape)
+        ):
             got = (tuple(mask.shape), mask.dtype) if isinstance(mask, torch.Tensor) else type(mask).__name__
-            raise ValueError(f"mask must be a bool tensor of shape ({diff.shape[1]},) or {tuple(diff.shape)}, got {got}")
+            raise ValueError(
+                f"mask must be a bool tensor of shape ({diff.shape[1]},) or {tuple(diff.shape)}, got {got}"
+            )
         diff = diff * mask
     return alpha * torch.linalg.vector_norm(diff, dim=1).mean()

@@ -44,12 +44,16 @@ def whiteness(commands, dt: float, *, per_episode: bool = False):
     dt = check_positive("dt", dt)
     x = commands.detach().cpu().numpy() if isinstance(commands, torch.Tensor) else np.asarray(commands)
     if x.ndim not in (1, 2, 3) or not np.issubdtype(x.dtype, np.number):
-        raise ValueError(f"commands must be numeric with shape (T,), (E, T) or (E, T, D), got shape {x.shape}")
+        raise ValueError(
+            f"commands must be numeric with shape (T,), (E, T) or (E, T, D), got shape {x.shape}"
+        )
     x = x.astype(np.float64)
     if x.ndim == 1:
         x = x[None]  # (1, T)
     if x.shape[1] < 2:
-        raise ValueError(f"commands must hold at least 2 decisions per episode, got shape {np.shape(commands)}")
+        raise ValueError(
+            f"commands must hold at least 2 decisions per episode, got shape {np.shape(commands)}"
+        )
     if not np.isfinite(x).all():
         raise ValueError("commands must be finite, got NaN or inf")
     rate = np.diff(x, axis=1) / dt  # (E, T-1[, D]): δP_i / δt
@@ -126,7 +130,11 @@ def swerve_rate(toward_side_road, *, slight: float, clear: float, per_pass: bool
     clear = check_positive("clear", clear)
     if clear < slight:
         raise ValueError(f"clear must be >= slight, got clear={clear} < slight={slight}")
-    x = toward_side_road.detach().cpu().numpy() if isinstance(toward_side_road, torch.Tensor) else np.asarray(toward_side_road)
+    x = (
+        toward_side_road.detach().cpu().numpy()
+        if isinstance(toward_side_road, torch.Tensor)
+        else np.asarray(toward_side_road)
+    )
     if x.ndim != 2 or len(x) == 0 or not np.issubdtype(x.dtype, np.number):
         raise ValueError(f"toward_side_road must be numeric with shape (P, T), P >= 1, got shape {x.shape}")
     x = x.astype(np.float64)
@@ -155,8 +163,10 @@ def crashes_per_km(crashes, distance_m) -> float:
     c = np.atleast_1d(np.asarray(crashes))
     d = np.atleast_1d(np.asarray(distance_m, dtype=np.float64))
     if c.ndim != 1 or c.shape != d.shape or not np.issubdtype(c.dtype, np.number):
-        raise ValueError(f"crashes and distance_m must be numbers or equally long sequences, got shapes "
-                         f"{np.shape(crashes)} and {np.shape(distance_m)}")
+        raise ValueError(
+            f"crashes and distance_m must be numbers or equally long sequences, got shapes "
+            f"{np.shape(crashes)} and {np.shape(distance_m)}"
+        )
     if not np.isfinite(c).all() or (c < 0).any() or (c != np.round(c)).any():
         raise ValueError(f"crashes must be non-negative integers, got {c.tolist()}")
     if not np.isfinite(d).all() or (d < 0).any() or d.sum() <= 0:

@@ -24,7 +24,8 @@ anyway (e.g. to compare).
 
 from __future__ import annotations
 
-from typing import Protocol, Sequence
+from collections.abc import Sequence
+from typing import Protocol
 
 import torch
 
@@ -143,7 +144,9 @@ def expert_negatives(
 class NegativeSampler(Protocol):
     """What the training objective calls once per minibatch."""
 
-    def __call__(self, actions: torch.Tensor, n_neg: int, generator: torch.Generator | None = None) -> torch.Tensor:
+    def __call__(
+        self, actions: torch.Tensor, n_neg: int, generator: torch.Generator | None = None
+    ) -> torch.Tensor:
         """``actions`` (B, D), the minibatch's expert actions -> counter-examples (B, N, D)."""
         ...
 
@@ -154,13 +157,17 @@ class UniformSampler:
     def __init__(self, low: float | Sequence[float] = -1.0, high: float | Sequence[float] = 1.0):
         self.low, self.high = _bounds(low, high)
 
-    def __call__(self, actions: torch.Tensor, n_neg: int, generator: torch.Generator | None = None) -> torch.Tensor:
+    def __call__(
+        self, actions: torch.Tensor, n_neg: int, generator: torch.Generator | None = None
+    ) -> torch.Tensor:
         check_tensor("actions", actions, ndim=2)
         low, high = self.low, self.high
         if len(low) == 1 and actions.shape[1] > 1:
             low, high = low.expand(actions.shape[1]), high.expand(actions.shape[1])
         if len(low) != actions.shape[1]:
-            raise ValueError(f"actions must have D = {len(low)} columns to match the bounds, got shape {tuple(actions.shape)}")
+            raise ValueError(
+                f"actions must have D = {len(low)} columns to match the bounds, got shape {tuple(actions.shape)}"
+            )
         return uniform_negatives(len(actions), n_neg, low, high, generator, device=actions.device)
 
     def __repr__(self) -> str:
@@ -170,14 +177,23 @@ class UniformSampler:
 class ExpertSampler:
     """DA-IBC: counter-examples drawn from the minibatch's expert actions plus N(0, σ²I)."""
 
-    def __init__(self, sigma: float, low: float | Sequence[float] | None = None, high: float | Sequence[float] | None = None):
+    def __init__(
+        self,
+        sigma: float,
+        low: float | Sequence[float] | None = None,
+        high: float | Sequence[float] | None = None,
+    ):
         self.sigma = check_positive("sigma", sigma, allow_zero=True)
         if (low is None) != (high is None):
             raise ValueError("low and high must be given together (to clip) or both left None (no clipping)")
         self.low, self.high = low, high
 
-    def __call__(self, actions: torch.Tensor, n_neg: int, generator: torch.Generator | None = None) -> torch.Tensor:
-        return expert_negatives(actions, len(actions), n_neg, self.sigma, generator, low=self.low, high=self.high)
+    def __call__(
+        self, actions: torch.Tensor, n_neg: int, generator: torch.Generator | None = None
+    ) -> torch.Tensor:
+        return expert_negatives(
+            actions, len(actions), n_neg, self.sigma, generator, low=self.low, high=self.high
+        )
 
     def __repr__(self) -> str:
         clip = "" if self.low is None else f", low={self.low}, high={self.high}"

@@ -17,7 +17,7 @@ and ``"actions"``.
 
 from __future__ import annotations
 
-from typing import Callable, Mapping
+from collections.abc import Callable, Mapping
 
 import torch
 
@@ -26,7 +26,9 @@ from ibc_tutorial.training import Objective
 from ibc_tutorial.utils import check_int, check_positive, check_tensor
 
 
-def likelihood_objective(policy: torch.nn.Module, *, obs_key: str = "obs", action_key: str = "actions") -> Objective:
+def likelihood_objective(
+    policy: torch.nn.Module, *, obs_key: str = "obs", action_key: str = "actions"
+) -> Objective:
     """The loss of an explicit policy (regression, Beta, classifier, MDN) as ``train`` wants it.
 
     Returns ``objective(batch, generator) = policy.loss(batch[obs_key], batch[action_key])``: the
@@ -141,7 +143,9 @@ def grid_objective(
     return objective
 
 
-def consecutive_pairs(data: Mapping[str, torch.Tensor], episode_key: str = "episode") -> dict[str, torch.Tensor]:
+def consecutive_pairs(
+    data: Mapping[str, torch.Tensor], episode_key: str = "episode"
+) -> dict[str, torch.Tensor]:
     """Pairs of consecutive frames of the same episode, for temporal smoothing (eq. 4).
 
     For every frame t whose successor t + 1 belongs to the same episode (frames are stored

@@ -39,9 +39,10 @@ import os
 import pickle
 import random
 import signal
+from collections.abc import Callable, Iterable
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
-from typing import Any, Callable, Iterable, TypeVar
+from typing import Any, TypeVar
 
 import numpy as np
 import torch
@@ -110,7 +111,8 @@ def _check_importable(what: str, task: Callable) -> None:
         where = "a lambda or nested function" if "<" in qualname else f"defined in module {module!r}"
         raise ValueError(
             f"{what} must be a function of an importable module for worker processes to import it, got "
-            f"{_name(task)!r}, {where}: move it into the library (ibc_tutorial), or pass workers=1")
+            f"{_name(task)!r}, {where}: move it into the library (ibc_tutorial), or pass workers=1"
+        )
 
 
 class _Restored:
@@ -170,8 +172,9 @@ def parallel_calls(calls: Iterable[Callable[[], T]], *, workers: int | None = No
     tasks = list(calls)
     for i, task in enumerate(tasks):
         if not callable(task):
-            raise ValueError(f"calls[{i}] must be callable (a function or a functools.partial), "
-                             f"got {type(task).__name__}")
+            raise ValueError(
+                f"calls[{i}] must be callable (a function or a functools.partial), got {type(task).__name__}"
+            )
     return _execute("each call", tasks, workers)
 
 
@@ -198,8 +201,10 @@ def _execute(what: str, tasks: list[Callable], workers: int | None) -> list:
     try:
         payloads = [pickle.dumps((task, settings), protocol=pickle.HIGHEST_PROTOCOL) for task in tasks]
     except Exception as exc:  # pickle raises several types: PicklingError, TypeError, AttributeError
-        raise ValueError(f"the calls and their arguments must be picklable to reach a worker process: "
-                         f"{type(exc).__name__}: {exc}") from exc
+        raise ValueError(
+            f"the calls and their arguments must be picklable to reach a worker process: "
+            f"{type(exc).__name__}: {exc}"
+        ) from exc
     pool = _pool(workers)  # started on demand: no more processes than tasks
     try:
         futures = [pool.submit(_run_in_worker, payload) for payload in payloads]
@@ -208,8 +213,10 @@ def _execute(what: str, tasks: list[Callable], workers: int | None) -> list:
             try:
                 results.append(pickle.loads(future.result()))
             except BrokenProcessPool as exc:
-                raise RuntimeError(f"a worker process died during call {i} (of {n}), {_name(tasks[i])} "
-                                   f"(killed, or out of memory?)") from exc
+                raise RuntimeError(
+                    f"a worker process died during call {i} (of {n}), {_name(tasks[i])} "
+                    f"(killed, or out of memory?)"
+                ) from exc
             except Exception as exc:
                 raise _failed(tasks[i], i, n, exc) from exc
     except BaseException:  # an error or Ctrl-C: stop the workers now rather than finish the other calls

@@ -55,10 +55,13 @@ def check_scores(name: str, scores) -> np.ndarray:
     try:
         x = np.asarray(scores, dtype=float)
     except (TypeError, ValueError):
-        raise ValueError(f"{name} must be an (agents, episodes) array of numbers, "
-                         f"got {type(scores).__name__}") from None
+        raise ValueError(
+            f"{name} must be an (agents, episodes) array of numbers, got {type(scores).__name__}"
+        ) from None
     if x.ndim != 2 or x.shape[0] < 1 or x.shape[1] < 1:
-        raise ValueError(f"{name} must be an (agents, episodes) array with at least one of each, got shape {x.shape}")
+        raise ValueError(
+            f"{name} must be an (agents, episodes) array with at least one of each, got shape {x.shape}"
+        )
     if not np.isfinite(x).all():
         raise ValueError(f"{name} must be finite, got NaN or inf")
     return x
@@ -131,7 +134,10 @@ def bootstrap_means(scores, n_resamples: int = DEFAULT_RESAMPLES, seed=0) -> np.
     n_resamples = check_int("n_resamples", n_resamples, minimum=1)
     rng = _rng(seed)
     a, e = x.shape
-    out = [x[agents[..., None], episodes].mean(axis=(1, 2)) for agents, episodes in _draws(a, e, n_resamples, rng)]
+    out = [
+        x[agents[..., None], episodes].mean(axis=(1, 2))
+        for agents, episodes in _draws(a, e, n_resamples, rng)
+    ]
     return np.concatenate(out)  # (R,)
 
 
@@ -147,8 +153,9 @@ def mean_interval(scores, *, n_resamples: int = DEFAULT_RESAMPLES, seed=0, level
     return _interval(x.mean(), bootstrap_means(x, n_resamples, _rng(seed)), level)
 
 
-def difference_interval(scores_a, scores_b, *, n_resamples: int = DEFAULT_RESAMPLES, seed=0,
-                        level: float = LEVEL) -> Interval:
+def difference_interval(
+    scores_a, scores_b, *, n_resamples: int = DEFAULT_RESAMPLES, seed=0, level: float = LEVEL
+) -> Interval:
     """mean(A) - mean(B) for two methods' (A, E) and (B, E') scores, with its percentile interval.
 
     The two methods' agents are different networks, so each resample draws the two-level
@@ -164,7 +171,9 @@ def difference_interval(scores_a, scores_b, *, n_resamples: int = DEFAULT_RESAMP
     return _interval(a.mean() - b.mean(), reps, level)
 
 
-def ratio_interval(scores, expert, *, n_resamples: int = DEFAULT_RESAMPLES, seed=0, level: float = LEVEL) -> Interval:
+def ratio_interval(
+    scores, expert, *, n_resamples: int = DEFAULT_RESAMPLES, seed=0, level: float = LEVEL
+) -> Interval:
     """mean(method) / mean(expert) with its percentile interval; the expert drove the same E starts.
 
     ``scores`` (A, E): the method's agents; ``expert`` (E,): the PID expert's score on each of the
@@ -178,16 +187,20 @@ def ratio_interval(scores, expert, *, n_resamples: int = DEFAULT_RESAMPLES, seed
     x = check_scores("scores", scores)
     ex = np.asarray(expert, dtype=float)
     if ex.ndim != 1 or len(ex) != x.shape[1]:
-        raise ValueError(f"expert must be a 1-D array of {x.shape[1]} episode scores (one per column of scores), "
-                         f"got shape {ex.shape}")
+        raise ValueError(
+            f"expert must be a 1-D array of {x.shape[1]} episode scores (one per column of scores), "
+            f"got shape {ex.shape}"
+        )
     if not (np.isfinite(ex).all() and (ex > 0).all()):
         raise ValueError("expert must hold finite scores > 0 in every episode")
     level = _check_level(level)
     n_resamples = check_int("n_resamples", n_resamples, minimum=1)
     rng = _rng(seed)
     a, e = x.shape
-    reps = [x[agents[..., None], episodes].mean(axis=(1, 2)) / ex[episodes].mean(axis=(1, 2))
-            for agents, episodes in _draws(a, e, n_resamples, rng)]
+    reps = [
+        x[agents[..., None], episodes].mean(axis=(1, 2)) / ex[episodes].mean(axis=(1, 2))
+        for agents, episodes in _draws(a, e, n_resamples, rng)
+    ]
     return _interval(x.mean() / ex.mean(), np.concatenate(reps), level)
 
 
@@ -230,12 +243,21 @@ class Judgement:
 
     def __str__(self) -> str:
         i = self.interval
-        return (f"{self.claim}: {self.verdict} (estimate {i.estimate:.2f}, {i.level:.0%} interval "
-                f"[{i.low:.2f}, {i.high:.2f}], threshold {self.threshold:g})")
+        return (
+            f"{self.claim}: {self.verdict} (estimate {i.estimate:.2f}, {i.level:.0%} interval "
+            f"[{i.low:.2f}, {i.high:.2f}], threshold {self.threshold:g})"
+        )
 
 
-def compare(scores_a, scores_b, claim: str = "A > B", *, n_resamples: int = DEFAULT_RESAMPLES, seed=0,
-            level: float = LEVEL) -> Judgement:
+def compare(
+    scores_a,
+    scores_b,
+    claim: str = "A > B",
+    *,
+    n_resamples: int = DEFAULT_RESAMPLES,
+    seed=0,
+    level: float = LEVEL,
+) -> Judgement:
     """The claim "A's mean is above B's", judged by the hierarchical interval of mean(A) - mean(B)."""
     interval = difference_interval(scores_a, scores_b, n_resamples=n_resamples, seed=seed, level=level)
     return Judgement(str(claim), interval, 0.0, verdict(interval, 0.0))
@@ -258,7 +280,9 @@ def exit_counts(visits) -> dict[int, dict[str, int]]:
         try:
             ap, turn = int(v["approach"]), v["turn"]
         except (TypeError, KeyError, ValueError):
-            raise ValueError(f"visits must be dicts with an integer 'approach' and a 'turn', got {v!r}") from None
+            raise ValueError(
+                f"visits must be dicts with an integer 'approach' and a 'turn', got {v!r}"
+            ) from None
         check_choice("turn", turn, TURNS)
         out.setdefault(ap, dict.fromkeys(TURNS, 0))[turn] += 1
     return out
@@ -299,8 +323,15 @@ class ExitTest:
     or "cannot tell at this scale"."""
 
 
-def exit_spread_test(visits_a, visits_b, *, min_visits: int = 2, n_permutations: int = DEFAULT_RESAMPLES, seed=0,
-                     level: float = LEVEL) -> ExitTest:
+def exit_spread_test(
+    visits_a,
+    visits_b,
+    *,
+    min_visits: int = 2,
+    n_permutations: int = DEFAULT_RESAMPLES,
+    seed=0,
+    level: float = LEVEL,
+) -> ExitTest:
     """Does agent A leave the same junction approach by different exits more than agent B does?
 
     The paper's Fig. 5 claim is comparative (DA-IBC makes different decisions at the same
@@ -326,8 +357,11 @@ def exit_spread_test(visits_a, visits_b, *, min_visits: int = 2, n_permutations:
     level = _check_level(level)
     rng = _rng(seed)
     ca, cb = exit_counts(visits_a), exit_counts(visits_b)
-    shared = sorted(ap for ap in ca if ap in cb and sum(ca[ap].values()) >= min_visits
-                    and sum(cb[ap].values()) >= min_visits)
+    shared = sorted(
+        ap
+        for ap in ca
+        if ap in cb and sum(ca[ap].values()) >= min_visits and sum(cb[ap].values()) >= min_visits
+    )
     if not shared:
         return ExitTest(0.0, 1.0, 1.0, 0, (0, 0), CANNOT_TELL)
     n_a = np.array([sum(ca[ap].values()) for ap in shared])  # (J,) A's visits per shared approach
@@ -340,7 +374,7 @@ def exit_spread_test(visits_a, visits_b, *, min_visits: int = 2, n_permutations:
         obs_a += n_a[j] - max(ca[ap].values())
         obs_b += n_b[j] - max(cb[ap].values())
         perm = rng.permuted(np.broadcast_to(pooled, (n_permutations, len(pooled))), axis=1)  # (R, n)
-        to_a = np.stack([(perm[:, :n_a[j]] == k).sum(1) for k in range(3)], axis=1)  # (R, 3) A's exits
+        to_a = np.stack([(perm[:, : n_a[j]] == k).sum(1) for k in range(3)], axis=1)  # (R, 3) A's exits
         to_b = np.bincount(pooled, minlength=3)[None, :] - to_a  # (R, 3) B gets the rest
         minority_a += n_a[j] - to_a.max(1)
         minority_b += n_b[j] - to_b.max(1)
@@ -401,7 +435,9 @@ def episode_table(folder, method: str, key: str = "score", evaluation: str = "fi
     starts = tuple(int(r["seed"]) for r in rows[0])
     for a, r in zip(agents, rows):
         if tuple(int(x["seed"]) for x in r) != starts:
-            raise ValueError(f"{method} seed {a} drove other starts than seed {agents[0]}: its {name} "
-                             "must list the same episode seeds in the same order")
+            raise ValueError(
+                f"{method} seed {a} drove other starts than seed {agents[0]}: its {name} "
+                "must list the same episode seeds in the same order"
+            )
     values = np.array([[float(x[key]) for x in r] for r in rows])  # (A, E)
     return EpisodeTable(values, tuple(agents), starts)

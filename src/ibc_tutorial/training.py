@@ -21,8 +21,9 @@ interrupted run resumes bit for bit as if it had not stopped. ``train`` is the o
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Any, Callable, Mapping, Protocol, runtime_checkable
+from typing import Any, Protocol, runtime_checkable
 
 import torch
 
@@ -103,7 +104,9 @@ class TrainResult:
     """What ``evaluate()`` returned at each log point (empty when no ``evaluate`` was given)."""
 
 
-def draw_minibatch(probs: torch.Tensor | None, m: int, batch_size: int, generator: torch.Generator) -> torch.Tensor:
+def draw_minibatch(
+    probs: torch.Tensor | None, m: int, batch_size: int, generator: torch.Generator
+) -> torch.Tensor:
     """Indices (batch_size,) of one minibatch among M samples: uniform, or with probabilities ``probs`` (M,).
 
     Drawn with replacement, as the DA-IBC paper applies its eq. 5 weights by sampling (sec. 2.5).
@@ -118,7 +121,9 @@ def as_minibatches(data) -> Minibatches:
     if isinstance(data, Mapping):
         return TensorData(data)
     if not isinstance(data, Minibatches):
-        raise ValueError(f"data must be a dict of tensors or have __len__ and batch(indices), got {type(data).__name__}")
+        raise ValueError(
+            f"data must be a dict of tensors or have __len__ and batch(indices), got {type(data).__name__}"
+        )
     if len(data) == 0:
         raise ValueError("data must hold at least one sample")
     return data
@@ -136,8 +141,15 @@ class Trainer:
             ``kde.inverse_density_weights``); uniform when None.
     """
 
-    def __init__(self, model: torch.nn.Module, objective: Objective, data, config: TrainConfig = TrainConfig(), *,
-                 sample_probs: torch.Tensor | None = None):
+    def __init__(
+        self,
+        model: torch.nn.Module,
+        objective: Objective,
+        data,
+        config: TrainConfig = TrainConfig(),
+        *,
+        sample_probs: torch.Tensor | None = None,
+    ):
         check_int("config.steps", config.steps, minimum=1)
         check_int("config.batch_size", config.batch_size, minimum=1)
         check_int("config.log_every", config.log_every, minimum=1)
@@ -167,9 +179,14 @@ class Trainer:
 
     def state_dict(self) -> dict:
         """Everything needed to continue exactly: model, Adam, generator, step, running loss (plain data)."""
-        return {"model": {k: v.detach().clone() for k, v in self.model.state_dict().items()},
-                "optimizer": self.optimizer.state_dict(), "generator": self.generator.get_state(),
-                "step": self.step, "running_loss": self._running, "running_count": self._count}
+        return {
+            "model": {k: v.detach().clone() for k, v in self.model.state_dict().items()},
+            "optimizer": self.optimizer.state_dict(),
+            "generator": self.generator.get_state(),
+            "step": self.step,
+            "running_loss": self._running,
+            "running_count": self._count,
+        }
 
     def load_state_dict(self, state: Mapping) -> None:
         """Restore a ``state_dict`` (e.g. read back from a checkpoint)."""
@@ -184,8 +201,12 @@ class Trainer:
         self.generator.set_state(state["generator"])
         self._running, self._count = float(state.get("running_loss", 0.0)), int(state.get("running_count", 0))
 
-    def run(self, *, evaluate: Callable[[], object] | None = None,
-            callback: Callable[[int, float], None] | None = None) -> TrainResult:
+    def run(
+        self,
+        *,
+        evaluate: Callable[[], object] | None = None,
+        callback: Callable[[int, float], None] | None = None,
+    ) -> TrainResult:
         """Train from ``self.step`` to ``config.steps``; record the mean loss every ``log_every`` steps.
 
         Args:
@@ -202,7 +223,9 @@ class Trainer:
             idx = draw_minibatch(self.sample_probs, m, c.batch_size, self.generator)  # (B,)
             loss = self.objective(self.data.batch(idx), self.generator)
             if loss.ndim != 0 or not torch.isfinite(loss):
-                raise ValueError(f"the objective must return a finite scalar, got {loss.detach()!r} at step {step}")
+                raise ValueError(
+                    f"the objective must return a finite scalar, got {loss.detach()!r} at step {step}"
+                )
             self.optimizer.zero_grad(set_to_none=True)
             loss.backward()
             for group in self.optimizer.param_groups:
@@ -227,9 +250,17 @@ class Trainer:
         return result
 
 
-def train(model: torch.nn.Module, objective: Objective, data, config: TrainConfig = TrainConfig(), *,
-          sample_probs: torch.Tensor | None = None, evaluate: Callable[[], object] | None = None,
-          callback: Callable[[int, float], None] | None = None, state: Mapping | None = None) -> TrainResult:
+def train(
+    model: torch.nn.Module,
+    objective: Objective,
+    data,
+    config: TrainConfig = TrainConfig(),
+    *,
+    sample_probs: torch.Tensor | None = None,
+    evaluate: Callable[[], object] | None = None,
+    callback: Callable[[int, float], None] | None = None,
+    state: Mapping | None = None,
+) -> TrainResult:
     """Train ``model`` in place by Adam on minibatches of ``data`` (see ``Trainer`` for the arguments).
 
     With ``state`` (a ``Trainer.state_dict()``), the run continues from it up to ``config.steps``.

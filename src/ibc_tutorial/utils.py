@@ -6,8 +6,8 @@ import io
 import os
 import random
 import tempfile
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Iterable
 
 import numpy as np
 import torch
@@ -41,7 +41,9 @@ def quiet() -> bool:
     return os.environ.get(QUIET_ENV, "").strip().lower() not in ("", "0", "false")
 
 
-def progress(iterable: Iterable | None = None, *, total: int | None = None, desc: str = "", enabled: bool | None = None):
+def progress(
+    iterable: Iterable | None = None, *, total: int | None = None, desc: str = "", enabled: bool | None = None
+):
     """A tqdm progress bar for readers; a silent pass-through when ``TQDM_DISABLE=1`` (see
     ``quiet``) or ``enabled`` is False."""
     show = (not quiet()) if enabled is None else enabled
@@ -72,7 +74,9 @@ def check_positive(name: str, value, *, allow_zero: bool = False) -> float:
     return v
 
 
-def check_positive_fields(config, names: Iterable[str], *, allow_zero: bool = False, prefix: str = "config") -> None:
+def check_positive_fields(
+    config, names: Iterable[str], *, allow_zero: bool = False, prefix: str = "config"
+) -> None:
     """``check_positive`` on each field ``names`` of a config dataclass; the error names
     ``config.<field>`` (``prefix`` changes the first part)."""
     for name in names:
@@ -110,7 +114,9 @@ def check_choice(name: str, value, choices: Iterable) -> str:
     return value
 
 
-def check_tensor(name: str, x, *, ndim: int | None = None, shape: tuple | None = None, finite: bool = True) -> torch.Tensor:
+def check_tensor(
+    name: str, x, *, ndim: int | None = None, shape: tuple | None = None, finite: bool = True
+) -> torch.Tensor:
     """Check a tensor's rank, shape (``None`` entries are free) and finiteness; raise ValueError naming ``name``."""
     if not isinstance(x, torch.Tensor):
         raise ValueError(f"{name} must be a torch.Tensor, got {type(x).__name__}")
@@ -141,17 +147,23 @@ def check_device(name: str, device) -> torch.device:
         try:
             dev = torch.device(device)
         except (RuntimeError, ValueError):
-            raise ValueError(f"{name} must be a torch device name such as 'cpu', 'cuda', 'cuda:1' or 'mps', "
-                             f"got {device!r}") from None
+            raise ValueError(
+                f"{name} must be a torch device name such as 'cpu', 'cuda', 'cuda:1' or 'mps', got {device!r}"
+            ) from None
     else:
         raise ValueError(f"{name} must be a device name such as 'cpu' or 'cuda', got {device!r}")
     if dev.type not in DEVICE_TYPES:
         raise ValueError(f"{name} must be one of {DEVICE_TYPES} (cuda:N for the N-th GPU), got {device!r}")
     if dev.type == "cuda":
         if not torch.cuda.is_available():
-            why = (f"this torch, {torch.__version__}, is built without CUDA: install a CUDA build of torch"
-                   if torch.version.cuda is None else "no CUDA GPU is visible")
-            raise ValueError(f"{name} {device!r}: CUDA is not available on this machine ({why}), or use {name} cpu")
+            why = (
+                f"this torch, {torch.__version__}, is built without CUDA: install a CUDA build of torch"
+                if torch.version.cuda is None
+                else "no CUDA GPU is visible"
+            )
+            raise ValueError(
+                f"{name} {device!r}: CUDA is not available on this machine ({why}), or use {name} cpu"
+            )
         n = torch.cuda.device_count()
         if dev.index is not None and dev.index >= n:
             raise ValueError(f"{name} {device!r}: this machine has {n} CUDA GPU(s), cuda:0 to cuda:{n - 1}")

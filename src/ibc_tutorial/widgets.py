@@ -31,7 +31,17 @@ def _png(fig) -> bytes:
 
 
 # =========================================================================== chapter 03: energy explorer
-def energy_explorer(model, obs_fn, grid, *, values, value: float | None = None, description: str = "distance (m)", xlabel: str = "steering", title: str = "E(x, y) over actions"):
+def energy_explorer(
+    model,
+    obs_fn,
+    grid,
+    *,
+    values,
+    value: float | None = None,
+    description: str = "distance (m)",
+    xlabel: str = "steering",
+    title: str = "E(x, y) over actions",
+):
     """A slider over an observation parameter that redraws the energy model's landscape over actions.
 
     The figure shows p(y | x) ∝ exp(−E(x, y)) over ``grid`` (top) and E itself (bottom), with the
@@ -46,7 +56,14 @@ def energy_explorer(model, obs_fn, grid, *, values, value: float | None = None, 
         value: its initial value (default: ``low``).
     """
     low, high, step = values
-    slider = w.FloatSlider(value=low if value is None else value, min=low, max=high, step=step, description=description, continuous_update=False)
+    slider = w.FloatSlider(
+        value=low if value is None else value,
+        min=low,
+        max=high,
+        step=step,
+        description=description,
+        continuous_update=False,
+    )
     image = w.Image(format="png")
     a = grid[:, 0].numpy()  # (G,)
 
@@ -87,7 +104,15 @@ def _dfo_iteration_figure(trace: DFOTrace, it: int, x: np.ndarray, e: np.ndarray
     return fig
 
 
-def dfo_stepper(energy_fn, grid, expert_actions, config: DFOConfig = DFOConfig(n_samples=2000), *, seed: int = 0, bins: int = 60):
+def dfo_stepper(
+    energy_fn,
+    grid,
+    expert_actions,
+    config: DFOConfig = DFOConfig(n_samples=2000),
+    *,
+    seed: int = 0,
+    bins: int = 60,
+):
     """Step through Algorithm 1 (``optimizers.dfo.dfo_trace``) on a 1-D energy landscape.
 
     Controls: the iteration shown, the initialisation (``optimizers.dfo.INITS``), the final
@@ -114,7 +139,9 @@ def dfo_stepper(energy_fn, grid, expert_actions, config: DFOConfig = DFOConfig(n
 
     def run(*_):
         g = torch.Generator().manual_seed(int(seed_box.value))
-        state["trace"] = dfo_trace(energy_fn, expert_actions, replace(config, init=init.value, select=select.value), generator=g)
+        state["trace"] = dfo_trace(
+            energy_fn, expert_actions, replace(config, init=init.value, select=select.value), generator=g
+        )
         draw()
 
     def draw(*_):

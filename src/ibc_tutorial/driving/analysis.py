@@ -45,7 +45,14 @@ def junction_visits(town, lanes: np.ndarray) -> list[dict]:
                 ap = tw.approaches[ap_id]
                 for turn, conn in ap.exits.items():
                     if lane in tw.lanes[conn].successors:
-                        visits.append({"approach": int(ap_id), "node": int(ap.node), "turn": turn, "step": int(prev_step)})
+                        visits.append(
+                            {
+                                "approach": int(ap_id),
+                                "node": int(ap.node),
+                                "turn": turn,
+                                "step": int(prev_step),
+                            }
+                        )
                         break
         prev, prev_step = lane, k
     return visits
@@ -76,7 +83,9 @@ def junction_crossings(town, lanes: np.ndarray, steer: np.ndarray) -> list[dict]
     lanes = np.asarray(lanes).reshape(-1)
     steer = np.asarray(steer, dtype=float).reshape(-1)
     if len(steer) not in (len(lanes), len(lanes) - 1):
-        raise ValueError(f"steer must hold one value per state or per step: {len(lanes)} states, got {len(steer)}")
+        raise ValueError(
+            f"steer must hold one value per state or per step: {len(lanes)} states, got {len(steer)}"
+        )
     out: list[dict] = []
     open_: dict | None = None
     prev_road = None  # the last road lane seen
@@ -98,7 +107,7 @@ def junction_crossings(town, lanes: np.ndarray, steer: np.ndarray) -> list[dict]
         open_.update(stop=len(lanes), turn="", finished=False)
         out.append(open_)
     for c in out:
-        s = steer[c["start"]:min(c["stop"], len(steer))]
+        s = steer[c["start"] : min(c["stop"], len(steer))]
         c["steer_min"] = float(s.min()) if len(s) else 0.0
         c["steer_max"] = float(s.max()) if len(s) else 0.0
     return out
@@ -137,13 +146,17 @@ def road_coverage(town, poses: np.ndarray, radius: float = 3.0, *, chunk: int = 
     lane_dir = np.stack([np.cos(wh), np.sin(wh)], axis=1)  # (W, 2) unit headings
     car_dir = np.stack([np.cos(poses[:, 2]), np.sin(poses[:, 2])], axis=1)  # (T, 2)
     for a in range(0, len(wp), chunk):
-        d2 = ((wp[a:a + chunk, None, :] - poses[None, :, :2]) ** 2).sum(-1)  # (C, T) squared distances
-        aligned = lane_dir[a:a + chunk] @ car_dir.T >= np.cos(COVERAGE_HEADING)  # (C, T): cos(heading gap) >= cos 60°
-        covered[a:a + chunk] = ((d2 <= radius * radius) & aligned).any(1)
+        d2 = ((wp[a : a + chunk, None, :] - poses[None, :, :2]) ** 2).sum(-1)  # (C, T) squared distances
+        aligned = lane_dir[a : a + chunk] @ car_dir.T >= np.cos(
+            COVERAGE_HEADING
+        )  # (C, T): cos(heading gap) >= cos 60°
+        covered[a : a + chunk] = ((d2 <= radius * radius) & aligned).any(1)
     return float(covered.mean())
 
 
-def stop_line_gaps(town, poses: np.ndarray, lanes: np.ndarray, car_half: float = 2.3) -> tuple[np.ndarray, np.ndarray]:
+def stop_line_gaps(
+    town, poses: np.ndarray, lanes: np.ndarray, car_half: float = 2.3
+) -> tuple[np.ndarray, np.ndarray]:
     """Distance from the front bumper to the stop line of the lane being driven, and its light.
 
     Args:
@@ -160,7 +173,9 @@ def stop_line_gaps(town, poses: np.ndarray, lanes: np.ndarray, car_half: float =
     tw = _town(town)
     poses = np.asarray(poses, dtype=float).reshape(-1, 3)
     lanes = np.asarray(lanes).reshape(-1)
-    light = np.array([tw.light_of_approach.get(tw.approach_of_lane.get(int(ln), -1), -1) for ln in lanes], dtype=int)
+    light = np.array(
+        [tw.light_of_approach.get(tw.approach_of_lane.get(int(ln), -1), -1) for ln in lanes], dtype=int
+    )
     gaps = np.full(len(poses), np.nan)
     on = light >= 0
     if on.any():
@@ -206,12 +221,16 @@ def light_label_conflicts(log, stop_distance: float = 9.5, stopped_speed: float 
     label = {}
     for i in near:  # walk on along the approach lane to the rest or to the junction
         j = i
-        while not resting[j] and j + 1 < len(log) and log.episode[j + 1] == log.episode[i] \
-                and log.lane[j + 1] == log.lane[i]:
+        while (
+            not resting[j]
+            and j + 1 < len(log)
+            and log.episode[j + 1] == log.episode[i]
+            and log.lane[j + 1] == log.lane[i]
+        ):
             j += 1
         if not resting[j] and (j + 1 == len(log) or log.episode[j + 1] != log.episode[i]):
             continue  # the episode ends on the approach: unknown
-        if (log.lights[i:j + 1, light[i]] != log.lights[i, light[i]]).any():
+        if (log.lights[i : j + 1, light[i]] != log.lights[i, light[i]]).any():
             label[i] = "changed"  # the light changed before the outcome: the sample did not decide it
         elif resting[j]:
             label[i] = "stop"

@@ -30,7 +30,7 @@ the float32 channels the networks see.
 from __future__ import annotations
 
 import math
-from functools import lru_cache
+from functools import cache
 
 import numpy as np
 
@@ -61,7 +61,9 @@ LIGHT_SHIFTS = (2, 4, 6)
 def _unpack_table() -> np.ndarray:
     """(5, 256) float32: the value of each channel for every packed byte."""
     byte = np.arange(256)
-    levels = np.array((0.0,) + LIGHT_LEVELS, dtype=np.float32)  # by light code 0 none, 1 green, 2 yellow, 3 red
+    levels = np.array(
+        (0.0,) + LIGHT_LEVELS, dtype=np.float32
+    )  # by light code 0 none, 1 green, 2 yellow, 3 red
     rows = [byte & 1, (byte >> 1) & 1] + [levels[(byte >> shift) & 3] for shift in LIGHT_SHIFTS]
     return np.stack(rows).astype(np.float32)
 
@@ -90,7 +92,11 @@ def _centre_lines(town: Town) -> list[Lane]:
         pu, pv = town.nodes[u], town.nodes[v]
         d = (pv - pu) / np.linalg.norm(pv - pu)
         a, b = pu + d * ARM_LENGTH, pv - d * ARM_LENGTH
-        out.append(Lane(-1, "road", a, b, float(np.linalg.norm(b - a)), points=np.zeros((0, 2)), headings=np.zeros(0)))
+        out.append(
+            Lane(
+                -1, "road", a, b, float(np.linalg.norm(b - a)), points=np.zeros((0, 2)), headings=np.zeros(0)
+            )
+        )
     for n, p in enumerate(town.nodes):
         arms = [i for i in range(4) for ap in town.approaches if ap.node == n and ap.arm == i]
         if len(arms) != 2:
@@ -98,10 +104,20 @@ def _centre_lines(town: Town) -> list[Lane]:
         a, b = arms
         t_in, t_out = -DIRECTIONS[a], DIRECTIONS[b]
         cross = t_in[0] * t_out[1] - t_in[1] * t_out[0]
-        out.append(Lane(-1, "connector", p + DIRECTIONS[a] * ARM_LENGTH, p + DIRECTIONS[b] * ARM_LENGTH,
-                        ARM_LENGTH * math.pi / 2, turn="left" if cross > 0 else "right",
-                        center=p + (DIRECTIONS[a] + DIRECTIONS[b]) * ARM_LENGTH, radius=ARM_LENGTH,
-                        points=np.zeros((0, 2)), headings=np.zeros(0)))
+        out.append(
+            Lane(
+                -1,
+                "connector",
+                p + DIRECTIONS[a] * ARM_LENGTH,
+                p + DIRECTIONS[b] * ARM_LENGTH,
+                ARM_LENGTH * math.pi / 2,
+                turn="left" if cross > 0 else "right",
+                center=p + (DIRECTIONS[a] + DIRECTIONS[b]) * ARM_LENGTH,
+                radius=ARM_LENGTH,
+                points=np.zeros((0, 2)),
+                headings=np.zeros(0),
+            )
+        )
     return out
 
 
@@ -126,13 +142,21 @@ class TownRaster:
         # road edges: drivable pixels within two pixels of a non-drivable one
         interior = drivable.copy()
         for _ in range(int(round(2 * LINE_HALF_WIDTH * self.res))):
-            interior[1:-1, 1:-1] &= (interior[:-2, 1:-1] & interior[2:, 1:-1] & interior[1:-1, :-2] & interior[1:-1, 2:]
-                                     & interior[:-2, :-2] & interior[:-2, 2:] & interior[2:, :-2] & interior[2:, 2:])
+            interior[1:-1, 1:-1] &= (
+                interior[:-2, 1:-1]
+                & interior[2:, 1:-1]
+                & interior[1:-1, :-2]
+                & interior[1:-1, 2:]
+                & interior[:-2, :-2]
+                & interior[:-2, 2:]
+                & interior[2:, :-2]
+                & interior[2:, 2:]
+            )
         lines |= drivable & ~interior
         stop_id = np.zeros((self.height, self.width), dtype=np.uint8)
         for s in town.stop_lines:
             self._paint_stop_line(stop_id, s)
-        self.code = (drivable.astype(np.uint8) | (lines.astype(np.uint8) << 1) | (stop_id << 2))  # (H, W) uint8
+        self.code = drivable.astype(np.uint8) | (lines.astype(np.uint8) << 1) | (stop_id << 2)  # (H, W) uint8
         """(H, W) one byte per pixel: bit 0 drivable, bit 1 lane boundary, bits 2-7 1 + stop-line id."""
         buildings = np.zeros_like(drivable)
         for poly in town.buildings:
@@ -196,7 +220,7 @@ class TownRaster:
         return bool(self.lookup(x, y) & 1)
 
 
-@lru_cache(maxsize=None)
+@cache
 def get_raster(town_name: str) -> TownRaster:
     """The raster of a town, built once (about a second) and cached."""
     return TownRaster(get_town(town_name))
@@ -224,19 +248,24 @@ class BEVRenderer:
         want = (3, self._n_lights) if batch is None else (batch, 3, self._n_lights)
         arr = np.asarray(lights)
         if arr.shape != want or arr.dtype.kind not in "iu" or (arr.size and (arr.min() < 0 or arr.max() > 2)):
-            raise ValueError(f"lights must be light states (0 green, 1 yellow, 2 red) of shape {want}, got "
-                             f"{arr.dtype} of shape {arr.shape}")
+            raise ValueError(
+                f"lights must be light states (0 green, 1 yellow, 2 red) of shape {want}, got "
+                f"{arr.dtype} of shape {arr.shape}"
+            )
         return arr.astype(np.uint8, copy=False)
 
     def _lut(self, lights: np.ndarray) -> np.ndarray:
         """256-entry table from raster byte to packed view byte, for light states (3, L) at the three lags."""
         if self.light_encoding == "flag":
-            code = np.where(lights == 0, 0, 3).astype(np.uint8)  # (3, L): green not drawn, yellow and red as red
+            code = np.where(lights == 0, 0, 3).astype(
+                np.uint8
+            )  # (3, L): green not drawn, yellow and red as red
         else:
             code = lights.astype(np.uint8) + 1  # (3, L): 1 green, 2 yellow, 3 red
         ids = np.zeros(64, dtype=np.uint8)
-        ids[1:self._n_lights + 1] = ((code[0] << LIGHT_SHIFTS[0]) | (code[1] << LIGHT_SHIFTS[1])
-                                     | (code[2] << LIGHT_SHIFTS[2]))
+        ids[1 : self._n_lights + 1] = (
+            (code[0] << LIGHT_SHIFTS[0]) | (code[1] << LIGHT_SHIFTS[1]) | (code[2] << LIGHT_SHIFTS[2])
+        )
         return self._low | ids[np.arange(256) >> 2]
 
     def _indices(self, x: float, y: float, yaw: float) -> np.ndarray:

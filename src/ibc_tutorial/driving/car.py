@@ -60,7 +60,16 @@ class CarConfig:
     """Physics steps per control step (so control runs at physics_hz / substeps = 10 Hz)."""
 
     def __post_init__(self):
-        for name in ("mass", "length", "width", "wheelbase", "max_steer_rad", "max_accel", "max_brake", "lateral_grip"):
+        for name in (
+            "mass",
+            "length",
+            "width",
+            "wheelbase",
+            "max_steer_rad",
+            "max_accel",
+            "max_brake",
+            "lateral_grip",
+        ):
             check_positive(f"CarConfig.{name}", getattr(self, name))
         for name in ("rolling_drag", "air_drag"):
             check_positive(f"CarConfig.{name}", getattr(self, name), allow_zero=True)

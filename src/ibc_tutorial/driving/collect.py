@@ -60,7 +60,9 @@ class CollectConfig:
         check_positive("min_minutes", self.min_minutes)
         check_positive("max_minutes", self.max_minutes)
         if self.max_minutes < self.min_minutes:
-            raise ValueError(f"max_minutes must be >= min_minutes, got {self.max_minutes} < {self.min_minutes}")
+            raise ValueError(
+                f"max_minutes must be >= min_minutes, got {self.max_minutes} < {self.min_minutes}"
+            )
         check_positive("steer_noise", self.steer_noise, allow_zero=True)
         check_fraction("CollectConfig.brake_noise", self.brake_noise)
 
@@ -70,7 +72,20 @@ class Recorder:
 
     def __init__(self, sim: DrivingSim):
         self.sim = sim
-        self.rows: dict[str, list] = {k: [] for k in ("pose", "speed", "prev_action", "action", "executed", "lights", "episode", "step", "lane")}
+        self.rows: dict[str, list] = {
+            k: []
+            for k in (
+                "pose",
+                "speed",
+                "prev_action",
+                "action",
+                "executed",
+                "lights",
+                "episode",
+                "step",
+                "lane",
+            )
+        }
 
     def record(self, episode: int, action, executed, lane: int) -> None:
         """Log the sim's current state with the action chosen in it (call before ``sim.step``)."""
@@ -90,9 +105,17 @@ class Recorder:
         r = self.rows
         arrays = {k: np.array(v) for k, v in r.items()}
         if not r["pose"]:
-            arrays = {"pose": np.zeros((0, 3)), "speed": np.zeros(0), "prev_action": np.zeros((0, 2)),
-                      "action": np.zeros((0, 2)), "executed": np.zeros((0, 2)), "lights": np.zeros((0, n_lights)),
-                      "episode": np.zeros(0), "step": np.zeros(0), "lane": np.zeros(0)}
+            arrays = {
+                "pose": np.zeros((0, 3)),
+                "speed": np.zeros(0),
+                "prev_action": np.zeros((0, 2)),
+                "action": np.zeros((0, 2)),
+                "executed": np.zeros((0, 2)),
+                "lights": np.zeros((0, n_lights)),
+                "episode": np.zeros(0),
+                "step": np.zeros(0),
+                "lane": np.zeros(0),
+            }
         return DemoLog(self.sim.town.name, meta=meta or {}, **arrays)
 
 
@@ -105,7 +128,9 @@ def collect(config: CollectConfig = CollectConfig(), show_progress: bool | None 
     # durations spread evenly over [min, max] (stratified: one draw per 1/routes of the range, shuffled),
     # so the total stays close to routes x the mean duration: 600 steps per minute at 10 Hz
     lo, hi = c.min_minutes * 600, c.max_minutes * 600
-    steps = np.round(lo + (hi - lo) * (rng.permutation(c.routes) + rng.random(c.routes)) / c.routes).astype(int)
+    steps = np.round(lo + (hi - lo) * (rng.permutation(c.routes) + rng.random(c.routes)) / c.routes).astype(
+        int
+    )
     rec = Recorder(sim)
     routes, ended = [], []
     bar = progress(total=int(steps.sum()), desc=f"collecting {c.town}", enabled=show_progress)
@@ -117,7 +142,9 @@ def collect(config: CollectConfig = CollectConfig(), show_progress: bool | None 
             lane, s = sim.start
             routes.append({"start_lane": int(lane), "start_s": float(s), "turns": None})
         else:
-            routes.append({"start_lane": route.start_lane, "start_s": route.start_s, "turns": list(route.turns)})
+            routes.append(
+                {"start_lane": route.start_lane, "start_s": route.start_s, "turns": list(route.turns)}
+            )
         reason = "completed"
         for _ in range(int(steps[k])):
             action = expert.act()
@@ -128,8 +155,14 @@ def collect(config: CollectConfig = CollectConfig(), show_progress: bool | None 
             if sim.terminated:
                 reason = sim.termination_reason
                 break
-        ended.append({"steps": int(sim.t), "distance_m": round(sim.distance, 1),
-                      "red_light_infractions": sim.infractions, "end": reason})
+        ended.append(
+            {
+                "steps": int(sim.t),
+                "distance_m": round(sim.distance, 1),
+                "red_light_infractions": sim.infractions,
+                "end": reason,
+            }
+        )
     bar.close()
     # what was collected and how; no wall time (the command prints it), so identical collections give identical logs
     meta = {"config": asdict(c), "expert": asdict(expert.config), "routes": routes, "episodes": ended}
@@ -141,8 +174,16 @@ def run(args: argparse.Namespace) -> int:
     """``ibc-tutorial collect`` (arguments in ``ibc_tutorial.cli``): check the inputs and ``--out``, collect, save.
 
     Errors are raised (``ValueError``, ``cli.UserError``) for ``cli.main`` to print on one line."""
-    config = CollectConfig(args.town, args.routes, args.seed, args.min_minutes, args.max_minutes,
-                           args.routeless, args.steer_noise, args.brake_noise)
+    config = CollectConfig(
+        args.town,
+        args.routes,
+        args.seed,
+        args.min_minutes,
+        args.max_minutes,
+        args.routeless,
+        args.steer_noise,
+        args.brake_noise,
+    )
     check_output_file("--out", args.out, force=getattr(args, "force", False))
     t0 = time.perf_counter()
     log = collect(config)
@@ -152,7 +193,9 @@ def run(args: argparse.Namespace) -> int:
     dist = sum(e["distance_m"] for e in eps)
     inf = sum(e["red_light_infractions"] for e in eps)
     ends = sum(e["end"] != "completed" for e in eps)
-    print(f"{len(log)} samples in {len(eps)} episodes of {config.town}: {dist / 1000:.1f} km, "
-          f"{inf} red-light infractions, {ends} episodes ended early; "
-          f"{seconds:.1f} s; written to {path}")
+    print(
+        f"{len(log)} samples in {len(eps)} episodes of {config.town}: {dist / 1000:.1f} km, "
+        f"{inf} red-light infractions, {ends} episodes ended early; "
+        f"{seconds:.1f} s; written to {path}"
+    )
     return 0

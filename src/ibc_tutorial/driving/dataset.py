@@ -93,7 +93,9 @@ class DemoLog:
             new[1:] = self.episode[1:] != self.episode[:-1]
             expected = np.where(new, 0, np.concatenate([[0], self.step[:-1] + 1]))
             if (self.step != expected).any():
-                raise ValueError("DemoLog episodes must be stored step by step: step 0, 1, 2, ... within each episode")
+                raise ValueError(
+                    "DemoLog episodes must be stored step by step: step 0, 1, 2, ... within each episode"
+                )
 
     def __len__(self) -> int:
         return len(self.pose)
@@ -104,7 +106,9 @@ class DemoLog:
 
     def states(self) -> np.ndarray:
         """(N, 3) float32 [speed, previous steer, previous acceleration]: the observation's state."""
-        return np.concatenate([np.minimum(self.speed, MAX_SPEED)[:, None], self.prev_action], axis=1).astype(np.float32)
+        return np.concatenate([np.minimum(self.speed, MAX_SPEED)[:, None], self.prev_action], axis=1).astype(
+            np.float32
+        )
 
     def history_rows(self, index: np.ndarray) -> np.ndarray:
         """(B, 3) rows holding the light states 15, 8 and 0 steps before each sample (clamped at its episode's start)."""
@@ -141,26 +145,36 @@ class DemoLog:
         """Write the log to ``path`` (.npz) atomically."""
         buf = io.BytesIO()
         meta = dict(self.meta, town=self.town)
-        np.savez_compressed(buf, format=np.array(FORMAT), version=np.array(VERSION), meta=np.array(json.dumps(meta)),
-                            checksum=np.array(self.checksum()), **{k: getattr(self, k) for k in ARRAYS})
+        np.savez_compressed(
+            buf,
+            format=np.array(FORMAT),
+            version=np.array(VERSION),
+            meta=np.array(json.dumps(meta)),
+            checksum=np.array(self.checksum()),
+            **{k: getattr(self, k) for k in ARRAYS},
+        )
         return atomic_write_bytes(path, buf.getvalue())
 
     @classmethod
-    def load(cls, path) -> "DemoLog":
+    def load(cls, path) -> DemoLog:
         """Read a log written by ``save``; ValueError if the file is damaged, foreign or of another version."""
         path = Path(path)
         if not path.is_file():
             raise ValueError(f"no demonstration file at {path}")
         if not zipfile.is_zipfile(path):
-            raise ValueError(f"{path} is truncated or damaged, or not a demonstration file: it is not an .npz archive")
+            raise ValueError(
+                f"{path} is truncated or damaged, or not a demonstration file: it is not an .npz archive"
+            )
         try:
             with np.load(path, allow_pickle=False) as z:
                 files = set(z.files)
                 if "format" not in files or str(z["format"]) != FORMAT:
                     raise _Refused(f"{path} is not an ibc-tutorial demonstration file (no '{FORMAT}' header)")
                 if int(z["version"]) != VERSION:
-                    raise _Refused(f"{path} is a demonstration file of version {int(z['version'])}; "
-                                   f"this library reads version {VERSION}: collect it again")
+                    raise _Refused(
+                        f"{path} is a demonstration file of version {int(z['version'])}; "
+                        f"this library reads version {VERSION}: collect it again"
+                    )
                 missing = [k for k in list(ARRAYS) + ["meta", "checksum"] if k not in files]
                 if missing:
                     raise _Refused(f"{path} is damaged: it lacks {missing}")
@@ -170,13 +184,17 @@ class DemoLog:
         except _Refused as exc:
             raise ValueError(str(exc)) from None
         except Exception as exc:  # a damaged archive member: zlib, zip, format or JSON errors
-            raise ValueError(f"{path} is truncated or damaged and cannot be read ({type(exc).__name__}: "
-                             f"{' '.join(str(exc).split())}): collect it again") from None
+            raise ValueError(
+                f"{path} is truncated or damaged and cannot be read ({type(exc).__name__}: "
+                f"{' '.join(str(exc).split())}): collect it again"
+            ) from None
         if not isinstance(meta, dict) or not isinstance(meta.get("town"), str) or meta["town"] not in TOWNS:
             raise ValueError(f"{path} is damaged: its meta must be a dict naming the town (one of {TOWNS})")
         for name, (dtype, _shape) in ARRAYS.items():
             if arrays[name].dtype != np.dtype(dtype):
-                raise ValueError(f"{path} is damaged: {name} must be {np.dtype(dtype).name}, got {arrays[name].dtype.name}")
+                raise ValueError(
+                    f"{path} is damaged: {name} must be {np.dtype(dtype).name}, got {arrays[name].dtype.name}"
+                )
         try:
             log = cls(meta.pop("town"), meta=meta, **arrays)
         except ValueError as exc:
@@ -203,8 +221,10 @@ class DemoLog:
         off = (x < x0 - PAD) | (x > x1 + PAD) | (y < y0 - PAD) | (y > y1 + PAD)
         if off.any():
             k = int(np.flatnonzero(off)[0])
-            raise ValueError(f"pose {k} ({x[k]:.1f}, {y[k]:.1f}) lies off {self.town}'s map "
-                             f"(x in [{x0 - PAD:.0f}, {x1 + PAD:.0f}], y in [{y0 - PAD:.0f}, {y1 + PAD:.0f}] m)")
+            raise ValueError(
+                f"pose {k} ({x[k]:.1f}, {y[k]:.1f}) lies off {self.town}'s map "
+                f"(x in [{x0 - PAD:.0f}, {x1 + PAD:.0f}], y in [{y0 - PAD:.0f}, {y1 + PAD:.0f}] m)"
+            )
         if not np.isfinite(self.speed).all() or (np.abs(self.speed) > MAX_SPEED).any():
             raise ValueError(f"speed must be finite and within ±{MAX_SPEED} m/s")
         for name in ("action", "executed", "prev_action"):
@@ -212,10 +232,14 @@ class DemoLog:
             if not np.isfinite(v).all() or (np.abs(v) > 1.0).any():
                 raise ValueError(f"{name} must be finite and in [-1, 1]")
         if (self.lights > RED).any():
-            raise ValueError(f"lights must be codes 0 (green), 1 (yellow) or 2 (red), got {int(self.lights.max())}")
+            raise ValueError(
+                f"lights must be codes 0 (green), 1 (yellow) or 2 (red), got {int(self.lights.max())}"
+            )
         if (self.lane < 0).any() or (self.lane >= len(town.lanes)).any():
-            raise ValueError(f"lane must index {self.town}'s {len(town.lanes)} lanes, got "
-                             f"{int(self.lane.min())}..{int(self.lane.max())}")
+            raise ValueError(
+                f"lane must index {self.town}'s {len(town.lanes)} lanes, got "
+                f"{int(self.lane.min())}..{int(self.lane.max())}"
+            )
         if (self.episode < 0).any():
             raise ValueError("episode indices must be >= 0")
         missing = [k for k in ("config", "episodes") if k not in self.meta]

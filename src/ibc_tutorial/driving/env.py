@@ -69,10 +69,21 @@ class DrivingEnv(gymnasium.Env):
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
 
-    def __init__(self, town: str = "town01", bev_size: int = 192, routeless: bool = True, max_steps: int = 3000,
-                 render_mode: str | None = None, config: EnvConfig | None = None, light_encoding: str = "intensity"):
-        self.config = config if config is not None else EnvConfig(town, bev_size, routeless, max_steps,
-                                                                  light_encoding=light_encoding)
+    def __init__(
+        self,
+        town: str = "town01",
+        bev_size: int = 192,
+        routeless: bool = True,
+        max_steps: int = 3000,
+        render_mode: str | None = None,
+        config: EnvConfig | None = None,
+        light_encoding: str = "intensity",
+    ):
+        self.config = (
+            config
+            if config is not None
+            else EnvConfig(town, bev_size, routeless, max_steps, light_encoding=light_encoding)
+        )
         if render_mode is not None:
             check_choice("render_mode", render_mode, self.metadata["render_modes"])
         self.render_mode = render_mode
@@ -80,14 +91,20 @@ class DrivingEnv(gymnasium.Env):
         self.sim = DrivingSim(c.town, c.car, c.lights)
         self.town = self.sim.town
         self.renderer = BEVRenderer(get_raster(c.town), c.bev_size, c.light_encoding)
-        self._full_renderer = (self.renderer if c.bev_size == 192
-                               else BEVRenderer(get_raster(c.town), 192, c.light_encoding))
+        self._full_renderer = (
+            self.renderer if c.bev_size == 192 else BEVRenderer(get_raster(c.town), 192, c.light_encoding)
+        )
         S = c.bev_size
-        self.observation_space = spaces.Dict({
-            "bev": spaces.Box(0.0, 1.0, (5, S, S), dtype=np.float32),
-            "state": spaces.Box(np.array([0.0, -1.0, -1.0], dtype=np.float32),
-                                np.array([MAX_SPEED, 1.0, 1.0], dtype=np.float32), dtype=np.float32),
-        })
+        self.observation_space = spaces.Dict(
+            {
+                "bev": spaces.Box(0.0, 1.0, (5, S, S), dtype=np.float32),
+                "state": spaces.Box(
+                    np.array([0.0, -1.0, -1.0], dtype=np.float32),
+                    np.array([MAX_SPEED, 1.0, 1.0], dtype=np.float32),
+                    dtype=np.float32,
+                ),
+            }
+        )
         self.action_space = spaces.Box(-1.0, 1.0, (2,), dtype=np.float32)
         self.route: Route | None = None
         self._max_steps = c.max_steps
@@ -113,13 +130,17 @@ class DrivingEnv(gymnasium.Env):
         if route is None and not self.config.routeless:
             route = random_route(self.town, self.np_random, start=start)
         self.route = route
-        self._max_steps = check_int("options['max_steps']", options.get("max_steps", self.config.max_steps), minimum=1)
+        self._max_steps = check_int(
+            "options['max_steps']", options.get("max_steps", self.config.max_steps), minimum=1
+        )
         lane, s = (None, None) if start is None else start
         offsets = options.get("light_offsets")
         if offsets is not None:
             offsets = np.asarray(offsets)
             if offsets.shape != (self.town.n_junctions,) or offsets.dtype.kind not in "iu":
-                raise ValueError(f"options['light_offsets'] must be {self.town.n_junctions} integers, got {offsets!r}")
+                raise ValueError(
+                    f"options['light_offsets'] must be {self.town.n_junctions} integers, got {offsets!r}"
+                )
         self.sim.reset(self.np_random, lane=lane, s=s, route=route, offsets=offsets)
         self._done = False
         self._last_score = 0.0
@@ -144,7 +165,9 @@ class DrivingEnv(gymnasium.Env):
         from ibc_tutorial.driving.render import bev_to_rgb, draw_ego
 
         x, y, yaw = self.sim.car.pose
-        return draw_ego(bev_to_rgb(self._full_renderer.render(x, y, yaw, self.sim.light_history())), self.sim.car.config)
+        return draw_ego(
+            bev_to_rgb(self._full_renderer.render(x, y, yaw, self.sim.light_history())), self.sim.car.config
+        )
 
     # ------------------------------------------------------------------ helpers
     @staticmethod
@@ -167,9 +190,13 @@ class DrivingEnv(gymnasium.Env):
             lane, s = start
             lane, s = int(lane), float(s)
         except (TypeError, ValueError):
-            raise ValueError(f"options['start'] must be (road lane id, arc length in m), got {start!r}") from None
+            raise ValueError(
+                f"options['start'] must be (road lane id, arc length in m), got {start!r}"
+            ) from None
         if lane not in self.town.road_lanes or not 0 <= s <= self.town.lanes[lane].length:
-            raise ValueError(f"options['start'] must name a road lane of {self.town.name} and a position on it, got {start!r}")
+            raise ValueError(
+                f"options['start'] must name a road lane of {self.town.name} and a position on it, got {start!r}"
+            )
         return lane, s
 
     def _observation(self) -> dict:
@@ -188,19 +215,35 @@ def register_envs() -> None:
     """Register ``ENV_IDS`` with Gymnasium (once; importing ``ibc_tutorial.driving`` does it)."""
     for town, env_id in ENV_IDS.items():
         if env_id not in gymnasium.registry:
-            gymnasium.register(id=env_id, entry_point="ibc_tutorial.driving.env:DrivingEnv", kwargs={"town": town})
+            gymnasium.register(
+                id=env_id, entry_point="ibc_tutorial.driving.env:DrivingEnv", kwargs={"town": town}
+            )
 
 
-def make_env(town: str = "town01", bev_size: int = 192, routeless: bool = True, max_steps: int = 3000,
-             seed: int | None = None, render_mode: str | None = None, light_encoding: str = "intensity") -> DrivingEnv:
+def make_env(
+    town: str = "town01",
+    bev_size: int = 192,
+    routeless: bool = True,
+    max_steps: int = 3000,
+    seed: int | None = None,
+    render_mode: str | None = None,
+    light_encoding: str = "intensity",
+) -> DrivingEnv:
     """A driving environment (see ``DrivingEnv``), made through its Gymnasium id so that it carries
     its spec, without Gymnasium's wrappers; if ``seed`` is given it is reset with it once."""
     check_choice("town", town, TOWNS)
     if render_mode is not None:
         check_choice("render_mode", render_mode, DrivingEnv.metadata["render_modes"])
     register_envs()
-    env = gymnasium.make(ENV_IDS[town], bev_size=bev_size, routeless=routeless, max_steps=max_steps,
-                         render_mode=render_mode, light_encoding=light_encoding, disable_env_checker=True).unwrapped
+    env = gymnasium.make(
+        ENV_IDS[town],
+        bev_size=bev_size,
+        routeless=routeless,
+        max_steps=max_steps,
+        render_mode=render_mode,
+        light_encoding=light_encoding,
+        disable_env_checker=True,
+    ).unwrapped
     if seed is not None:
         check_int("seed", seed, minimum=0)
         env.reset(seed=seed)

@@ -108,7 +108,9 @@ class ExpertConfig:
         for name in ("noise_prob", "brake_prob", "hesitate_prob"):
             check_probability(f"ExpertConfig.{name}", getattr(self, name))
         if len(self.brake_steps) != 2 or not 1 <= self.brake_steps[0] <= self.brake_steps[1]:
-            raise ValueError(f"ExpertConfig.brake_steps must be (low, high) with 1 <= low <= high, got {self.brake_steps!r}")
+            raise ValueError(
+                f"ExpertConfig.brake_steps must be (low, high) with 1 <= low <= high, got {self.brake_steps!r}"
+            )
 
 
 class PID:
@@ -237,7 +239,11 @@ class Expert:
 
     def _choose(self, lane: int) -> tuple[int, int]:
         """The lane after ``lane`` and the index of the junction choice it took (-1: no choice)."""
-        ap = self.town.approaches[self.town.approach_of_lane[lane]] if lane in self.town.approach_of_lane else None
+        ap = (
+            self.town.approaches[self.town.approach_of_lane[lane]]
+            if lane in self.town.approach_of_lane
+            else None
+        )
         if ap is None or not ap.is_junction:
             return self.town.next_lane(lane), -1
         if self._turn_k < len(self._turns):
@@ -299,12 +305,14 @@ class Expert:
         # a turn ahead: the path's heading changes within the preview distance
         j = int(np.searchsorted(self.s, s_car + c.turn_preview_m))
         j = min(j, len(self.s) - 1)
-        turning = bool(self.turn_wp[self.idx:j + 1].any())
+        turning = bool(self.turn_wp[self.idx : j + 1].any())
         look = c.turn_lookahead_m if turning else c.lookahead_m
         t = min(int(np.searchsorted(self.s, s_car + look)), len(self.s) - 1)
         tx, ty = self.xy[t]
         err = math.atan2(ty - y, tx - x) - yaw
-        err = -math.atan2(math.sin(err), math.cos(err))  # > 0: target to the right; positive steer turns right
+        err = -math.atan2(
+            math.sin(err), math.cos(err)
+        )  # > 0: target to the right; positive steer turns right
         steer = min(max(self.steer_pid.step(err), -1.0), 1.0)
 
         speed = sim.car.speed
@@ -328,7 +336,12 @@ class Expert:
         if acc is None:
             acc = u if u < 0 else u * max(1.0 - abs(steer), c.min_throttle_scale)
         acc = min(max(acc, -1.0), 1.0)
-        self.last = {"target_speed": target, "stop_distance": stop_d, "turning": turning, "lane": self.current_lane}
+        self.last = {
+            "target_speed": target,
+            "stop_distance": stop_d,
+            "turning": turning,
+            "lane": self.current_lane,
+        }
         return np.array([steer, acc], dtype=np.float32)
 
     def _stop_distance(self, s_car: float, speed: float) -> float | None:
@@ -353,7 +366,9 @@ class Expert:
         if c.steer_noise > 0:
             if self._noise_left <= 0 and self.rng.random() < c.noise_prob:
                 self._noise_left = int(self.rng.integers(c.noise_steps[0], c.noise_steps[1] + 1))
-                self._noise_value = float(self.rng.choice([-1.0, 1.0]) * self.rng.uniform(0.5, 1.0) * c.steer_noise)
+                self._noise_value = float(
+                    self.rng.choice([-1.0, 1.0]) * self.rng.uniform(0.5, 1.0) * c.steer_noise
+                )
             if self._noise_left > 0:
                 self._noise_left -= 1
                 out[0] = np.float32(min(max(out[0] + self._noise_value, -1.0), 1.0))
@@ -367,4 +382,3 @@ class Expert:
                 self._brake_left -= 1
                 out[1] = np.float32(self._brake_value)
         return out
-

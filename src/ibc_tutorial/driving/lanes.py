@@ -198,7 +198,9 @@ def build_lanes(nodes: np.ndarray, edges: list[tuple[int, int]]) -> tuple[list[L
             off = right_of(d) * (LANE_WIDTH / 2)
             start = nodes[a] + d * ARM_LENGTH + off
             end = nodes[b] - d * ARM_LENGTH + off
-            lane = Lane(len(lanes), "road", start, end, float(np.linalg.norm(end - start)), from_node=a, to_node=b)
+            lane = Lane(
+                len(lanes), "road", start, end, float(np.linalg.norm(end - start)), from_node=a, to_node=b
+            )
             road_lane[(a, b)] = lane.id
             lanes.append(lane)
 
@@ -217,19 +219,43 @@ def build_lanes(nodes: np.ndarray, edges: list[tuple[int, int]]) -> tuple[list[L
                 end = nodes[n] + t_out * ARM_LENGTH + right_of(t_out) * (LANE_WIDTH / 2)
                 cross = t_in[0] * t_out[1] - t_in[1] * t_out[0]
                 if b == (a + 2) % 4:
-                    lane = Lane(len(lanes), "connector", start, end, float(np.linalg.norm(end - start)), node=n)
+                    lane = Lane(
+                        len(lanes), "connector", start, end, float(np.linalg.norm(end - start)), node=n
+                    )
                 elif cross > 0:
                     c = start + left_of(t_in) * LEFT_TURN_RADIUS
-                    lane = Lane(len(lanes), "connector", start, end, LEFT_TURN_RADIUS * math.pi / 2,
-                                turn="left", node=n, center=c, radius=LEFT_TURN_RADIUS)
+                    lane = Lane(
+                        len(lanes),
+                        "connector",
+                        start,
+                        end,
+                        LEFT_TURN_RADIUS * math.pi / 2,
+                        turn="left",
+                        node=n,
+                        center=c,
+                        radius=LEFT_TURN_RADIUS,
+                    )
                 else:
                     c = start + right_of(t_in) * RIGHT_TURN_RADIUS
-                    lane = Lane(len(lanes), "connector", start, end, RIGHT_TURN_RADIUS * math.pi / 2,
-                                turn="right", node=n, center=c, radius=RIGHT_TURN_RADIUS)
+                    lane = Lane(
+                        len(lanes),
+                        "connector",
+                        start,
+                        end,
+                        RIGHT_TURN_RADIUS * math.pi / 2,
+                        turn="right",
+                        node=n,
+                        center=c,
+                        radius=RIGHT_TURN_RADIUS,
+                    )
                 lane.successors = [road_lane[(n, node_arms[b])]]
                 lanes.append(lane)
                 exits[lane.turn] = lane.id
             incoming = road_lane[(src, n)]
             lanes[incoming].successors = sorted(exits.values())
-            approaches.append(Approach(len(approaches), n, a, incoming, exits, len(node_arms) >= 3, lanes[incoming].end.copy()))
+            approaches.append(
+                Approach(
+                    len(approaches), n, a, incoming, exits, len(node_arms) >= 3, lanes[incoming].end.copy()
+                )
+            )
     return lanes, approaches

@@ -98,7 +98,9 @@ def make_stop_lines(approaches: list[Approach], junction_nodes: list[int]) -> li
         j = index[ap.node]
         slot = slots.get(j, 0)
         slots[j] = slot + 1
-        out.append(StopLine(len(out), ap.id, j, slot, tuple(map(float, ap.entry)), tuple(map(float, ap.direction))))
+        out.append(
+            StopLine(len(out), ap.id, j, slot, tuple(map(float, ap.entry)), tuple(map(float, ap.direction)))
+        )
     return out
 
 
@@ -110,7 +112,11 @@ class LightSchedule:
         self.n_junctions = check_int("n_junctions", n_junctions, minimum=0)
         self.junction = np.array([s.junction for s in stop_lines], dtype=np.int64)  # (L,)
         self.slot = np.array([s.slot for s in stop_lines], dtype=np.int64)  # (L,)
-        heads = np.bincount(self.junction, minlength=n_junctions) if len(stop_lines) else np.zeros(n_junctions, int)
+        heads = (
+            np.bincount(self.junction, minlength=n_junctions)
+            if len(stop_lines)
+            else np.zeros(n_junctions, int)
+        )
         self.heads = heads  # (J,) heads per junction
         self.cycle = np.maximum(heads, 1) * timing.slot_steps  # (J,) steps of a full cycle
 
@@ -137,7 +143,9 @@ class LightSchedule:
         check_int("light", light, minimum=0, maximum=self.n_lights - 1)
         offsets = np.zeros(self.n_junctions, dtype=np.int64)
         j = self.junction[light]
-        offsets[j] = (self.slot[light] * self.timing.slot_steps + self.timing.green_steps + self.timing.yellow_steps) % self.cycle[j]
+        offsets[j] = (
+            self.slot[light] * self.timing.slot_steps + self.timing.green_steps + self.timing.yellow_steps
+        ) % self.cycle[j]
         return offsets
 
     def states(self, t, offsets: np.ndarray) -> np.ndarray:
@@ -160,7 +168,9 @@ class RedLightMonitor:
         self.direction = np.array([s.direction for s in stop_lines], dtype=float).reshape(-1, 2)  # (L, 2)
         self.right = np.stack([self.direction[:, 1], -self.direction[:, 0]], axis=1)  # (L, 2)
         self._axes = np.concatenate([self.direction, self.right]).T  # (2, 2L)
-        self._origin = np.concatenate([(self.entry * self.direction).sum(1), (self.entry * self.right).sum(1)])  # (2L,)
+        self._origin = np.concatenate(
+            [(self.entry * self.direction).sum(1), (self.entry * self.right).sum(1)]
+        )  # (2L,)
         self.reset()
 
     def reset(self) -> None:

@@ -7,16 +7,22 @@ import numpy as np
 from ibc_tutorial.driving.bev import EGO_ROW, FULL_SIZE, LIGHT_LEVELS, PIXELS_PER_METRE, TownRaster
 from ibc_tutorial.driving.car import CarConfig
 
-ROAD_COLOURS = np.array([
-    [80, 80, 80],     # drivable area: grey
-    [255, 255, 255],  # lane boundaries: white
-], dtype=np.uint8)
+ROAD_COLOURS = np.array(
+    [
+        [80, 80, 80],  # drivable area: grey
+        [255, 255, 255],  # lane boundaries: white
+    ],
+    dtype=np.uint8,
+)
 """Colour of the two road channels (0/1)."""
-LIGHT_COLOURS = np.array([
-    [40, 200, 60],    # green (level 0.3)
-    [255, 200, 0],    # yellow (level 0.6)
-    [255, 40, 40],    # red (level 1.0)
-], dtype=np.uint8)
+LIGHT_COLOURS = np.array(
+    [
+        [40, 200, 60],  # green (level 0.3)
+        [255, 200, 0],  # yellow (level 0.6)
+        [255, 40, 40],  # red (level 1.0)
+    ],
+    dtype=np.uint8,
+)
 """Colour of a stop line by the light level of its channel (``bev.LIGHT_LEVELS``)."""
 LAG_BRIGHTNESS = (0.45, 0.7, 1.0)
 """Light channels 2, 3, 4 (15, 8 and 0 steps ago) are drawn this bright: the newest on top, brightest."""
@@ -48,11 +54,13 @@ def draw_ego(img: np.ndarray, car: CarConfig = CarConfig()) -> np.ndarray:
     res = PIXELS_PER_METRE * scale
     r0, c0 = EGO_ROW * scale, FULL_SIZE / 2 * scale
     hl, hw = car.length / 2 * res, car.width / 2 * res
-    img[int(round(r0 - hl)):int(round(r0 + hl)), int(round(c0 - hw)):int(round(c0 + hw))] = EGO_COLOUR
+    img[int(round(r0 - hl)) : int(round(r0 + hl)), int(round(c0 - hw)) : int(round(c0 + hw))] = EGO_COLOUR
     return img
 
 
-def town_rgb(raster: TownRaster, stop_flags: np.ndarray | None = None, step: int = 1) -> tuple[np.ndarray, tuple]:
+def town_rgb(
+    raster: TownRaster, stop_flags: np.ndarray | None = None, step: int = 1
+) -> tuple[np.ndarray, tuple]:
     """A picture of the whole town and its extent for ``imshow``.
 
     Args:

@@ -20,8 +20,8 @@ with steering perturbations, which the Gymnasium environment does not model.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 
@@ -103,11 +103,21 @@ class _Trace:
         return out
 
 
-def rollout(policy: Policy | str, town: str = "town02", episodes: int = 10, steps: int = 3000, bev_size: int = 64,
-            seed: int = 0, routeless: bool = True, record_xy: bool = True, record_steps: bool = False,
-            keep_obs: bool = False, show_progress: bool | None = None,
-            light_encoding: str = "intensity",
-            on_step: Callable[[int, list[int], dict[str, np.ndarray]], None] | None = None) -> list[EpisodeResult]:
+def rollout(
+    policy: Policy | str,
+    town: str = "town02",
+    episodes: int = 10,
+    steps: int = 3000,
+    bev_size: int = 64,
+    seed: int = 0,
+    routeless: bool = True,
+    record_xy: bool = True,
+    record_steps: bool = False,
+    keep_obs: bool = False,
+    show_progress: bool | None = None,
+    light_encoding: str = "intensity",
+    on_step: Callable[[int, list[int], dict[str, np.ndarray]], None] | None = None,
+) -> list[EpisodeResult]:
     """Run ``episodes`` episodes of at most ``steps`` steps side by side; return one result each.
 
     Actions are clipped to [-1, 1] (a NaN still raises the environment's ValueError).
@@ -133,8 +143,10 @@ def rollout(policy: Policy | str, town: str = "town02", episodes: int = 10, step
         raise ValueError("keep_obs needs record_steps=True")
     if on_step is not None and not callable(on_step):
         raise ValueError(f"on_step must be callable or None, got {type(on_step).__name__}")
-    envs = [make_env(town, bev_size=bev_size, routeless=routeless, max_steps=steps, light_encoding=light_encoding)
-            for _ in range(episodes)]
+    envs = [
+        make_env(town, bev_size=bev_size, routeless=routeless, max_steps=steps, light_encoding=light_encoding)
+        for _ in range(episodes)
+    ]
     obs, infos = zip(*(env.reset(seed=seed + i) for i, env in enumerate(envs)))
     obs, infos = list(obs), list(infos)
     experts = [Expert(env) for env in envs] if policy == "expert" else None
@@ -152,8 +164,10 @@ def rollout(policy: Policy | str, town: str = "town02", episodes: int = 10, step
         if experts is not None:
             actions = np.stack([experts[i].act() for i in active])  # (B, 2)
         else:
-            batch = {"bev": np.stack([obs[i]["bev"] for i in active]),  # (B, 5, S, S) float32
-                     "state": np.stack([obs[i]["state"] for i in active])}  # (B, 3) float32
+            batch = {
+                "bev": np.stack([obs[i]["bev"] for i in active]),  # (B, 5, S, S) float32
+                "state": np.stack([obs[i]["state"] for i in active]),
+            }  # (B, 3) float32
             if on_step is not None:
                 on_step(t, list(active), batch)
             actions = np.asarray(policy(batch), dtype=np.float64).reshape(len(active), 2)
@@ -177,8 +191,17 @@ def rollout(policy: Policy | str, town: str = "town02", episodes: int = 10, step
     results = []
     for i in range(episodes):
         info = done_info.get(i) or envs[i].sim.info()
-        results.append(EpisodeResult(seed + i, info["step"], info["distance_m"], info["red_light_infractions"], info["score"],
-                                     bool(info["termination"]), info["termination"],
-                                     np.array(tracks[i]) if record_xy else None,
-                                     traces[i].arrays() if traces else None))
+        results.append(
+            EpisodeResult(
+                seed + i,
+                info["step"],
+                info["distance_m"],
+                info["red_light_infractions"],
+                info["score"],
+                bool(info["termination"]),
+                info["termination"],
+                np.array(tracks[i]) if record_xy else None,
+                traces[i].arrays() if traces else None,
+            )
+        )
     return results

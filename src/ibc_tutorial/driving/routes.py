@@ -8,8 +8,8 @@ the lane graph it gives the dense path the expert follows.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
@@ -63,8 +63,13 @@ def uniform_exit(exits: list[str], rng: np.random.Generator) -> str:
     return exits[int(rng.integers(len(exits)))]
 
 
-def random_route(town: Town, rng: np.random.Generator, n_turns: int = 64, start: tuple[int, float] | None = None,
-                 choose: Callable[[list[str], np.random.Generator], str] = uniform_exit) -> Route:
+def random_route(
+    town: Town,
+    rng: np.random.Generator,
+    n_turns: int = 64,
+    start: tuple[int, float] | None = None,
+    choose: Callable[[list[str], np.random.Generator], str] = uniform_exit,
+) -> Route:
     """A route with ``n_turns`` legal turns from a random start (or ``start`` = (lane, s)).
 
     At each junction approach met, ``choose(exits, rng)`` picks the turn among the sorted legal exits

@@ -31,7 +31,9 @@ def score(distance_m: float, infractions: int) -> float:
 class DrivingSim:
     """A town, its lights and one car; ``step`` advances one 0.1 s control step."""
 
-    def __init__(self, town: str = "town01", car: CarConfig = CarConfig(), timing: LightTiming = LightTiming()):
+    def __init__(
+        self, town: str = "town01", car: CarConfig = CarConfig(), timing: LightTiming = LightTiming()
+    ):
         self.town = get_town(town)
         self.raster = get_raster(town)
         self.space = pymunk.Space()
@@ -60,8 +62,14 @@ class DrivingSim:
         self.collided = True
 
     # ------------------------------------------------------------------ episode
-    def reset(self, rng: np.random.Generator, lane: int | None = None, s: float | None = None,
-              offsets: np.ndarray | None = None, route=None) -> None:
+    def reset(
+        self,
+        rng: np.random.Generator,
+        lane: int | None = None,
+        s: float | None = None,
+        offsets: np.ndarray | None = None,
+        route=None,
+    ) -> None:
         """Start an episode: random light phases, the car at rest on ``lane`` at arc length ``s``
         (both random when None), or at the start of ``route`` (a ``routes.Route``) if given."""
         if route is not None:
@@ -69,7 +77,9 @@ class DrivingSim:
         self.route = route
         self.episode += 1
         self.episode_seed = int(rng.integers(2**31))  # seeds the routeless expert's choices
-        self.offsets = self.schedule.random_offsets(rng) if offsets is None else np.asarray(offsets, dtype=np.int64)
+        self.offsets = (
+            self.schedule.random_offsets(rng) if offsets is None else np.asarray(offsets, dtype=np.int64)
+        )
         if lane is None:
             lane, s = random_start(self.town, rng)
         ln = self.town.lanes[lane]
@@ -122,7 +132,7 @@ class DrivingSim:
 
     @property
     def termination_reason(self) -> str:
-        """"building", "off_road" or "" (still driving)."""
+        """ "building", "off_road" or "" (still driving)."""
         return "building" if self.collided else ("off_road" if self.off_road else "")
 
     @property
@@ -146,7 +156,9 @@ class DrivingSim:
             "distance_m": self.distance,
             "red_light_infractions": self.infractions,
             "score": self.score,
-            "x": x, "y": y, "yaw": yaw,
+            "x": x,
+            "y": y,
+            "yaw": yaw,
             "speed": self.car.speed,
             "step": self.t,
             "ran_red_light": bool(self.ran_lights),

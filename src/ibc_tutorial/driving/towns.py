@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cache
 
 import numpy as np
 
@@ -53,19 +53,41 @@ def _layout(name, nodes: dict[str, tuple[float, float]], chains: list[list[str]]
 TOWN01 = _layout(
     "town01",
     {
-        "sw": (0, 0), "se": (394, 0), "ne": (394, 328), "nw": (0, 328),
-        "s88": (88, 0), "s152": (152, 0), "s335": (335, 0), "n88": (88, 328), "n335": (335, 328),
-        "a88": (88, 55), "a152": (152, 55), "a335": (335, 55),
-        "b88": (88, 130), "b335": (335, 130), "c88": (88, 196), "c335": (335, 196),
+        "sw": (0, 0),
+        "se": (394, 0),
+        "ne": (394, 328),
+        "nw": (0, 328),
+        "s88": (88, 0),
+        "s152": (152, 0),
+        "s335": (335, 0),
+        "n88": (88, 328),
+        "n335": (335, 328),
+        "a88": (88, 55),
+        "a152": (152, 55),
+        "a335": (335, 55),
+        "b88": (88, 130),
+        "b335": (335, 130),
+        "c88": (88, 196),
+        "c335": (335, 196),
     },
     [
         ["sw", "s88", "s152", "s335", "se", "ne", "n335", "n88", "nw", "sw"],
         ["s88", "a88", "b88", "c88", "n88"],
         ["s335", "a335", "b335", "c335", "n335"],
-        ["a88", "a152", "a335"], ["b88", "b335"], ["c88", "c335"], ["s152", "a152"],
+        ["a88", "a152", "a335"],
+        ["b88", "b335"],
+        ["c88", "c335"],
+        ["s152", "a152"],
     ],
-    [(0, 0, 88, 328), (335, 0, 394, 328), (88, 0, 152, 55), (152, 0, 335, 55),
-     (88, 55, 335, 130), (88, 130, 335, 196), (88, 196, 335, 328)],
+    [
+        (0, 0, 88, 328),
+        (335, 0, 394, 328),
+        (88, 0, 152, 55),
+        (152, 0, 335, 55),
+        (88, 55, 335, 130),
+        (88, 130, 335, 196),
+        (88, 196, 335, 328),
+    ],
 )
 
 # town02, about 200 x 200 m, 8 T-junctions: an outer loop, an east-west road at y = 82, north-south
@@ -73,13 +95,25 @@ TOWN01 = _layout(
 TOWN02 = _layout(
     "town02",
     {
-        "sw": (0, 0), "se": (196, 0), "ne": (196, 197), "nw": (0, 197),
-        "w82": (0, 82), "m82": (50, 82), "c82": (139, 82), "e82": (196, 82),
-        "m131": (50, 131), "c131": (139, 131), "e131": (196, 131), "n50": (50, 197),
+        "sw": (0, 0),
+        "se": (196, 0),
+        "ne": (196, 197),
+        "nw": (0, 197),
+        "w82": (0, 82),
+        "m82": (50, 82),
+        "c82": (139, 82),
+        "e82": (196, 82),
+        "m131": (50, 131),
+        "c131": (139, 131),
+        "e131": (196, 131),
+        "n50": (50, 197),
     },
     [
         ["sw", "se", "e82", "e131", "ne", "n50", "nw", "w82", "sw"],
-        ["w82", "m82", "c82", "e82"], ["m82", "m131", "n50"], ["c82", "c131"], ["m131", "c131", "e131"],
+        ["w82", "m82", "c82", "e82"],
+        ["m82", "m131", "n50"],
+        ["c82", "c131"],
+        ["m131", "c131", "e131"],
     ],
     [(0, 0, 196, 82), (0, 82, 50, 197), (50, 82, 139, 131), (139, 82, 196, 131), (50, 131, 196, 197)],
 )
@@ -103,10 +137,18 @@ def building_polygon(block: tuple[float, float, float, float]) -> np.ndarray:
     cut = 2 * ARM_LENGTH - (kerb_r - SIDEWALK) * math.sqrt(2) - 2 * inset  # x+y of the cut, minus the corner
     cut = max(cut, 0.0)
     ax0, ay0, ax1, ay1 = x0 + inset, y0 + inset, x1 - inset, y1 - inset
-    return np.array([
-        (ax0 + cut, ay0), (ax1 - cut, ay0), (ax1, ay0 + cut), (ax1, ay1 - cut),
-        (ax1 - cut, ay1), (ax0 + cut, ay1), (ax0, ay1 - cut), (ax0, ay0 + cut),
-    ])
+    return np.array(
+        [
+            (ax0 + cut, ay0),
+            (ax1 - cut, ay0),
+            (ax1, ay0 + cut),
+            (ax1, ay1 - cut),
+            (ax1 - cut, ay1),
+            (ax0 + cut, ay1),
+            (ax0, ay1 - cut),
+            (ax0, ay0 + cut),
+        ]
+    )
 
 
 class Town:
@@ -126,8 +168,10 @@ class Town:
         self.buildings = [building_polygon(b) for b in layout.blocks]
         half = LANE_WIDTH
         self.extent = (
-            float(self.nodes[:, 0].min() - half), float(self.nodes[:, 1].min() - half),
-            float(self.nodes[:, 0].max() + half), float(self.nodes[:, 1].max() + half),
+            float(self.nodes[:, 0].min() - half),
+            float(self.nodes[:, 1].min() - half),
+            float(self.nodes[:, 0].max() + half),
+            float(self.nodes[:, 1].max() + half),
         )
         """(xmin, ymin, xmax, ymax) of the roads in metres."""
         # every waypoint of every lane, for localisation
@@ -151,7 +195,9 @@ class Town:
         x0, y0, x1, y1 = self.extent
         return x1 - x0, y1 - y0
 
-    def localize(self, x: float, y: float, yaw: float, max_heading_error: float = math.pi / 3) -> tuple[int, int, float]:
+    def localize(
+        self, x: float, y: float, yaw: float, max_heading_error: float = math.pi / 3
+    ) -> tuple[int, int, float]:
         """The lane waypoint nearest to (x, y) among those heading within ``max_heading_error`` of ``yaw``.
 
         Returns ``(lane id, waypoint index, distance in metres)``.
@@ -176,11 +222,13 @@ class Town:
 
     def __repr__(self) -> str:
         w, h = self.size
-        return (f"Town({self.name!r}: {w:.0f} x {h:.0f} m, {self.n_junctions} junctions, "
-                f"{self.n_lights} lights, {len(self.lanes)} lanes)")
+        return (
+            f"Town({self.name!r}: {w:.0f} x {h:.0f} m, {self.n_junctions} junctions, "
+            f"{self.n_lights} lights, {len(self.lanes)} lanes)"
+        )
 
 
-@lru_cache(maxsize=None)
+@cache
 def get_town(name: str = "town01") -> Town:
     """The town called ``name`` ("town01" or "town02"), built once and cached."""
     check_choice("town", name, TOWNS)

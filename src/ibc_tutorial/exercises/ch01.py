@@ -55,25 +55,37 @@ def check_best_constant_mse(fn) -> Feedback:
             c = _as_float(out)
             if c is None:
                 shape = tuple(out.shape) if isinstance(out, torch.Tensor) else type(out).__name__
-                return hint(f"return one number (a float or a 0-d tensor) for the whole set of actions, got {shape}.")
+                return hint(
+                    f"return one number (a float or a 0-d tensor) for the whole set of actions, got {shape}."
+                )
             ref = float(actions.mean())
             if abs(c - ref) < 1e-4:
                 continue
             loss = lambda v: float(((actions - v) ** 2).mean())  # noqa: E731
             if abs(c - float(actions.median())) < 1e-6 or abs(c - float(torch.quantile(actions, 0.5))) < 1e-6:
-                return hint("your constant is a median: it minimises the mean *absolute* error. Which value makes the derivative of the *squared* error zero?")
+                return hint(
+                    "your constant is a median: it minimises the mean *absolute* error. Which value makes the derivative of the *squared* error zero?"
+                )
             if abs(c - float(actions.sum())) < 1e-4:
-                return hint("your value grows with the number of actions: the best constant should not change if every action were repeated twice.")
+                return hint(
+                    "your value grows with the number of actions: the best constant should not change if every action were repeated twice."
+                )
             if abs(c) < 1e-9 and abs(ref) > 1e-3:
-                return hint("your constant does not depend on the actions (it is 0): the loss here is not symmetric around 0.")
+                return hint(
+                    "your constant does not depend on the actions (it is 0): the loss here is not symmetric around 0."
+                )
             if any(abs(c - float(a)) < 1e-6 for a in actions):
                 return hint(
                     f"your constant is one of the actions an expert took, but the loss there ({loss(c):.4f}) is not the smallest: "
                     "try c a little to either side. The optimum need not be an action anyone took."
                 )
             if abs(c - ref) < 2e-2:
-                return hint("close, but not exact (a search over a grid?): set the derivative of the loss with respect to c to zero and solve.")
-            return hint(f"for one of the test sets your constant gives a mean squared error of {loss(c):.4f}; a better constant exists. Differentiate the loss with respect to c.")
+                return hint(
+                    "close, but not exact (a search over a grid?): set the derivative of the loss with respect to c to zero and solve."
+                )
+            return hint(
+                f"for one of the test sets your constant gives a mean squared error of {loss(c):.4f}; a better constant exists. Differentiate the loss with respect to c."
+            )
         return correct("The mean: it lies between the two modes, where no expert steered.")
 
     return run_check(check, "best_constant_mse")
@@ -85,7 +97,20 @@ def _hits_cases():
     tree = torch.tensor([20.0, 0.0])
     # random points around the tree, plus hand-picked ones near the boundary (distance 2.5)
     pts = tree + torch.empty(200, 2).uniform_(-5.0, 5.0, generator=gen)
-    special = torch.tensor([[20.0, 2.4], [20.0, 2.6], [17.6, 0.0], [22.6, 0.0], [20.0 + 1.7, 1.7], [20.0 + 1.8, -1.8], [20.0, 0.0], [10.0, 0.0], [21.55, 0.0], [20.0, -1.05]])
+    special = torch.tensor(
+        [
+            [20.0, 2.4],
+            [20.0, 2.6],
+            [17.6, 0.0],
+            [22.6, 0.0],
+            [20.0 + 1.7, 1.7],
+            [20.0 + 1.8, -1.8],
+            [20.0, 0.0],
+            [10.0, 0.0],
+            [21.55, 0.0],
+            [20.0, -1.05],
+        ]
+    )
     # exactly 2.5 m from the tree (exact in float32): the discs only touch, which is no collision
     touching = tree + torch.tensor([[2.5, 0.0], [0.0, -2.5], [-1.5, 2.0], [2.0, -1.5]])
     return torch.cat([pts, special, touching]), tree, 1.0, 1.5
@@ -100,28 +125,42 @@ def check_hits_tree(fn) -> Feedback:
         if not isinstance(out, torch.Tensor):
             return hint(f"return a torch.Tensor of booleans, one per car position, got {type(out).__name__}.")
         if out.shape != (len(xy),):
-            return hint(f"return one answer per car position: shape ({len(xy)},) for {len(xy)} positions, got {tuple(out.shape)}.")
+            return hint(
+                f"return one answer per car position: shape ({len(xy)},) for {len(xy)} positions, got {tuple(out.shape)}."
+            )
         got = out.bool() if out.dtype == torch.bool else out != 0
         dist = (xy - tree).norm(dim=1)
         ref = dist < rc + rt
         if torch.equal(got, ref):
             return correct("Two discs overlap when their centres are closer than the sum of their radii.")
         if torch.equal(got, dist <= rc + rt) or torch.equal(got, ((xy - tree) ** 2).sum(1) <= (rc + rt) ** 2):
-            return hint("right everywhere except where the two discs only touch (centres exactly r_car + r_tree apart): touching is not overlapping, so that comparison must be strict.")
+            return hint(
+                "right everywhere except where the two discs only touch (centres exactly r_car + r_tree apart): touching is not overlapping, so that comparison must be strict."
+            )
         if torch.equal(got, dist < rt) or torch.equal(got, dist <= rt):
-            return hint("a car whose centre stays outside the tree's disc can still touch it: the car has a size too.")
+            return hint(
+                "a car whose centre stays outside the tree's disc can still touch it: the car has a size too."
+            )
         if torch.equal(got, dist < rc) or torch.equal(got, dist <= rc):
             return hint("the tree has a size too, not only the car.")
         if torch.equal(got, dist < 2 * (rc + rt)) or torch.equal(got, dist < 2 * rt + 2 * rc):
-            return hint("you flag collisions too far from the tree: are you using diameters where radii belong?")
+            return hint(
+                "you flag collisions too far from the tree: are you using diameters where radii belong?"
+            )
         if torch.equal(got, dist**2 < rc + rt) or torch.equal(got, dist < (rc + rt) ** 2):
-            return hint("compare like with like: a squared distance with a squared length, or a distance with a length.")
-        if torch.equal(got, (xy[:, 0] - tree[0]).abs() < rc + rt) or torch.equal(got, (xy[:, 1] - tree[1]).abs() < rc + rt):
+            return hint(
+                "compare like with like: a squared distance with a squared length, or a distance with a length."
+            )
+        if torch.equal(got, (xy[:, 0] - tree[0]).abs() < rc + rt) or torch.equal(
+            got, (xy[:, 1] - tree[1]).abs() < rc + rt
+        ):
             return hint("the distance between the centres depends on both coordinates, x and y.")
         if torch.equal(got, ~ref):
             return hint("your answer is the opposite: True should mean the discs overlap.")
         wrong = int((got != ref).sum())
-        return hint(f"{wrong} of {len(xy)} positions get the wrong answer; for instance a car at {xy[(got != ref).nonzero()[0, 0]].tolist()} (tree at {tree.tolist()}, radii {rc} and {rt}).")
+        return hint(
+            f"{wrong} of {len(xy)} positions get the wrong answer; for instance a car at {xy[(got != ref).nonzero()[0, 0]].tolist()} (tree at {tree.tolist()}, radii {rc} and {rt})."
+        )
 
     return run_check(check, "hits_tree")
 
@@ -133,7 +172,9 @@ def _swerve_cases() -> torch.Tensor:
     start = torch.empty(6, 1).uniform_(-0.3, 0.3, generator=gen)
     bump = torch.tensor([[0.8], [0.0], [-0.5], [0.3], [1.2], [0.05]]) * torch.sin(torch.pi * t)[None, :]
     drift = torch.tensor([[0.0], [0.2], [0.0], [-0.4], [0.0], [0.0]]) * t[None, :]
-    return -(start + bump + drift + 0.01 * torch.randn(6, 30, generator=gen))  # (E=6, T=30): most bumps to the right (-y)
+    return -(
+        start + bump + drift + 0.01 * torch.randn(6, 30, generator=gen)
+    )  # (E=6, T=30): most bumps to the right (-y)
 
 
 def check_swerve(fn) -> Feedback:
@@ -147,23 +188,37 @@ def check_swerve(fn) -> Feedback:
         ref = y[:, 0] - y.min(dim=1).values  # >= 0: t = 0 is one of the t
         if out.shape != ref.shape:
             if out.shape == (y.shape[1],):
-                return hint(f"return one number per episode (rows, {y.shape[0]} of them), not one per time step: which dimension do you reduce over?")
+                return hint(
+                    f"return one number per episode (rows, {y.shape[0]} of them), not one per time step: which dimension do you reduce over?"
+                )
             return hint(f"return one number per episode: shape ({y.shape[0]},), got {tuple(out.shape)}.")
         out = out.detach().to(ref.dtype)
         if torch.allclose(out, ref, atol=1e-5):
             return correct("The largest move towards the side road, measured from where the car was.")
         low = y.min(dim=1).values
         if torch.allclose(out, (-low).clamp_min(0.0), atol=1e-5) or torch.allclose(out, -low, atol=1e-5):
-            return hint("measure from where each car was at the start (its first offset), not from the centre line: a car driving a little off-centre all along has not swerved.")
+            return hint(
+                "measure from where each car was at the start (its first offset), not from the centre line: a car driving a little off-centre all along has not swerved."
+            )
         if torch.allclose(out, y.max(dim=1).values - y[:, 0], atol=1e-5):
-            return hint("that is the largest move to the left (y increasing); the side road branches off to the right, where y decreases.")
+            return hint(
+                "that is the largest move to the left (y increasing); the side road branches off to the right, where y decreases."
+            )
         if torch.allclose(out, (y - y[:, :1]).abs().max(dim=1).values, atol=1e-5):
-            return hint("only moves towards the side road (to the right, y decreasing) count as a swerve towards it.")
+            return hint(
+                "only moves towards the side road (to the right, y decreasing) count as a swerve towards it."
+            )
         if torch.allclose(out, (y[:, 0] - y[:, -1]).clamp_min(0.0), atol=1e-5):
-            return hint("the swerve is the *largest* deviation during the episode, not where the car ends up.")
+            return hint(
+                "the swerve is the *largest* deviation during the episode, not where the car ends up."
+            )
         if torch.allclose(out, low - y[:, 0], atol=1e-5):
-            return hint("check the sign: a swerve is a distance moved, at least 0, so subtract the smallest y from the first one.")
-        return hint("for some episodes your value differs from the largest move towards the side road (y decreasing) since the first time step.")
+            return hint(
+                "check the sign: a swerve is a distance moved, at least 0, so subtract the smallest y from the first one."
+            )
+        return hint(
+            "for some episodes your value differs from the largest move towards the side road (y decreasing) since the first time step."
+        )
 
     return run_check(check, "swerve")
 
@@ -200,17 +255,27 @@ def check_predict_mae_side(fn) -> Feedback:
             if answer == truth:
                 continue
             if truth == "anywhere in the gap":
-                return hint(f"with {n_right} actions on each side, count the samples above and below a constant in the gap: "
-                            "does moving it within the gap change the mean absolute error?")
+                return hint(
+                    f"with {n_right} actions on each side, count the samples above and below a constant in the gap: "
+                    "does moving it within the gap change the mean absolute error?"
+                )
             if answer == "anywhere in the gap":
                 if abs(n_right - n_left) <= 2:
-                    return hint(f"for {n_right} right and {n_left} left: even one sample more on one side breaks the tie. "
-                                "The MAE's slope is (#below - #above)/N; where is it zero?")
-                return hint("you answer like the mean (the MSE's optimum) or as if the counts did not matter. "
-                            f"For {n_right} right and {n_left} left, which value has half the samples on each side?")
-            return hint(f"for {n_right} right and {n_left} left you picked the smaller mode: the median lies in the mode "
-                        "that holds more than half of the samples.")
-        return correct("A median: in the bigger mode when the counts differ, anywhere in the gap when they are equal. "
-                       "So an MAE policy follows the majority at the side road (straight on), but at the tree's near tie it is arbitrary.")
+                    return hint(
+                        f"for {n_right} right and {n_left} left: even one sample more on one side breaks the tie. "
+                        "The MAE's slope is (#below - #above)/N; where is it zero?"
+                    )
+                return hint(
+                    "you answer like the mean (the MSE's optimum) or as if the counts did not matter. "
+                    f"For {n_right} right and {n_left} left, which value has half the samples on each side?"
+                )
+            return hint(
+                f"for {n_right} right and {n_left} left you picked the smaller mode: the median lies in the mode "
+                "that holds more than half of the samples."
+            )
+        return correct(
+            "A median: in the bigger mode when the counts differ, anywhere in the gap when they are equal. "
+            "So an MAE policy follows the majority at the side road (straight on), but at the tree's near tie it is arbitrary."
+        )
 
     return run_check(check, "`predict_mae_side`")

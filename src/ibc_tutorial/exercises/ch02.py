@@ -23,7 +23,9 @@ from ibc_tutorial.exercises.core import Feedback, correct, hint, run_check
 
 
 def _close(a: torch.Tensor, b: torch.Tensor, rtol: float = 1e-3, atol: float = 1e-3) -> bool:
-    return bool(torch.isfinite(a).all()) and bool(torch.allclose(a.double(), b.double(), rtol=rtol, atol=atol))
+    return bool(torch.isfinite(a).all()) and bool(
+        torch.allclose(a.double(), b.double(), rtol=rtol, atol=atol)
+    )
 
 
 def _scalar(out, name: str) -> torch.Tensor | Feedback:
@@ -42,7 +44,9 @@ def _beta_inputs(seed: int, b: int = 32, d: int = 2):
     gen = torch.Generator().manual_seed(seed)
     alpha = torch.exp(torch.empty(b, d).uniform_(-1.5, 2.0, generator=gen))
     beta = torch.exp(torch.empty(b, d).uniform_(-1.5, 2.0, generator=gen))
-    actions = torch.empty(b, d).uniform_(-0.98, 0.98, generator=gen)  # y' in [0.01, 0.99]: any clamp up to 0.01 is fine
+    actions = torch.empty(b, d).uniform_(
+        -0.98, 0.98, generator=gen
+    )  # y' in [0.01, 0.99]: any clamp up to 0.01 is fine
     return alpha, beta, actions
 
 
@@ -66,33 +70,83 @@ def check_beta_nll(fn) -> Feedback:
         if not torch.isfinite(out):
             pos = actions.abs()  # (B, D) in [0, 0.98]: a loss that forgot to rescale is finite here
             out_pos = fn(alpha.clone(), beta.clone(), pos)
-            unscaled = -torch.distributions.Beta(alpha.double(), beta.double()).log_prob(pos.double().clamp_min(1e-6)).sum(1).mean()
+            unscaled = (
+                -torch.distributions.Beta(alpha.double(), beta.double())
+                .log_prob(pos.double().clamp_min(1e-6))
+                .sum(1)
+                .mean()
+            )
             if isinstance(out_pos, torch.Tensor) and out_pos.ndim == 0 and _close(out_pos, unscaled):
                 return hint(
                     "your loss is NaN or infinite for actions inside (-1, 1): the Beta density lives on [0, 1], "
                     "and eq. 1 maps each action to y' = (y + 1)/2 before scoring it."
                 )
-            return hint("your loss is NaN or infinite for actions inside (-1, 1): check every log, and that the actions are mapped into [0, 1].")
+            return hint(
+                "your loss is NaN or infinite for actions inside (-1, 1): check every log, and that the actions are mapped into [0, 1]."
+            )
         if not _close(out, ref):
             mistakes = [
-                (log_f.sum(1).mean(), "the sign: eq. 1 is the *negative* log-likelihood, which training minimises."),
-                (-log_f.mean(), "the reduction over action dimensions: eq. 1 *sums* log f over the action dimensions (acceleration + steering) and averages over the samples."),
-                (-log_f.sum(), "the reduction over the batch: eq. 1 *averages* over the N samples (the 1/N in front)."),
-                (ref + d * math.log(2.0), "the rescaling: eq. 1 scores the density of the rescaled action y' itself, with no change-of-variables term."),
-                (ref - d * math.log(2.0), "the rescaling: eq. 1 scores the density of the rescaled action y' itself, with no change-of-variables term."),
+                (
+                    log_f.sum(1).mean(),
+                    "the sign: eq. 1 is the *negative* log-likelihood, which training minimises.",
+                ),
+                (
+                    -log_f.mean(),
+                    "the reduction over action dimensions: eq. 1 *sums* log f over the action dimensions (acceleration + steering) and averages over the samples.",
+                ),
+                (
+                    -log_f.sum(),
+                    "the reduction over the batch: eq. 1 *averages* over the N samples (the 1/N in front).",
+                ),
+                (
+                    ref + d * math.log(2.0),
+                    "the rescaling: eq. 1 scores the density of the rescaled action y' itself, with no change-of-variables term.",
+                ),
+                (
+                    ref - d * math.log(2.0),
+                    "the rescaling: eq. 1 scores the density of the rescaled action y' itself, with no change-of-variables term.",
+                ),
             ]
-            log_b = torch.lgamma(alpha.double()) + torch.lgamma(beta.double()) - torch.lgamma(alpha.double() + beta.double())
-            mistakes.append((-(log_f + log_b).sum(1).mean(), "the normalising constant B(α, β): without it f is not a density."))
-            mistakes.append((-(log_f - log_b).sum(1).mean(), "the normalising constant B(α, β): f divides by it, so log f subtracts log B."))
+            log_b = (
+                torch.lgamma(alpha.double())
+                + torch.lgamma(beta.double())
+                - torch.lgamma(alpha.double() + beta.double())
+            )
+            mistakes.append(
+                (
+                    -(log_f + log_b).sum(1).mean(),
+                    "the normalising constant B(α, β): without it f is not a density.",
+                )
+            )
+            mistakes.append(
+                (
+                    -(log_f - log_b).sum(1).mean(),
+                    "the normalising constant B(α, β): f divides by it, so log f subtracts log B.",
+                )
+            )
             y = actions.double().clamp(1e-6, 1 - 1e-6)
             wrong_y = torch.distributions.Beta(alpha.double(), beta.double()).log_prob(y)
-            mistakes.append((-wrong_y.sum(1).mean(), "the rescaling: actions live in [-1, 1]; eq. 1 maps them to y' = (y + 1)/2 before scoring them."))
-            swapped = torch.distributions.Beta(beta.double(), alpha.double()).log_prob((actions.double() + 1) / 2)
-            mistakes.append((-swapped.sum(1).mean(), "which exponent goes with α and which with β: α belongs to y', β to (1 - y')."))
+            mistakes.append(
+                (
+                    -wrong_y.sum(1).mean(),
+                    "the rescaling: actions live in [-1, 1]; eq. 1 maps them to y' = (y + 1)/2 before scoring them.",
+                )
+            )
+            swapped = torch.distributions.Beta(beta.double(), alpha.double()).log_prob(
+                (actions.double() + 1) / 2
+            )
+            mistakes.append(
+                (
+                    -swapped.sum(1).mean(),
+                    "which exponent goes with α and which with β: α belongs to y', β to (1 - y').",
+                )
+            )
             for value, what in mistakes:
                 if _close(out, value):
                     return hint(f"close, but check {what}")
-            return hint(f"your loss is {float(out):.4g} on a random test batch where eq. 1 gives {float(ref):.4g}; compare your formula with the Beta density term by term.")
+            return hint(
+                f"your loss is {float(out):.4g} on a random test batch where eq. 1 gives {float(ref):.4g}; compare your formula with the Beta density term by term."
+            )
         # other batch sizes and dimensions, and one dimension at a time
         for seed, (b2, d2) in [(1, (7, 1)), (2, (5, 3))]:
             a2, b2_, y2 = _beta_inputs(seed, b2, d2)
@@ -100,7 +154,9 @@ def check_beta_nll(fn) -> Feedback:
             if isinstance(out2, Feedback):
                 return out2
             if not _close(out2, -_beta_log_f(a2, b2_, y2).sum(1).mean()):
-                return hint(f"correct on a (32, 2) batch but not on a ({len(y2)}, {y2.shape[1]}) one: avoid hard-coding the batch size or the number of action dimensions.")
+                return hint(
+                    f"correct on a (32, 2) batch but not on a ({len(y2)}, {y2.shape[1]}) one: avoid hard-coding the batch size or the number of action dimensions."
+                )
         # the bounds: full lock and full brake
         alpha, beta, _ = _beta_inputs(3, 8, 2)
         alpha.requires_grad_(True)
@@ -115,10 +171,14 @@ def check_beta_nll(fn) -> Feedback:
                 "expert data holds them). Keep y' a little inside (0, 1) before taking logs."
             )
         if not out.requires_grad:
-            return hint("your loss does not depend on alpha and beta through autograd (did you use .item(), numpy or detach?): training needs its gradients.")
+            return hint(
+                "your loss does not depend on alpha and beta through autograd (did you use .item(), numpy or detach?): training needs its gradients."
+            )
         out.backward()
         if not (torch.isfinite(alpha.grad).all() and torch.isfinite(beta.grad).all()):
-            return hint("the loss is finite at actions of exactly ±1 but its gradients are not: keep y' a little inside (0, 1) before taking logs.")
+            return hint(
+                "the loss is finite at actions of exactly ±1 but its gradients are not: keep y' a little inside (0, 1) before taking logs."
+            )
         return correct("Your Beta NLL matches eq. 1 and stays finite, with finite gradients, at the bounds.")
 
     return run_check(check, "`beta_nll`")
@@ -152,35 +212,80 @@ def check_mdn_nll(fn) -> Feedback:
         ref = -_mixture(logits, means, stds).log_prob(actions.double()).mean()
         if not _close(out, ref):
             if not torch.isfinite(out):
-                return hint("your loss is NaN or infinite on an ordinary batch: check the logs (of the weights, of the densities).")
+                return hint(
+                    "your loss is NaN or infinite on an ordinary batch: check the logs (of the weights, of the densities)."
+                )
             normal = torch.distributions.Normal(means.double(), stds.double())
             log_comp = normal.log_prob(actions.double()[:, None]).sum(-1)  # (B, K)
             log_w = torch.log_softmax(logits.double(), 1)
             w_raw = logits.double().clamp_min(1e-12)
             mistakes = [
                 (-ref, "the sign: the loss is the *negative* log-likelihood."),
-                (-_mixture(logits, means, stds).log_prob(actions.double()).sum(), "the reduction: average over the batch, not sum."),
-                (-(log_w + log_comp).sum(1).mean(), "how the components combine: the mixture density is a weighted *sum* of the component densities, so take the log after summing (log-sum-exp), not a sum of logs."),
-                (-(log_w.exp() * log_comp).sum(1).mean(), "how the components combine: the mixture density is a weighted *sum* of the component densities; the log of that sum is not the weighted sum of logs."),
-                (-torch.logsumexp(logits.double() + log_comp, 1).mean(), "the mixture weights: the logits are not normalised; a softmax over the K components turns them into weights that sum to 1."),
-                (-torch.logsumexp(torch.log(w_raw) + log_comp, 1).mean(), "the mixture weights: the logits are not probabilities; a softmax over the K components turns them into weights that sum to 1."),
-                (-torch.logsumexp(log_w + normal.log_prob(actions.double()[:, None]).mean(-1), 1).mean(), "the action dimensions: a diagonal Gaussian's log-density *sums* the per-dimension log-densities."),
-                (-torch.logsumexp(log_w + (normal.log_prob(actions.double()[:, None]) + torch.log(stds.double())).sum(-1), 1).mean(), "the Gaussian's normalisation: its log-density has a -log σ term."),
-                (-torch.logsumexp(log_w + (normal.log_prob(actions.double()[:, None]) - torch.log(stds.double())).sum(-1), 1).mean(), "the Gaussian's normalisation: its log-density has -log σ, not -2 log σ (σ is a standard deviation, not a variance)."),
+                (
+                    -_mixture(logits, means, stds).log_prob(actions.double()).sum(),
+                    "the reduction: average over the batch, not sum.",
+                ),
+                (
+                    -(log_w + log_comp).sum(1).mean(),
+                    "how the components combine: the mixture density is a weighted *sum* of the component densities, so take the log after summing (log-sum-exp), not a sum of logs.",
+                ),
+                (
+                    -(log_w.exp() * log_comp).sum(1).mean(),
+                    "how the components combine: the mixture density is a weighted *sum* of the component densities; the log of that sum is not the weighted sum of logs.",
+                ),
+                (
+                    -torch.logsumexp(logits.double() + log_comp, 1).mean(),
+                    "the mixture weights: the logits are not normalised; a softmax over the K components turns them into weights that sum to 1.",
+                ),
+                (
+                    -torch.logsumexp(torch.log(w_raw) + log_comp, 1).mean(),
+                    "the mixture weights: the logits are not probabilities; a softmax over the K components turns them into weights that sum to 1.",
+                ),
+                (
+                    -torch.logsumexp(log_w + normal.log_prob(actions.double()[:, None]).mean(-1), 1).mean(),
+                    "the action dimensions: a diagonal Gaussian's log-density *sums* the per-dimension log-densities.",
+                ),
+                (
+                    -torch.logsumexp(
+                        log_w
+                        + (normal.log_prob(actions.double()[:, None]) + torch.log(stds.double())).sum(-1),
+                        1,
+                    ).mean(),
+                    "the Gaussian's normalisation: its log-density has a -log σ term.",
+                ),
+                (
+                    -torch.logsumexp(
+                        log_w
+                        + (normal.log_prob(actions.double()[:, None]) - torch.log(stds.double())).sum(-1),
+                        1,
+                    ).mean(),
+                    "the Gaussian's normalisation: its log-density has -log σ, not -2 log σ (σ is a standard deviation, not a variance).",
+                ),
             ]
             var_normal = torch.distributions.Normal(means.double(), stds.double().sqrt())
-            mistakes.append((-torch.logsumexp(log_w + var_normal.log_prob(actions.double()[:, None]).sum(-1), 1).mean(), "the Gaussian: stds are standard deviations, not variances."))
+            mistakes.append(
+                (
+                    -torch.logsumexp(
+                        log_w + var_normal.log_prob(actions.double()[:, None]).sum(-1), 1
+                    ).mean(),
+                    "the Gaussian: stds are standard deviations, not variances.",
+                )
+            )
             for value, what in mistakes:
                 if _close(out, value):
                     return hint(f"close, but check {what}")
-            return hint(f"your loss is {float(out):.4g} on a random test batch where the mixture gives {float(ref):.4g}; compare your formula with log Σ_k π_k N(y; μ_k, σ_k²) term by term.")
+            return hint(
+                f"your loss is {float(out):.4g} on a random test batch where the mixture gives {float(ref):.4g}; compare your formula with log Σ_k π_k N(y; μ_k, σ_k²) term by term."
+            )
         for seed, (b, k, d) in [(1, (6, 1, 1)), (2, (9, 5, 3))]:
             args = _mdn_inputs(seed, b, k, d)
             out2 = _scalar(fn(*args), "mdn_nll")
             if isinstance(out2, Feedback):
                 return out2
             if not _close(out2, -_mixture(*args[:3]).log_prob(args[3].double()).mean()):
-                return hint(f"correct for K = 3 components and D = 2 action dimensions but not for K = {k}, D = {d}: avoid hard-coding the sizes.")
+                return hint(
+                    f"correct for K = 3 components and D = 2 action dimensions but not for K = {k}, D = {d}: avoid hard-coding the sizes."
+                )
         # far from every component: a naive exp underflows to 0 and log(0) = -inf
         logits, means, stds, actions = _mdn_inputs(3, 8, 3, 1)
         far_means = means - 40.0
@@ -193,7 +298,9 @@ def check_mdn_nll(fn) -> Feedback:
                 "right on ordinary inputs, but not when the action is far from every component (at the start of "
                 "training it often is): the densities underflow to 0. Stay in log space (torch.logsumexp)."
             )
-        return correct("Your MDN loss matches torch.distributions.MixtureSameFamily, also far from every component.")
+        return correct(
+            "Your MDN loss matches torch.distributions.MixtureSameFamily, also far from every component."
+        )
 
     return run_check(check, "`mdn_nll`")
 
@@ -235,14 +342,18 @@ def check_beta_can_represent(fn) -> Feedback:
             if answer == truth:
                 continue
             if shape == "two peaks inside":
-                return hint("look at the second derivative of log f in the chapter: can log f be concave near one point and "
-                            "have a dip in between two peaks, with alpha and beta fixed?")
+                return hint(
+                    "look at the second derivative of log f in the chapter: can log f be concave near one point and "
+                    "have a dip in between two peaks, with alpha and beta fixed?"
+                )
             if shape == "peaks at both ends":
                 return hint("try alpha and beta both below 1: what does the density do near z = 0 and z = 1?")
             if shape == "flat":
                 return hint("evaluate the density for alpha = beta = 1.")
             return hint("try alpha = beta = 2: where is the density highest?")
-        return correct("A Beta has at most one peak inside the interval; its 'two modes' can only be the two walls of a U, "
-                       "at full lock. That is why the chapter's Beta policy is flat or U-shaped at the tree.")
+        return correct(
+            "A Beta has at most one peak inside the interval; its 'two modes' can only be the two walls of a U, "
+            "at full lock. That is why the chapter's Beta policy is flat or U-shaped at the tree."
+        )
 
     return run_check(check, "`beta_can_represent`")

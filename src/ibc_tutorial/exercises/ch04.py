@@ -30,9 +30,13 @@ def _gen(seed: int) -> torch.Generator:
 
 def _shape_feedback(out, want: tuple) -> Feedback | None:
     if not isinstance(out, torch.Tensor):
-        return hint(f"expert_negatives must return a torch.Tensor of shape (batch_size, n_neg, D), got {type(out).__name__}.")
+        return hint(
+            f"expert_negatives must return a torch.Tensor of shape (batch_size, n_neg, D), got {type(out).__name__}."
+        )
     if tuple(out.shape) != want:
-        return hint(f"expert_negatives must return shape (batch_size, n_neg, D) = {want}, got {tuple(out.shape)}.")
+        return hint(
+            f"expert_negatives must return shape (batch_size, n_neg, D) = {want}, got {tuple(out.shape)}."
+        )
     if not torch.isfinite(out).all():
         return hint("expert_negatives returned NaN or infinite values.")
     return None
@@ -50,7 +54,9 @@ def check_expert_negatives(fn) -> Feedback:
         try:
             many = fn(_EXPERT[:3].clone(), 2, 50, 0.0, _gen(2))
         except Exception as exc:  # e.g. randperm / sampling without replacement
-            return hint(f"drawing 50 counter-examples from 3 expert actions failed ({type(exc).__name__}): the paper samples *with replacement*.")
+            return hint(
+                f"drawing 50 counter-examples from 3 expert actions failed ({type(exc).__name__}): the paper samples *with replacement*."
+            )
         bad = _shape_feedback(many, (2, 50, 2))
         if bad:
             return bad
@@ -61,7 +67,9 @@ def check_expert_negatives(fn) -> Feedback:
             return bad
         match = (copies.reshape(-1, 1, 2) == _EXPERT[None]).all(-1).any(-1)  # (B*N,)
         if not match.all():
-            return hint("with sigma = 0 every counter-example should be exactly one of the expert actions you were given: draw rows of `expert_actions` (then add the noise).")
+            return hint(
+                "with sigma = 0 every counter-example should be exactly one of the expert actions you were given: draw rows of `expert_actions` (then add the noise)."
+            )
         # uniform over the set, independently per sample
         pool = torch.linspace(-1, 1, 4)[:, None]  # (4, 1)
         draws = fn(pool.clone(), 200, 100, 0.0, _gen(3))
@@ -69,10 +77,14 @@ def check_expert_negatives(fn) -> Feedback:
         if bad:
             return bad
         if all(torch.equal(draws[0], draws[i]) for i in range(1, 5)):
-            return hint("every sample of the batch gets the same counter-examples: draw a fresh set for each sample.")
+            return hint(
+                "every sample of the batch gets the same counter-examples: draw a fresh set for each sample."
+            )
         freq = torch.stack([(draws == v).float().mean() for v in pool[:, 0]])
         if (freq - 0.25).abs().max() > 0.03:
-            return hint("some expert actions are drawn far more often than others: draw each one with equal probability (uniformly over the M rows).")
+            return hint(
+                "some expert actions are drawn far more often than others: draw each one with equal probability (uniformly over the M rows)."
+            )
         # the noise: mean and variance = expert set's + sigma^2
         sigma = 0.1
         big = fn(_EXPERT.clone(), 400, 250, sigma, _gen(4)).reshape(-1, 2).double()
@@ -80,16 +92,26 @@ def check_expert_negatives(fn) -> Feedback:
         var0 = _EXPERT.double().var(0, unbiased=False)
         var = big.var(0)
         if ((big.mean(0) - mu).abs() > 0.01).any():
-            return hint("the counter-examples are not centred on the expert actions: the noise should have mean 0.")
+            return hint(
+                "the counter-examples are not centred on the expert actions: the noise should have mean 0."
+            )
         if ((var - (var0 + sigma**2)).abs() / (var0 + sigma**2) > 0.05).any():
             if (big.reshape(-1, 1, 2) == _EXPERT.double()[None]).all(-1).any(-1).all():
                 return hint("no noise was added: each counter-example is an expert action plus N(0, σ²I).")
-            if ((var - (var0 + sigma**4)).abs() / (var0 + sigma**4) < 0.05).all() or ((var - (var0 + sigma)).abs() / (var0 + sigma) < 0.05).all():
-                return hint("the noise has the wrong scale: σ is the standard deviation of N(0, σ²I), so multiply standard-normal draws by σ.")
-            return hint(f"the counter-examples' variance per dimension is {var.tolist()} but should be the expert set's plus σ² = {(var0 + sigma**2).tolist()}.")
+            if ((var - (var0 + sigma**4)).abs() / (var0 + sigma**4) < 0.05).all() or (
+                (var - (var0 + sigma)).abs() / (var0 + sigma) < 0.05
+            ).all():
+                return hint(
+                    "the noise has the wrong scale: σ is the standard deviation of N(0, σ²I), so multiply standard-normal draws by σ."
+                )
+            return hint(
+                f"the counter-examples' variance per dimension is {var.tolist()} but should be the expert set's plus σ² = {(var0 + sigma**2).tolist()}."
+            )
         # the noise's shape: Gaussian and independent per coordinate (one action, many draws)
         one = torch.tensor([[0.2, -0.3]])
-        noise = (fn(one.clone(), 500, 200, sigma, _gen(5)).reshape(-1, 2).double() - one.double()) / sigma  # (100000, 2) in units of σ
+        noise = (
+            fn(one.clone(), 500, 200, sigma, _gen(5)).reshape(-1, 2).double() - one.double()
+        ) / sigma  # (100000, 2) in units of σ
         within1 = float((noise.abs() <= 1).double().mean())  # N(0, 1): 0.683
         within2 = float((noise.abs() <= 2).double().mean())  # N(0, 1): 0.954
         kurtosis = float((noise**4).mean() / (noise**2).mean() ** 2)  # N(0, 1): 3
@@ -99,7 +121,9 @@ def check_expert_negatives(fn) -> Feedback:
                 f"where N(0, σ²) puts 68 % (its kurtosis is {kurtosis:.2f}, a Gaussian's 3). Draw it with torch.randn, times σ."
             )
         if abs(float(torch.corrcoef(noise.T)[0, 1])) > 0.02:
-            return hint("the noise of the two coordinates is correlated: N(0, σ²I) draws every coordinate independently.")
+            return hint(
+                "the noise of the two coordinates is correlated: N(0, σ²I) draws every coordinate independently."
+            )
         # no clipping: near the edge of the box, some counter-examples must fall outside it
         edge = torch.tensor([[0.95, -0.95], [1.0, -1.0]])
         near = fn(edge.clone(), 100, 50, 0.3, _gen(6)).double()  # (100, 50, 2)
@@ -112,8 +136,12 @@ def check_expert_negatives(fn) -> Feedback:
         a = fn(_EXPERT.clone(), 3, 5, 0.2, _gen(7))
         b = fn(_EXPERT.clone(), 3, 5, 0.2, _gen(7))
         if not torch.equal(a, b):
-            return hint("two calls with equally seeded generators gave different counter-examples: pass `generator=generator` to every random draw.")
-        return correct("Your sampler draws expert actions with replacement, per sample, and adds N(0, σ²I): DA-IBC's counter-examples.")
+            return hint(
+                "two calls with equally seeded generators gave different counter-examples: pass `generator=generator` to every random draw."
+            )
+        return correct(
+            "Your sampler draws expert actions with replacement, per sample, and adds N(0, σ²I): DA-IBC's counter-examples."
+        )
 
     return run_check(check, "`expert_negatives`")
 
@@ -128,32 +156,59 @@ def check_grid_nll(fn) -> Feedback:
 
     def check() -> Feedback:
         g = _gen(0)
-        pos, grid_e, cell = 3 * torch.randn(6, generator=g), 3 * torch.randn(6, 121, generator=g), (2 / 10) ** 2
+        pos, grid_e, cell = (
+            3 * torch.randn(6, generator=g),
+            3 * torch.randn(6, 121, generator=g),
+            (2 / 10) ** 2,
+        )
         out = fn(pos.clone(), grid_e.clone(), cell)
         if not isinstance(out, torch.Tensor):
             return hint(f"grid_nll must return a torch.Tensor of shape (B,), got {type(out).__name__}.")
         if out.ndim == 0:
-            return hint("grid_nll must return one NLL per sample, shape (B,): leave the averaging to the caller.")
+            return hint(
+                "grid_nll must return one NLL per sample, shape (B,): leave the averaging to the caller."
+            )
         if tuple(out.shape) != (6,):
             return hint(f"grid_nll must return shape (B,) = (6,), got {tuple(out.shape)}.")
         ref = _nll_ref(pos, grid_e, cell)
         if not _close(out, ref):
             lse = torch.logsumexp(-grid_e.double(), 1)
             mistakes = [
-                (pos.double() + lse, "the cell area: Z(x) is an integral over the box, so each grid point stands for its cell's area ΔA."),
-                (pos.double() + lse - math.log(cell), "the cell area's sign: Z(x) ≈ Σ e^(−E) · ΔA, so log Z gains + log ΔA."),
-                (pos.double() + lse - math.log(121) + math.log(cell), "Z(x): it *sums* e^(−E) over the grid points (times ΔA), it does not average them."),
-                (-pos.double() + torch.logsumexp(grid_e.double(), 1) + math.log(cell), "the sign of the energies: p(y|x) = e^(−E(x, y)) / Z(x)."),
-                (-(pos.double() + lse + math.log(cell)), "the overall sign: this is the *negative* log-likelihood."),
+                (
+                    pos.double() + lse,
+                    "the cell area: Z(x) is an integral over the box, so each grid point stands for its cell's area ΔA.",
+                ),
+                (
+                    pos.double() + lse - math.log(cell),
+                    "the cell area's sign: Z(x) ≈ Σ e^(−E) · ΔA, so log Z gains + log ΔA.",
+                ),
+                (
+                    pos.double() + lse - math.log(121) + math.log(cell),
+                    "Z(x): it *sums* e^(−E) over the grid points (times ΔA), it does not average them.",
+                ),
+                (
+                    -pos.double() + torch.logsumexp(grid_e.double(), 1) + math.log(cell),
+                    "the sign of the energies: p(y|x) = e^(−E(x, y)) / Z(x).",
+                ),
+                (
+                    -(pos.double() + lse + math.log(cell)),
+                    "the overall sign: this is the *negative* log-likelihood.",
+                ),
             ]
             for value, what in mistakes:
                 if _close(out, value):
                     return hint(f"close, but check {what}")
-            return hint(f"your NLL of the first sample is {float(out[0]):.4g} where −log p = E + log Σ e^(−E_g) + log ΔA gives {float(ref[0]):.4g}.")
+            return hint(
+                f"your NLL of the first sample is {float(out[0]):.4g} where −log p = E + log Σ e^(−E_g) + log ΔA gives {float(ref[0]):.4g}."
+            )
         out2 = fn(pos + 1000, grid_e + 1000, cell)
         if not isinstance(out2, torch.Tensor) or not _close(out2, ref, rtol=1e-3, atol=1e-2):
-            return hint("your NLL breaks down when the energies are around 1000 (e^(−1000) underflows): use torch.logsumexp.")
-        return correct("Your grid NLL is the model's normalised density at the expert's action, Z computed on the grid.")
+            return hint(
+                "your NLL breaks down when the energies are around 1000 (e^(−1000) underflows): use torch.logsumexp."
+            )
+        return correct(
+            "Your grid NLL is the model's normalised density at the expert's action, Z computed on the grid."
+        )
 
     return run_check(check, "`grid_nll`")
 
@@ -161,7 +216,11 @@ def check_grid_nll(fn) -> Feedback:
 def _close(a, b, rtol: float = 1e-4, atol: float = 1e-4) -> bool:
     a = torch.as_tensor(a, dtype=torch.float64)
     b = torch.as_tensor(b, dtype=torch.float64)
-    return a.shape == b.shape and bool(torch.isfinite(a).all()) and bool(torch.allclose(a, b, rtol=rtol, atol=atol))
+    return (
+        a.shape == b.shape
+        and bool(torch.isfinite(a).all())
+        and bool(torch.allclose(a, b, rtol=rtol, atol=atol))
+    )
 
 
 # --------------------------------------------------------------------------- the tilt of a DA-IBC landscape
@@ -194,23 +253,37 @@ def check_predicted_shares(fn) -> Feedback:
         modes = torch.tensor([[-0.7, 0.1], [0.0, 0.35], [0.7, 0.1]], dtype=torch.float64)
         out = fn(modes.clone(), actions.clone(), 0.1)
         if not isinstance(out, torch.Tensor) or tuple(out.shape) != (3,):
-            return hint(f"predicted_shares must return a torch.Tensor of shape (K,) = (3,), one share per valid action, got {getattr(out, 'shape', type(out).__name__)}.")
+            return hint(
+                f"predicted_shares must return a torch.Tensor of shape (K,) = (3,), one share per valid action, got {getattr(out, 'shape', type(out).__name__)}."
+            )
         out = out.detach().double()
         if not torch.isfinite(out).all():
             return hint("predicted_shares returned NaN or infinite values.")
         ref = _normalise(1 / _q(modes, actions, 0.1))
         if not _close(out, ref, rtol=1e-3, atol=1e-4):
             if _close(out, torch.full((3,), 1 / 3, dtype=torch.float64)):
-                return hint("one third each is what the expert does, p(y|x). But the model does not learn p(y|x): with counter-examples drawn from q, InfoNCE is best served by e^(−E) ∝ p(y|x) / q(y).")
+                return hint(
+                    "one third each is what the expert does, p(y|x). But the model does not learn p(y|x): with counter-examples drawn from q, InfoNCE is best served by e^(−E) ∝ p(y|x) / q(y)."
+                )
             if _close(out, _normalise(_q(modes, actions, 0.1)), rtol=1e-3, atol=1e-4):
-                return hint("your shares grow with q: the wrong way round. A counter-example pushes the energy *up* where it lands, so where counter-examples are common the model puts *less* mass.")
+                return hint(
+                    "your shares grow with q: the wrong way round. A counter-example pushes the energy *up* where it lands, so where counter-examples are common the model puts *less* mass."
+                )
             if _close(out, _normalise(1 / _q(modes, actions, 0.2)), rtol=1e-3, atol=1e-4):
-                return hint("q is the density of the counter-examples: expert actions plus N(0, σ²I), a KDE with bandwidth σ, not chapter 05's 0.2.")
+                return hint(
+                    "q is the density of the counter-examples: expert actions plus N(0, σ²I), a KDE with bandwidth σ, not chapter 05's 0.2."
+                )
             if _close(out / out.sum(), ref, rtol=1e-3, atol=1e-4):
-                return hint("the proportions are right; make the shares sum to 1 (they are shares of the mass near the K actions).")
-            return hint(f"your shares are {[round(v, 3) for v in out.tolist()]}: compute q at each valid action (the expert actions blurred by σ), then share ∝ 1/q.")
+                return hint(
+                    "the proportions are right; make the shares sum to 1 (they are shares of the mass near the K actions)."
+                )
+            return hint(
+                f"your shares are {[round(v, 3) for v in out.tolist()]}: compute q at each valid action (the expert actions blurred by σ), then share ∝ 1/q."
+            )
         out2 = fn(modes.clone(), actions.clone(), 0.3)
-        if not isinstance(out2, torch.Tensor) or not _close(out2.detach().double(), _normalise(1 / _q(modes, actions, 0.3)), rtol=1e-3, atol=1e-4):
+        if not isinstance(out2, torch.Tensor) or not _close(
+            out2.detach().double(), _normalise(1 / _q(modes, actions, 0.3)), rtol=1e-3, atol=1e-4
+        ):
             return hint("right for σ = 0.1 but not for σ = 0.3: use the σ you are given.")
         straight = float(ref[1])
         return correct(

@@ -31,7 +31,16 @@ def _close(a: torch.Tensor, b: torch.Tensor, rtol: float = 1e-4) -> bool:
 
 
 # --------------------------------------------------------------------------- eq. 4 by hand
-def _kde_ref(x: torch.Tensor, data: torch.Tensor, h: float, *, kernel_const=True, divide_h=True, divide_m=True, half=True) -> torch.Tensor:
+def _kde_ref(
+    x: torch.Tensor,
+    data: torch.Tensor,
+    h: float,
+    *,
+    kernel_const=True,
+    divide_h=True,
+    divide_m=True,
+    half=True,
+) -> torch.Tensor:
     """Eq. 4 in float64, with switches that reproduce the usual mistakes."""
     u = (x.double()[:, None] - data.double()[None, :]) / h  # (Q, M)
     k = torch.exp(-(0.5 if half else 1.0) * u**2)
@@ -50,7 +59,9 @@ def check_kde_1d(fn) -> Feedback:
 
     def check() -> Feedback:
         g = torch.Generator().manual_seed(0)
-        data = torch.cat([0.05 * torch.randn(40, generator=g), 0.7 + 0.05 * torch.randn(8, generator=g)])  # (48,)
+        data = torch.cat(
+            [0.05 * torch.randn(40, generator=g), 0.7 + 0.05 * torch.randn(8, generator=g)]
+        )  # (48,)
         x = torch.linspace(-1, 1, 21)
         h = 0.2
         out = _tensor(fn(x.clone(), data.clone(), h), "kde_1d", (21,))
@@ -59,25 +70,46 @@ def check_kde_1d(fn) -> Feedback:
         ref = _kde_ref(x, data, h)
         if not _close(out, ref):
             mistakes = [
-                (_kde_ref(x, data, h, divide_h=False), "the factor 1/(N h) of eq. 4: the 1/h is missing, so the estimate does not integrate to 1."),
-                (_kde_ref(x, data, h, divide_m=False), "the factor 1/(N h) of eq. 4: divide by the number of data points N too (ĝ is an average of kernels)."),
-                (_kde_ref(x, data, h, kernel_const=False), "the kernel K(u): the Gaussian density has a constant in front of the exponential."),
-                (_kde_ref(x, data, h, half=False), "the kernel K(u): look again at the exponent of the standard Gaussian density."),
-                (_kde_ref(x, data, h * h), "how the bandwidth enters: u = (x − x_j) / h, with h itself, not h²."),
+                (
+                    _kde_ref(x, data, h, divide_h=False),
+                    "the factor 1/(N h) of eq. 4: the 1/h is missing, so the estimate does not integrate to 1.",
+                ),
+                (
+                    _kde_ref(x, data, h, divide_m=False),
+                    "the factor 1/(N h) of eq. 4: divide by the number of data points N too (ĝ is an average of kernels).",
+                ),
+                (
+                    _kde_ref(x, data, h, kernel_const=False),
+                    "the kernel K(u): the Gaussian density has a constant in front of the exponential.",
+                ),
+                (
+                    _kde_ref(x, data, h, half=False),
+                    "the kernel K(u): look again at the exponent of the standard Gaussian density.",
+                ),
+                (
+                    _kde_ref(x, data, h * h),
+                    "how the bandwidth enters: u = (x − x_j) / h, with h itself, not h².",
+                ),
             ]
             for value, what in mistakes:
                 if _close(out, value):
                     return hint(f"close, but check {what}")
             i = int((out - ref).abs().argmax())
-            return hint(f"at x = {float(x[i]):.2f} your density is {float(out[i]):.4g} where eq. 4 gives {float(ref[i]):.4g}; compute one value by hand and compare.")
+            return hint(
+                f"at x = {float(x[i]):.2f} your density is {float(out[i]):.4g} where eq. 4 gives {float(ref[i]):.4g}; compute one value by hand and compare."
+            )
         # another bandwidth and sizes: nothing hard-coded
         data2, x2 = torch.tensor([-0.3, 0.1, 0.2]), torch.tensor([0.0, 0.5])
         out2 = _tensor(fn(x2, data2, 0.5), "kde_1d", (2,))
         if isinstance(out2, Feedback):
             return out2
         if not _close(out2, _kde_ref(x2, data2, 0.5)):
-            return hint("correct for h = 0.2 and 48 data points, but not for h = 0.5 and 3: avoid hard-coding the bandwidth or the number of points.")
-        return correct("Your density matches eq. 4: an average of Gaussian bumps of width h, each of area 1/N.")
+            return hint(
+                "correct for h = 0.2 and 48 data points, but not for h = 0.5 and 3: avoid hard-coding the bandwidth or the number of points."
+            )
+        return correct(
+            "Your density matches eq. 4: an average of Gaussian bumps of width h, each of area 1/N."
+        )
 
     return run_check(check, "`kde_1d`")
 
@@ -111,13 +143,23 @@ def check_inverse_weights(fn) -> Feedback:
         if not _close(out, ref, rtol=1e-3):
             if abs(float(out.sum()) - 1) > 1e-3:
                 if _close(out / out.sum(), ref, rtol=1e-3):
-                    return hint("the weights are proportional to the right values, but they must sum to 1 (they become sampling probabilities).")
-                return hint(f"your weights sum to {float(out.sum()):.4g}: normalise them so that they sum to 1.")
+                    return hint(
+                        "the weights are proportional to the right values, but they must sum to 1 (they become sampling probabilities)."
+                    )
+                return hint(
+                    f"your weights sum to {float(out.sum()):.4g}: normalise them so that they sum to 1."
+                )
             if _close(out, g / g.sum(), rtol=1e-3):
-                return hint("your weights grow with the density: eq. 5 gives *rare* actions (low density) the large weights.")
+                return hint(
+                    "your weights grow with the density: eq. 5 gives *rare* actions (low density) the large weights."
+                )
             if out[90:].mean() <= out[:90].mean():
-                return hint("the 10 rare actions should get larger weights than the 90 common ones; yours do not.")
-            return hint("your weights sum to 1 and favour the rare actions, but they are not proportional to 1/ĝ(y_i) with ĝ the KDE of eq. 4 at bandwidth h (over all D dimensions).")
+                return hint(
+                    "the 10 rare actions should get larger weights than the 90 common ones; yours do not."
+                )
+            return hint(
+                "your weights sum to 1 and favour the rare actions, but they are not proportional to 1/ĝ(y_i) with ĝ the KDE of eq. 4 at bandwidth h (over all D dimensions)."
+            )
         out2 = _tensor(fn(actions.clone(), 0.5), "inverse_weights", (100,))
         if isinstance(out2, Feedback):
             return out2
@@ -177,11 +219,15 @@ def check_choose_bandwidth(fn) -> Feedback:
                     raise TypeError
                 h = float(out)
             except (TypeError, ValueError, RuntimeError):
-                return hint(f"choose_bandwidth must return one bandwidth (a number from `candidates`), got {type(out).__name__}.")
+                return hint(
+                    f"choose_bandwidth must return one bandwidth (a number from `candidates`), got {type(out).__name__}."
+                )
             if h not in _CANDIDATES:
                 if 0 <= h < len(_CANDIDATES) and float(h).is_integer():
                     return hint("return the bandwidth itself, not its index in `candidates`.")
-                return hint(f"choose_bandwidth returned {h:g}, which is not one of the candidates {list(_CANDIDATES)}.")
+                return hint(
+                    f"choose_bandwidth returned {h:g}, which is not one of the candidates {list(_CANDIDATES)}."
+                )
             if h == ref:
                 continue
             share, ess = table[h]
@@ -192,10 +238,16 @@ def check_choose_bandwidth(fn) -> Feedback:
                     f"only {ess:.0f} < {min_ess:.0f}: a few stray actions take over. Keep only the bandwidths whose 1/Σ w² reaches min_ess."
                 )
             if h == max(_CANDIDATES, key=lambda c: table[c][1]):
-                return hint(f"h = {h:g} has the largest effective sample size, because its weights are nearly uniform: its minibatches hold only {share:.0%} rare samples. Among the bandwidths that pass, maximise the rare share.")
+                return hint(
+                    f"h = {h:g} has the largest effective sample size, because its weights are nearly uniform: its minibatches hold only {share:.0%} rare samples. Among the bandwidths that pass, maximise the rare share."
+                )
             if ess < min_ess:
-                return hint(f"h = {h:g} has an effective sample size of {ess:.0f}, below min_ess = {min_ess:.0f}: compute it as 1 / Σ w_i² of the normalised weights.")
-            return hint(f"h = {h:g} passes the effective-sample-size test, but another candidate that passes puts more rare samples into minibatches than its {share:.0%}: compare the shares Σ_rare w_i.")
+                return hint(
+                    f"h = {h:g} has an effective sample size of {ess:.0f}, below min_ess = {min_ess:.0f}: compute it as 1 / Σ w_i² of the normalised weights."
+                )
+            return hint(
+                f"h = {h:g} passes the effective-sample-size test, but another candidate that passes puts more rare samples into minibatches than its {share:.0%}: compare the shares Σ_rare w_i."
+            )
         return correct(
             "Right: the narrowest bandwidths let a few stray actions take over (low effective sample size), the widest make the weights "
             "nearly uniform (few rare samples); the choice is in between, and it moves with min_ess and with the data."

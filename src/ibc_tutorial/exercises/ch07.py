@@ -28,8 +28,6 @@ L = 2.9  # wheelbase (m)
 DELTA_MAX = 0.6  # front-wheel angle at steer = 1 (rad)
 
 
-
-
 # --------------------------------------------------------------------------- 1. yaw rate
 def _yaw_ref(v, s):
     return -v * math.tan(DELTA_MAX * s) / L
@@ -48,21 +46,31 @@ def check_yaw_rate(fn) -> Feedback:
             if math.isclose(out, ref, rel_tol=1e-6, abs_tol=1e-9):
                 continue
             if math.isclose(out, -ref, rel_tol=1e-6, abs_tol=1e-9):
-                return hint("the sign: positive steering turns the car right, i.e. clockwise, and yaw angles count "
-                            "counter-clockwise.")
+                return hint(
+                    "the sign: positive steering turns the car right, i.e. clockwise, and yaw angles count "
+                    "counter-clockwise."
+                )
             if math.isclose(abs(out), abs(v * math.tan(DELTA_MAX) * s / L), rel_tol=1e-6):
-                return hint("the steering angle: steer = 1 means the front wheels at delta_max; the angle is "
-                            "delta_max x steer, and the bicycle needs the tangent of that angle.")
+                return hint(
+                    "the steering angle: steer = 1 means the front wheels at delta_max; the angle is "
+                    "delta_max x steer, and the bicycle needs the tangent of that angle."
+                )
             if math.isclose(abs(out), abs(v * DELTA_MAX * s / L), rel_tol=1e-6):
-                return hint("the bicycle's yaw rate uses the tangent of the wheel angle, not the angle itself "
-                            "(they differ at large angles).")
+                return hint(
+                    "the bicycle's yaw rate uses the tangent of the wheel angle, not the angle itself "
+                    "(they differ at large angles)."
+                )
             if math.isclose(abs(out), abs(v * math.tan(math.radians(DELTA_MAX * s)) / L), rel_tol=1e-6):
                 return hint("angles here are in radians: math.tan expects radians.")
             if math.isclose(abs(out), abs(math.tan(DELTA_MAX * s) / L), rel_tol=1e-6):
                 return hint("the yaw rate grows with speed: a car at rest does not turn.")
-            return hint(f"for speed {v} m/s and steer {s} your yaw rate is {out:.4f} rad/s, which is not the kinematic "
-                        "bicycle's: check the formula term by term (speed, wheel angle, wheelbase, sign).")
-        return correct("That is the kinematic bicycle: the circle's radius is L / tan(delta), whatever the speed.")
+            return hint(
+                f"for speed {v} m/s and steer {s} your yaw rate is {out:.4f} rad/s, which is not the kinematic "
+                "bicycle's: check the formula term by term (speed, wheel angle, wheelbase, sign)."
+            )
+        return correct(
+            "That is the kinematic bicycle: the circle's radius is L / tan(delta), whatever the speed."
+        )
 
     return run_check(check, "`yaw_rate`")
 
@@ -94,24 +102,39 @@ def check_pid(fn) -> Feedback:
         except (TypeError, ValueError):
             return hint("pid_outputs must return a list of numbers, one per error.")
         if len(out) != len(errors):
-            return hint(f"pid_outputs must return one output per error: got {len(out)} for {len(errors)} errors.")
+            return hint(
+                f"pid_outputs must return one output per error: got {len(out)} for {len(errors)} errors."
+            )
         pid = PID(*gains)
         ref = [pid.step(e) for e in errors]
         if np.allclose(out, ref, rtol=1e-6, atol=1e-9):
             return correct("Your PID matches the expert's controller step by step.")
         mistakes = [
-            (dict(integral_dt=False), "the integral term: it sums error x dt, an area under the error curve."),
-            (dict(deriv_dt=False), "the derivative term: it is the change of the error divided by dt, a rate."),
-            (dict(first_deriv=True), "the first step: there is no previous error yet, so the derivative term starts at 0."),
+            (
+                dict(integral_dt=False),
+                "the integral term: it sums error x dt, an area under the error curve.",
+            ),
+            (
+                dict(deriv_dt=False),
+                "the derivative term: it is the change of the error divided by dt, a rate.",
+            ),
+            (
+                dict(first_deriv=True),
+                "the first step: there is no previous error yet, so the derivative term starts at 0.",
+            ),
         ]
         for kwargs, message in mistakes:
             if np.allclose(out, _pid_ref(errors, *gains, **kwargs), rtol=1e-6, atol=1e-9):
                 return hint(message)
         if np.allclose(out[0], ref[0]):
-            return hint("your first output is right but later ones are not: check how the integral accumulates and "
-                        "how the derivative uses the previous error.")
-        return hint("your outputs differ from u = kp e + ki sum(e dt) + kd (e - e_prev)/dt from the first step on: "
-                    "check each term and the gain it goes with.")
+            return hint(
+                "your first output is right but later ones are not: check how the integral accumulates and "
+                "how the derivative uses the previous error."
+            )
+        return hint(
+            "your outputs differ from u = kp e + ki sum(e dt) + kd (e - e_prev)/dt from the first step on: "
+            "check each term and the gain it goes with."
+        )
 
     return run_check(check, "`pid_outputs`")
 
@@ -133,24 +156,36 @@ def check_ran_red_light(fn) -> Feedback:
     def check() -> Feedback:
         cross = (entry - 0.3 * d, entry + 0.4 * d)
         if not ask(*cross, RED):
-            return hint("the rear moving from just before the line to just past it while red is an infraction: "
-                        "compare the position along the lane before and after the step.")
+            return hint(
+                "the rear moving from just before the line to just past it while red is an infraction: "
+                "compare the position along the lane before and after the step."
+            )
         if ask(*cross, YELLOW):
             return hint("only red counts: crossing at yellow is legal (the light has not turned red yet).")
         if ask(*cross, GREEN):
             return hint("crossing at green is not an infraction.")
         if ask(entry + 0.4 * d, entry + 1.4 * d, RED):
-            return hint("the rear was already past the line before the step: that crossing was counted (or not) "
-                        "earlier; count only the step that crosses it.")
+            return hint(
+                "the rear was already past the line before the step: that crossing was counted (or not) "
+                "earlier; count only the step that crosses it."
+            )
         if ask(entry - 2.0 * d, entry - 1.0 * d, RED):
             return hint("the rear is still before the line after the step: no crossing yet.")
         if ask(entry + 0.4 * d, entry - 0.3 * d, RED):
-            return hint("moving backwards over the line is not running the light: only a forward crossing counts.")
-        if ask(cross[0] + 4.0 * right, cross[1] + 4.0 * right, RED) or ask(cross[0] - 4.0 * right, cross[1] - 4.0 * right, RED):
-            return hint("a crossing 4 m to the side is in another lane: only a crossing within the lane "
-                        "(half a lane width, 2 m, from the lane's centre line) counts.")
+            return hint(
+                "moving backwards over the line is not running the light: only a forward crossing counts."
+            )
+        if ask(cross[0] + 4.0 * right, cross[1] + 4.0 * right, RED) or ask(
+            cross[0] - 4.0 * right, cross[1] - 4.0 * right, RED
+        ):
+            return hint(
+                "a crossing 4 m to the side is in another lane: only a crossing within the lane "
+                "(half a lane width, 2 m, from the lane's centre line) counts."
+            )
         if not ask(cross[0] + 1.5 * right, cross[1] + 1.5 * right, RED):
-            return hint("a crossing 1.5 m to the side of the centre line is still within the 4 m lane and counts.")
+            return hint(
+                "a crossing 1.5 m to the side of the centre line is still within the 4 m lane and counts."
+            )
         return correct("That is the rule the environment applies (``lights.RedLightMonitor``).")
 
     return run_check(check, "`ran_red_light`")
@@ -167,8 +202,14 @@ def check_world_to_bev(fn) -> Feedback:
     """Check ``fn(x, y, car_x, car_y, car_yaw) -> (row, col)`` against the 192 view's geometry."""
 
     def check() -> Feedback:
-        cases = [(10.0, 5.0, 10.0, 5.0, 0.3), (20.0, 0.0, 10.0, 0.0, 0.0), (10.0, -3.0, 10.0, 0.0, 0.0),
-                 (3.0, 12.0, 3.0, 2.0, math.pi / 2), (14.0, 9.0, 10.0, 5.0, 0.7), (-4.0, 2.0, 1.0, -1.0, -2.2)]
+        cases = [
+            (10.0, 5.0, 10.0, 5.0, 0.3),
+            (20.0, 0.0, 10.0, 0.0, 0.0),
+            (10.0, -3.0, 10.0, 0.0, 0.0),
+            (3.0, 12.0, 3.0, 2.0, math.pi / 2),
+            (14.0, 9.0, 10.0, 5.0, 0.7),
+            (-4.0, 2.0, 1.0, -1.0, -2.2),
+        ]
         for x, y, cx, cy, yaw in cases:
             out = fn(x, y, cx, cy, yaw)
             try:
@@ -182,20 +223,30 @@ def check_world_to_bev(fn) -> Feedback:
                 return hint("rows and columns are swapped: return (row, col), row counted down from the top.")
             mirrored = (ref[0], 192 - ref[1])
             if np.allclose((row, col), mirrored, atol=1e-6):
-                return hint("left and right are mirrored: a point to the car's right must appear right of the car "
-                            "in the image (a larger column).")
+                return hint(
+                    "left and right are mirrored: a point to the car's right must appear right of the car "
+                    "in the image (a larger column)."
+                )
             if np.allclose((row, col), (304 - ref[0], ref[1]), atol=1e-6):
-                return hint("ahead must be up: image rows grow downwards, so a point ahead of the car has a smaller row.")
+                return hint(
+                    "ahead must be up: image rows grow downwards, so a point ahead of the car has a smaller row."
+                )
             noturn = (152 - 5 * (x - cx), 96 - 5 * (y - cy))
             if np.allclose((row, col), noturn, atol=1e-6) and yaw != 0:
-                return hint("the view turns with the car: project the offset onto the car's heading (cos, sin) and "
-                            "onto its right (sin, -cos).")
+                return hint(
+                    "the view turns with the car: project the offset onto the car's heading (cos, sin) and "
+                    "onto its right (sin, -cos)."
+                )
             if np.allclose((row, col), ((ref[0] - 152) / 5 + 152, (ref[1] - 96) / 5 + 96), atol=1e-6):
                 return hint("the scale: the view has 5 pixels per metre.")
             if np.isclose(col, ref[1], atol=1e-6):
-                return hint("the column is right but not the row: the car sits 40 px above the bottom edge of the 192 px view.")
-            return hint(f"the point ({x}, {y}) seen from a car at ({cx}, {cy}) heading {yaw:.2f} rad lands at "
-                        f"({row:.1f}, {col:.1f}) in your view: check the offset's projection, the scale and the car's pixel.")
+                return hint(
+                    "the column is right but not the row: the car sits 40 px above the bottom edge of the 192 px view."
+                )
+            return hint(
+                f"the point ({x}, {y}) seen from a car at ({cx}, {cy}) heading {yaw:.2f} rad lands at "
+                f"({row:.1f}, {col:.1f}) in your view: check the offset's projection, the scale and the car's pixel."
+            )
         return correct("That is the BEV's geometry: the renderer applies it to all 36,864 pixels at once.")
 
     return run_check(check, "`world_to_bev`")
@@ -203,8 +254,18 @@ def check_world_to_bev(fn) -> Feedback:
 
 # --------------------------------------------------------------------------- 5. will the expert stop?
 STOP_CASES = [  # (state, gap_m, speed): 0 green, 1 yellow, 2 red
-    (2, 5.0, 6.0), (0, 5.0, 6.0), (1, 8.0, 6.0), (1, 3.0, 6.0), (2, 12.0, 6.0), (1, 6.0, 4.5),
-    (1, 4.0, 6.0), (2, 0.5, 0.0), (1, 9.0, 3.0), (1, 12.0, 6.0), (0, 1.0, 0.5), (1, 4.5, 6.0),
+    (2, 5.0, 6.0),
+    (0, 5.0, 6.0),
+    (1, 8.0, 6.0),
+    (1, 3.0, 6.0),
+    (2, 12.0, 6.0),
+    (1, 6.0, 4.5),
+    (1, 4.0, 6.0),
+    (2, 0.5, 0.0),
+    (1, 9.0, 3.0),
+    (1, 12.0, 6.0),
+    (0, 1.0, 0.5),
+    (1, 4.5, 6.0),
     (1, 1.5, 6.0),
 ]
 
@@ -225,27 +286,39 @@ def check_expert_stops(fn) -> Feedback:
         truth = [stops_for_light(*c, config) for c in STOP_CASES]
         wrong = [c for c, a, t in zip(STOP_CASES, answers, truth) if a != t]
         if not wrong:
-            return correct("That is the expert's rule. A one-bit 'must stop' flag would draw a yellow line like a red "
-                           "one, yet at (yellow, 3 m, 6 m/s) the expert drives on: that is why the BEV draws yellow "
-                           "at its own level, 0.6, and lets distance and speed decide.")
+            return correct(
+                "That is the expert's rule. A one-bit 'must stop' flag would draw a yellow line like a red "
+                "one, yet at (yellow, 3 m, 6 m/s) the expert drives on: that is why the BEV draws yellow "
+                "at its own level, 0.6, and lets distance and speed decide."
+            )
         if any(s == 2 and g > config.stop_distance_m for s, g, _ in wrong):
-            return hint(f"distance: the expert considers its light only within {config.stop_distance_m} m of the line; "
-                        "a red light further away does not stop it yet.")
+            return hint(
+                f"distance: the expert considers its light only within {config.stop_distance_m} m of the line; "
+                "a red light further away does not stop it yet."
+            )
         yellow = [c for c in wrong if c[0] == 1]
         near_yellow = [k for k, c in enumerate(STOP_CASES) if c[0] == 1 and c[1] <= config.stop_distance_m]
         if yellow and all(answers[k] for k in near_yellow) and all(c[0] == 1 for c in wrong):
-            return hint("yellow is not red: close to the line and fast, stopping would need more braking than the "
-                        f"expert allows at yellow ({config.yellow_brake} m/s^2, the deceleration v^2 / (2 gap)), "
-                        "so it drives on.")
+            return hint(
+                "yellow is not red: close to the line and fast, stopping would need more braking than the "
+                f"expert allows at yellow ({config.yellow_brake} m/s^2, the deceleration v^2 / (2 gap)), "
+                "so it drives on."
+            )
         if yellow and not any(answers[STOP_CASES.index(c)] for c in yellow):
-            return hint("yellow is not green either: when a firm brake still stops the car before the line, the "
-                        "expert stops.")
+            return hint(
+                "yellow is not green either: when a firm brake still stops the car before the line, the "
+                "expert stops."
+            )
         if any(c[0] == 1 for c in wrong):
-            return hint("at yellow, compare the deceleration needed to stop at the line, v^2 / (2 gap), with the "
-                        f"expert's {config.yellow_brake} m/s^2: at or below it, it stops.")
+            return hint(
+                "at yellow, compare the deceleration needed to stop at the line, v^2 / (2 gap), with the "
+                f"expert's {config.yellow_brake} m/s^2: at or below it, it stops."
+            )
         state, gap, speed = wrong[0]
         yours = answers[STOP_CASES.index(wrong[0])]
-        return hint(f"for light state {state} at {gap} m and {speed} m/s your answer is {yours}: "
-                    "red stops, green goes; chapter 07's section *The expert* gives the rule.")
+        return hint(
+            f"for light state {state} at {gap} m and {speed} m/s your answer is {yours}: "
+            "red stops, green goes; chapter 07's section *The expert* gives the rule."
+        )
 
     return run_check(check, "`expert_stops`")

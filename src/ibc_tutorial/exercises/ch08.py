@@ -27,8 +27,6 @@ PENALTY = 0.7
 """The score's factor per red light run (``driving.sim.SCORE_PENALTY``)."""
 
 
-
-
 # --------------------------------------------------------------------------- 1. the episode score
 def _log(seed: int) -> tuple[np.ndarray, np.ndarray]:
     """A made-up episode: a path that turns back on itself, and the stop lines it crossed.
@@ -42,7 +40,7 @@ def _log(seed: int) -> tuple[np.ndarray, np.ndarray]:
     step = rng.uniform(0.0, 0.8, t)  # metres per 0.1 s step
     xy = np.vstack([[0.0, 0.0], np.cumsum(np.stack([step * np.cos(heading), step * np.sin(heading)], 1), 0)])
     crossed = np.full(t, -1)
-    crossed[rng.choice(t, 9, replace=False)] = [2, 2, 0, 1, 2, 0, 1, 0, 2][: 9]
+    crossed[rng.choice(t, 9, replace=False)] = [2, 2, 0, 1, 2, 0, 1, 0, 2][:9]
     return xy, crossed
 
 
@@ -76,24 +74,43 @@ def check_episode_score(fn) -> Feedback:
             if math.isclose(out, ref, rel_tol=1e-6, abs_tol=1e-6):
                 continue
             mistakes = [
-                (dict(path=False), "the distance driven is the length of the path, step by step, not the straight "
-                                   "line from the start to the end (this car drove a loop)."),
+                (
+                    dict(path=False),
+                    "the distance driven is the length of the path, step by step, not the straight "
+                    "line from the start to the end (this car drove a loop).",
+                ),
                 (dict(penalty="none"), "red lights cost: each one multiplies the score by 0.7."),
                 (dict(counts=(1, 2)), "only red counts: crossing the stop line at yellow is legal."),
-                (dict(counts=(0, 1, 2)), "only red counts: crossing a stop line at green or yellow is no infraction."),
-                (dict(penalty="linear"), "the penalty compounds: each red light multiplies what is left by 0.7 "
-                                         "(0.7 ** n), it does not take 30 % of the distance each time."),
-                (dict(penalty="times n"), "with n red lights the factor is 0.7 to the power n, not 0.7 times n "
-                                          "(an episode without infractions scores its distance)."),
-                (dict(penalty="subtract"), "the penalty is a factor on the distance, not metres taken off it."),
+                (
+                    dict(counts=(0, 1, 2)),
+                    "only red counts: crossing a stop line at green or yellow is no infraction.",
+                ),
+                (
+                    dict(penalty="linear"),
+                    "the penalty compounds: each red light multiplies what is left by 0.7 "
+                    "(0.7 ** n), it does not take 30 % of the distance each time.",
+                ),
+                (
+                    dict(penalty="times n"),
+                    "with n red lights the factor is 0.7 to the power n, not 0.7 times n "
+                    "(an episode without infractions scores its distance).",
+                ),
+                (
+                    dict(penalty="subtract"),
+                    "the penalty is a factor on the distance, not metres taken off it.",
+                ),
             ]
             for kwargs, message in mistakes:
                 if math.isclose(out, _score_ref(xy, crossed, **kwargs), rel_tol=1e-6, abs_tol=1e-6):
                     return hint(message)
-            return hint(f"for an episode of {len(crossed)} steps with {n_red} stop lines crossed at red, your score "
-                        f"is {out:.2f}: check the distance (a sum over steps) and the factor 0.7 per red light.")
-        return correct("That is the paper's score (``driving.sim.score``): a car that runs three red lights keeps "
-                       "34 % of its distance, one that stands still scores 0.")
+            return hint(
+                f"for an episode of {len(crossed)} steps with {n_red} stop lines crossed at red, your score "
+                f"is {out:.2f}: check the distance (a sum over steps) and the factor 0.7 per red light."
+            )
+        return correct(
+            "That is the paper's score (``driving.sim.score``): a car that runs three red lights keeps "
+            "34 % of its distance, one that stands still scores 0."
+        )
 
     return run_check(check, "`episode_score`")
 
@@ -117,7 +134,12 @@ def check_unseen_share(fn) -> Feedback:
     """Check ``fn(probs, batch_size) -> float``: mean_i (1 - p_i) ** (ceil(M / B) B)."""
 
     def check() -> Feedback:
-        cases = [(np.full(1000, 1e-3), 128), (_probs(), 128), (_probs(), 96), (np.r_[0.5, np.full(50, 0.01)], 7)]
+        cases = [
+            (np.full(1000, 1e-3), 128),
+            (_probs(), 128),
+            (_probs(), 96),
+            (np.r_[0.5, np.full(50, 0.01)], 7),
+        ]
         for p, b in cases:
             out = number_answer(fn(p.copy(), b), "unseen_share")
             if isinstance(out, Feedback):
@@ -127,31 +149,51 @@ def check_unseen_share(fn) -> Feedback:
                 continue
             if not 0.0 <= out <= 1.0:
                 if math.isclose(out, _unseen_ref(p, b, count=True), rel_tol=1e-6):
-                    return hint("that is the expected *number* of samples never drawn: return it as a share of M.")
+                    return hint(
+                        "that is the expected *number* of samples never drawn: return it as a share of M."
+                    )
                 return hint(f"a share lies between 0 and 1; yours is {out:.4g}.")
             mistakes = [
-                (dict(uniform=True), "the minibatches are weighted: sample i is drawn with probability p_i, not 1/M, "
-                                     "so common samples are missed more often than rare ones."),
-                (dict(draws="m"), "an epoch is ceil(M / B) minibatches of B: a few more than M draws when B does not "
-                                  "divide M."),
+                (
+                    dict(uniform=True),
+                    "the minibatches are weighted: sample i is drawn with probability p_i, not 1/M, "
+                    "so common samples are missed more often than rare ones.",
+                ),
+                (
+                    dict(draws="m"),
+                    "an epoch is ceil(M / B) minibatches of B: a few more than M draws when B does not "
+                    "divide M.",
+                ),
                 (dict(draws="floor"), "an epoch is ceil(M / B) minibatches, rounded up, not down."),
                 (dict(draws="batch"), "that is one minibatch: an epoch draws ceil(M / B) of them."),
-                (dict(linear=True, uniform=True), "draws are with replacement: a sample can be drawn twice and "
-                                                  "another never, even in M draws or more; the chance that n "
-                                                  "independent draws all miss sample i is (1 - p_i) ** n."),
-                (dict(linear=True), "1 - n p_i is only the first term: with n independent draws the chance of never "
-                                    "drawing sample i is (1 - p_i) ** n."),
+                (
+                    dict(linear=True, uniform=True),
+                    "draws are with replacement: a sample can be drawn twice and "
+                    "another never, even in M draws or more; the chance that n "
+                    "independent draws all miss sample i is (1 - p_i) ** n.",
+                ),
+                (
+                    dict(linear=True),
+                    "1 - n p_i is only the first term: with n independent draws the chance of never "
+                    "drawing sample i is (1 - p_i) ** n.",
+                ),
             ]
             for kwargs, message in mistakes:
                 if math.isclose(out, _unseen_ref(p, b, **kwargs), rel_tol=1e-6, abs_tol=1e-9):
                     return hint(message)
             if abs(out - ref) < 0.02:
-                return hint(f"your {out:.4f} is near the expected share {ref:.4f} but not it: compute the "
-                            "expectation exactly (a simulation only estimates it).")
-            return hint(f"for M = {len(p)} samples and B = {b} your share is {out:.4f}: the expected share is the "
-                        "average over samples of the chance that none of the epoch's draws picks it.")
-        return correct("That is the protocol's price: with the second case's weights (rare samples 6 times as likely) "
-                       "an epoch of B = 128 misses about half of the common samples and under 2 % of the rare ones.")
+                return hint(
+                    f"your {out:.4f} is near the expected share {ref:.4f} but not it: compute the "
+                    "expectation exactly (a simulation only estimates it)."
+                )
+            return hint(
+                f"for M = {len(p)} samples and B = {b} your share is {out:.4f}: the expected share is the "
+                "average over samples of the chance that none of the epoch's draws picks it."
+            )
+        return correct(
+            "That is the protocol's price: with the second case's weights (rare samples 6 times as likely) "
+            "an epoch of B = 128 misses about half of the common samples and under 2 % of the rare ones."
+        )
 
     return run_check(check, "`unseen_share`")
 
@@ -159,15 +201,24 @@ def check_unseen_share(fn) -> Feedback:
 # --------------------------------------------------------------------------- 3. the three agents
 FIELDS = ("loss", "negatives", "dfo_init", "dfo_select")
 """The keys of a recipe."""
-CHOICES = {"loss": ("beta nll", "infonce"), "negatives": (None, "uniform", "expert + noise"),
-           "dfo_init": (None, "uniform", "inverse-kde"), "dfo_select": (None, "argmax", "sample")}
+CHOICES = {
+    "loss": ("beta nll", "infonce"),
+    "negatives": (None, "uniform", "expert + noise"),
+    "dfo_init": (None, "uniform", "inverse-kde"),
+    "dfo_select": (None, "argmax", "sample"),
+}
 """The allowed value of each key (None: the method has no such step)."""
 
 
 RECIPES = {
     "bc": {"loss": "beta nll", "negatives": None, "dfo_init": None, "dfo_select": None},
     "ibc": {"loss": "infonce", "negatives": "uniform", "dfo_init": "uniform", "dfo_select": "argmax"},
-    "da-ibc": {"loss": "infonce", "negatives": "expert + noise", "dfo_init": "inverse-kde", "dfo_select": "sample"},
+    "da-ibc": {
+        "loss": "infonce",
+        "negatives": "expert + noise",
+        "dfo_init": "inverse-kde",
+        "dfo_select": "sample",
+    },
 }
 """The chapter's table of the three methods (``tests/test_exercises_ch08.py`` checks it against the
 library's ``experiments.agents.train.objective_for`` and ``agent.dfo_config``)."""
@@ -184,10 +235,15 @@ HINTS = {
     ("ibc", "dfo_select"): "the original IBC keeps the candidate of lowest energy at the end.",
     ("da-ibc", "loss"): "DA-IBC trains an energy model: with which loss (eq. 2)?",
     ("da-ibc", "negatives"): "DA-IBC's counter-examples are built from the minibatch's own expert actions "
-                             "(sec. 2.4).",
-    ("da-ibc", "dfo_init"): "DA-IBC starts DFO from expert actions, weighted so that rare ones are drawn more "
-                            "(sec. 2.4.1).",
-    ("da-ibc", "dfo_select"): "DA-IBC's last line of Algorithm 1 draws the action from the final distribution.",
+    "(sec. 2.4).",
+    (
+        "da-ibc",
+        "dfo_init",
+    ): "DA-IBC starts DFO from expert actions, weighted so that rare ones are drawn more (sec. 2.4.1).",
+    (
+        "da-ibc",
+        "dfo_select",
+    ): "DA-IBC's last line of Algorithm 1 draws the action from the final distribution.",
 }
 
 
@@ -198,15 +254,19 @@ def check_recipe(fn) -> Feedback:
         for method in ("bc", "ibc", "da-ibc"):
             out = fn(method)
             if not isinstance(out, dict) or set(out) != set(FIELDS):
-                return hint(f"recipe must return a dict with exactly the keys {', '.join(FIELDS)}; for {method!r} "
-                            f"it returned {out!r:.80}.")
+                return hint(
+                    f"recipe must return a dict with exactly the keys {', '.join(FIELDS)}; for {method!r} "
+                    f"it returned {out!r:.80}."
+                )
             for key in FIELDS:
                 value = out[key].strip().lower() if isinstance(out[key], str) else out[key]
                 if value not in CHOICES[key]:
                     return hint(f"{key} must be one of {CHOICES[key]}; for {method!r} it is {out[key]!r}.")
                 if value != RECIPES[method][key]:
                     return hint(f"{method}'s {key}: {HINTS[(method, key)]}")
-        return correct("IBC and DA-IBC share the loss and differ in two places only, as the paper's conclusion "
-                       "says: the counter-examples, and how DFO starts and ends.")
+        return correct(
+            "IBC and DA-IBC share the loss and differ in two places only, as the paper's conclusion "
+            "says: the counter-examples, and how DFO starts and ends."
+        )
 
     return run_check(check, "`recipe`")

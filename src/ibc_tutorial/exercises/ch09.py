@@ -25,7 +25,15 @@ import math
 import numpy as np
 
 from ibc_tutorial.exercises.core import Feedback, correct, hint, run_check
-from ibc_tutorial.stats import CANNOT_TELL, DOES_NOT_HOLD, HOLDS, TURNS, Interval, difference_interval, verdict
+from ibc_tutorial.stats import (
+    CANNOT_TELL,
+    DOES_NOT_HOLD,
+    HOLDS,
+    TURNS,
+    Interval,
+    difference_interval,
+    verdict,
+)
 
 RESAMPLES = 20_000
 """Resamples the checker asks for."""
@@ -51,8 +59,9 @@ def _q(reps: np.ndarray, level: float = 0.95) -> tuple[float, float]:
     return float(lo), float(hi)
 
 
-def _boot(x: np.ndarray, r: int, rng: np.random.Generator, agents=True, episodes=True, pooled=False,
-          idx=None) -> np.ndarray:
+def _boot(
+    x: np.ndarray, r: int, rng: np.random.Generator, agents=True, episodes=True, pooled=False, idx=None
+) -> np.ndarray:
     """(R,) resampled means of x (A, E) with a level switched off, or pooled; ``idx`` reuses draws."""
     a, e = x.shape
     if pooled:
@@ -73,20 +82,31 @@ def _mistakes(a: np.ndarray, b: np.ndarray) -> list[tuple[tuple[float, float], s
     lo, hi = _q(full_a - full_b)
     return [
         ((-hi, -lo), "the sign: the interval is for mean(A) - mean(B)."),
-        (_q(_boot(a, r, rng, pooled=True) - _boot(b, r, rng, pooled=True)),
-         "you resampled all episodes of a method as one pool: that treats the episodes of one agent as if "
-         "each came from another agent. Draw agents first, then episodes within each drawn agent."),
-        (_q(_boot(a, r, rng, episodes=False) - _boot(b, r, rng, episodes=False)),
-         "you resampled agents but kept each drawn agent's episodes as they are: the episodes vary too (other "
-         "starts), so draw them with replacement within each drawn agent."),
-        (_q(_boot(a, r, rng, agents=False) - _boot(b, r, rng, agents=False)),
-         "you resampled episodes but kept every agent once: another run of the method would give other agents, "
-         "so draw the agents with replacement too."),
-        (_q(full_a - full_b, 0.90), "the level: a 95 % interval runs from the 2.5th to the 97.5th percentile."),
+        (
+            _q(_boot(a, r, rng, pooled=True) - _boot(b, r, rng, pooled=True)),
+            "you resampled all episodes of a method as one pool: that treats the episodes of one agent as if "
+            "each came from another agent. Draw agents first, then episodes within each drawn agent.",
+        ),
+        (
+            _q(_boot(a, r, rng, episodes=False) - _boot(b, r, rng, episodes=False)),
+            "you resampled agents but kept each drawn agent's episodes as they are: the episodes vary too (other "
+            "starts), so draw them with replacement within each drawn agent.",
+        ),
+        (
+            _q(_boot(a, r, rng, agents=False) - _boot(b, r, rng, agents=False)),
+            "you resampled episodes but kept every agent once: another run of the method would give other agents, "
+            "so draw the agents with replacement too.",
+        ),
+        (
+            _q(full_a - full_b, 0.90),
+            "the level: a 95 % interval runs from the 2.5th to the 97.5th percentile.",
+        ),
         (_q(full_a), "that is an interval for mean(A) alone: the claim is about mean(A) - mean(B)."),
-        (_q(_boot(a, r, rng, idx=shared) - _boot(b, r, rng, idx=shared)),
-         "the two methods share the same agent and episode draws in your resamples: their agents are different "
-         "networks, so draw each method's resample independently."),
+        (
+            _q(_boot(a, r, rng, idx=shared) - _boot(b, r, rng, idx=shared)),
+            "the two methods share the same agent and episode draws in your resamples: their agents are different "
+            "networks, so draw each method's resample independently.",
+        ),
     ]
 
 
@@ -112,17 +132,23 @@ def check_bootstrap_difference(fn) -> Feedback:
             tol = TOLERANCE * (ref.high - ref.low)
             if abs(out[0] - ref.low) <= tol and abs(out[1] - ref.high) <= tol:
                 if k == 0 and ask(a, b, 123) != out:
-                    return hint("called twice with generators of the same seed, your function gave two intervals: "
-                                "draw every random number from the generator `rng` it is given.")
+                    return hint(
+                        "called twice with generators of the same seed, your function gave two intervals: "
+                        "draw every random number from the generator `rng` it is given."
+                    )
                 continue
             for value, message in _mistakes(a, b):
                 if abs(out[0] - value[0]) <= tol and abs(out[1] - value[1]) <= tol:
                     return hint(message)
-            return hint(f"for these methods (mean difference {a.mean() - b.mean():.1f}) your interval is "
-                        f"[{out[0]:.1f}, {out[1]:.1f}]: check the two levels of the resampling (agents with "
-                        "replacement, then E episodes of each drawn agent) and the percentiles.")
-        return correct("That is the two-level bootstrap (``stats.difference_interval``): with three agents per "
-                       "method, the spread between agents dominates the interval however many episodes each drives.")
+            return hint(
+                f"for these methods (mean difference {a.mean() - b.mean():.1f}) your interval is "
+                f"[{out[0]:.1f}, {out[1]:.1f}]: check the two levels of the resampling (agents with "
+                "replacement, then E episodes of each drawn agent) and the percentiles."
+            )
+        return correct(
+            "That is the two-level bootstrap (``stats.difference_interval``): with three agents per "
+            "method, the spread between agents dominates the interval however many episodes each drives."
+        )
 
     return run_check(check, "`bootstrap_difference`")
 
@@ -130,10 +156,23 @@ def check_bootstrap_difference(fn) -> Feedback:
 # --------------------------------------------------------------------------- 2. shares of exits
 def _visits() -> list[dict]:
     """Visits of a few approaches; approaches 4 and 5 lead into the same junction (node 2)."""
-    rows = [(4, 2, "left"), (5, 2, "straight"), (4, 2, "left"), (9, 3, "right"), (4, 2, "straight"),
-            (5, 2, "right"), (4, 2, "left"), (9, 3, "right"), (5, 2, "straight"), (4, 2, "right"),
-            (7, 1, "straight")]
-    return [{"approach": ap, "node": node, "turn": turn, "step": 10 * k} for k, (ap, node, turn) in enumerate(rows)]
+    rows = [
+        (4, 2, "left"),
+        (5, 2, "straight"),
+        (4, 2, "left"),
+        (9, 3, "right"),
+        (4, 2, "straight"),
+        (5, 2, "right"),
+        (4, 2, "left"),
+        (9, 3, "right"),
+        (5, 2, "straight"),
+        (4, 2, "right"),
+        (7, 1, "straight"),
+    ]
+    return [
+        {"approach": ap, "node": node, "turn": turn, "step": 10 * k}
+        for k, (ap, node, turn) in enumerate(rows)
+    ]
 
 
 def _shares_ref(visits, approach, *, key="approach", node=None, counts=False, all_visits=False):
@@ -155,9 +194,13 @@ def check_exit_shares(fn) -> Feedback:
             if set(out) != set(TURNS):
                 missing = sorted(set(TURNS) - set(out))
                 if missing and set(out) <= set(TURNS):
-                    return hint(f"for approach {approach} your dict has no {', '.join(map(repr, missing))}: give every "
-                                "exit a share, 0 for one that was never taken.")
-                return hint(f"the keys must be exactly {', '.join(map(repr, TURNS))}, got {sorted(map(str, out))}.")
+                    return hint(
+                        f"for approach {approach} your dict has no {', '.join(map(repr, missing))}: give every "
+                        "exit a share, 0 for one that was never taken."
+                    )
+                return hint(
+                    f"the keys must be exactly {', '.join(map(repr, TURNS))}, got {sorted(map(str, out))}."
+                )
             try:
                 got = {t: float(out[t]) for t in TURNS}
             except (TypeError, ValueError):
@@ -167,29 +210,45 @@ def check_exit_shares(fn) -> Feedback:
                 continue
             node = next(v["node"] for v in visits if v["approach"] == approach)
             mistakes = [
-                (_shares_ref(visits, approach, counts=True), "those are counts: divide by the approach's visits, so "
-                                                             "that the shares sum to 1."),
-                (_shares_ref(visits, approach, all_visits=True), "divide by the visits of *this approach*, not by "
-                                                                 "all the junction passes of the drive."),
-                (_shares_ref(visits, approach, key="node", node=node),
-                 "you took every visit of the junction (its node): an approach is one direction into it, and the "
-                 "visits from other directions have other exits. Keep the visits whose 'approach' is the one asked."),
+                (
+                    _shares_ref(visits, approach, counts=True),
+                    "those are counts: divide by the approach's visits, so that the shares sum to 1.",
+                ),
+                (
+                    _shares_ref(visits, approach, all_visits=True),
+                    "divide by the visits of *this approach*, not by all the junction passes of the drive.",
+                ),
+                (
+                    _shares_ref(visits, approach, key="node", node=node),
+                    "you took every visit of the junction (its node): an approach is one direction into it, and the "
+                    "visits from other directions have other exits. Keep the visits whose 'approach' is the one asked.",
+                ),
             ]
             for value, message in mistakes:
                 if all(math.isclose(got[t], value[t], abs_tol=1e-9) for t in TURNS):
                     return hint(message)
-            return hint(f"for approach {approach} your shares are {got}: count its visits by 'turn' and divide by "
-                        "its number of visits.")
-        return correct("Those are the exit shares. An agent that spreads its visits over two exits at one approach, "
-                       "visit after visit, is what the paper's Fig. 5 calls making different decisions there.")
+            return hint(
+                f"for approach {approach} your shares are {got}: count its visits by 'turn' and divide by "
+                "its number of visits."
+            )
+        return correct(
+            "Those are the exit shares. An agent that spreads its visits over two exits at one approach, "
+            "visit after visit, is what the paper's Fig. 5 calls making different decisions there."
+        )
 
     return run_check(check, "`exit_shares`")
 
 
 # --------------------------------------------------------------------------- 3. the verdict
 VERDICT_CASES = [  # (estimate, low, high, threshold)
-    (120.0, 15.0, 230.0, 0.0), (-80.0, -150.0, -12.0, 0.0), (60.0, -40.0, 170.0, 0.0), (-30.0, -95.0, 20.0, 0.0),
-    (0.93, 0.88, 0.97, 0.85), (0.90, 0.81, 0.99, 0.85), (0.70, 0.55, 0.83, 0.85), (40.0, 0.0, 90.0, 0.0),
+    (120.0, 15.0, 230.0, 0.0),
+    (-80.0, -150.0, -12.0, 0.0),
+    (60.0, -40.0, 170.0, 0.0),
+    (-30.0, -95.0, 20.0, 0.0),
+    (0.93, 0.88, 0.97, 0.85),
+    (0.90, 0.81, 0.99, 0.85),
+    (0.70, 0.55, 0.83, 0.85),
+    (40.0, 0.0, 90.0, 0.0),
     (0.62, 0.60, 0.66, 0.60),
 ]
 
@@ -203,21 +262,31 @@ def check_verdict(fn) -> Feedback:
             if not isinstance(out, str):
                 return hint(f"verdict must return one of the three strings, got {type(out).__name__}.")
             if out not in (HOLDS, DOES_NOT_HOLD, CANNOT_TELL):
-                return hint(f"verdict must return {HOLDS!r}, {DOES_NOT_HOLD!r} or {CANNOT_TELL!r}, got {out!r}.")
+                return hint(
+                    f"verdict must return {HOLDS!r}, {DOES_NOT_HOLD!r} or {CANNOT_TELL!r}, got {out!r}."
+                )
             ref = verdict(Interval(est, lo, hi), t)
             if out == ref:
                 continue
             case = f"for the interval [{lo:g}, {hi:g}] (estimate {est:g}) and the threshold {t:g} you answered {out!r}"
             if t in (lo, hi):
-                return hint(f"{case}: an interval that ends exactly on the threshold does not lie above (or below) "
-                            "it.")
+                return hint(
+                    f"{case}: an interval that ends exactly on the threshold does not lie above (or below) "
+                    "it."
+                )
             if lo <= t <= hi and out == (HOLDS if est > t else DOES_NOT_HOLD):
-                return hint(f"{case}: the estimate is on one side, but the interval reaches the other side, so a "
-                            "replication with other agents could well land there. The ordering does not decide.")
+                return hint(
+                    f"{case}: the estimate is on one side, but the interval reaches the other side, so a "
+                    "replication with other agents could well land there. The ordering does not decide."
+                )
             if ref == CANNOT_TELL:
                 return hint(f"{case}: the interval contains the threshold, so it cannot decide either way.")
-            return hint(f"{case}: the whole interval lies {'above' if ref == HOLDS else 'below'} the threshold.")
-        return correct("That is the rule the chapter applies to every claim (``stats.verdict``): the interval "
-                       "decides, and \"cannot tell at this scale\" is an honest third answer.")
+            return hint(
+                f"{case}: the whole interval lies {'above' if ref == HOLDS else 'below'} the threshold."
+            )
+        return correct(
+            "That is the rule the chapter applies to every claim (``stats.verdict``): the interval "
+            'decides, and "cannot tell at this scale" is an honest third answer.'
+        )
 
     return run_check(check, "`verdict`")

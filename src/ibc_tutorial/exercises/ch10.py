@@ -23,8 +23,6 @@ from ibc_tutorial.exercises.core import Feedback, correct, hint, number_answer, 
 from ibc_tutorial.metrics import crashes_per_km, swerve_rate, whiteness
 
 
-
-
 def _close(a: float, b: float) -> bool:
     return math.isclose(a, b, rel_tol=1e-6, abs_tol=1e-9)
 
@@ -42,8 +40,13 @@ def _swerve_ref(offsets, slight, clear, *, relative=True, signed=True, peak=True
 
 SWERVE_CASES = [
     # (offsets (P, T), slight, clear); after the first, each case tells one usual mistake from the others
-    (np.array([[0.3, 0.4, 0.9, 0.5], [0.0, 0.2, 1.3, 0.1], [-0.2, -0.9, -1.4, -0.6], [0.5, 0.6, 0.6, 0.55]]),
-     0.5, 1.0),
+    (
+        np.array(
+            [[0.3, 0.4, 0.9, 0.5], [0.0, 0.2, 1.3, 0.1], [-0.2, -0.9, -1.4, -0.6], [0.5, 0.6, 0.6, 0.55]]
+        ),
+        0.5,
+        1.0,
+    ),
     (np.array([[0.6, 0.65, 0.7, 0.6], [0.0, 0.1, 0.2, 0.1]]), 0.5, 1.0),  # entered off the centre line
     (np.array([[0.0, -0.7, -1.2, -0.3], [0.0, 0.2, 0.1, 0.0]]), 0.5, 1.0),  # moved away from the side road
     (np.array([[0.0, 1.1, 1.2, 1.1], [0.0, 0.6, 0.6, 0.6]]), 0.5, 1.0),  # peak, not mean
@@ -53,9 +56,9 @@ SWERVE_CASES = [
 
 SWERVE_HINTS = {
     "relative": "a car that enters the section already off the centre line has not swerved: measure each pass's "
-                "offsets from where the car was when the section began.",
+    "offsets from where the car was when the section began.",
     "signed": "only movement towards the side road is a swerve: a car that moves away from it has not been pulled "
-              "towards the other option.",
+    "towards the other option.",
     "peak": "a swerve is judged by how far the car went at its farthest, not on average over the pass.",
     "half": "the paper counts a slight swerve as half a swerve.",
 }
@@ -83,14 +86,19 @@ def check_swerve_rate(fn) -> Feedback:
             if len(made) == 1:
                 return hint(SWERVE_HINTS[made[0]])
             if not made:
-                return hint(f"for offsets {offsets.tolist()} with thresholds {slight} and {clear} m your rate is "
-                            f"{out:.4f}: score each pass 0, 1/2 or 1 from its peak, then average.")
+                return hint(
+                    f"for offsets {offsets.tolist()} with thresholds {slight} and {clear} m your rate is "
+                    f"{out:.4f}: score each pass 0, 1/2 or 1 from its peak, then average."
+                )
             wrong = True
         if wrong:
-            return hint("your rates differ from Table 2's measure: score each pass 0, 1/2 or 1 from its peak offset "
-                        "towards the side road, measured from where the pass began, then average.")
-        return correct("That is Table 2's measure. Its two thresholds are choices: chapter 10 says why "
-                       "0.5 m and 1.0 m.")
+            return hint(
+                "your rates differ from Table 2's measure: score each pass 0, 1/2 or 1 from its peak offset "
+                "towards the side road, measured from where the pass began, then average."
+            )
+        return correct(
+            "That is Table 2's measure. Its two thresholds are choices: chapter 10 says why 0.5 m and 1.0 m."
+        )
 
     return run_check(check, "`swerve_rate`")
 
@@ -121,20 +129,28 @@ def check_command_whiteness(fn) -> Feedback:
                 continue
             joined = np.concatenate(segments)
             if _close(out, whiteness(joined, dt)):
-                return hint("a restart puts the car somewhere else: the change of command across it is not a change "
-                            "the model made. Take differences within each stretch only.")
+                return hint(
+                    "a restart puts the car somewhere else: the change of command across it is not a change "
+                    "the model made. Take differences within each stretch only."
+                )
             per = [whiteness(s, dt) for s in segments if len(s) >= 2]
             if _close(out, float(np.mean(per))):
-                return hint("the stretches have different lengths: pool their squared rates of change over all the "
-                            "changes (eq. 2's D) instead of averaging one W per stretch.")
+                return hint(
+                    "the stretches have different lengths: pool their squared rates of change over all the "
+                    "changes (eq. 2's D) instead of averaging one W per stretch."
+                )
             if _close(out, ref * dt) or _close(out, ref * dt * dt):
                 return hint("eq. 2 divides each change by the time between decisions, δt.")
             if _close(out, ref * ref):
                 return hint("eq. 2 is a root mean square: take the square root.")
             if _close(out, ref * 250.0) or _close(out, ref * math.degrees(0.6)):
-                return hint("the exercise asks for the book's unit, steer per second (1/s), not degrees per second.")
-            return hint(f"for these stretches at δt = {dt} s your W is {out:.5f}: square each change's rate δP/δt, "
-                        "average over all changes of all stretches, take the root.")
+                return hint(
+                    "the exercise asks for the book's unit, steer per second (1/s), not degrees per second."
+                )
+            return hint(
+                f"for these stretches at δt = {dt} s your W is {out:.5f}: square each change's rate δP/δt, "
+                "average over all changes of all stretches, take the root."
+            )
         return correct("That is W_cmd in 1/s; multiplied by 250 it is in the paper's steering-wheel °/s.")
 
     return run_check(check, "`command_whiteness`")
@@ -143,7 +159,11 @@ def check_command_whiteness(fn) -> Feedback:
 # --------------------------------------------------------------------------- 3. crashes per km
 RUNS = [
     [{"crashes": 2, "distance_m": 400.0}, {"crashes": 1, "distance_m": 1600.0}],
-    [{"crashes": 0, "distance_m": 900.0}, {"crashes": 3, "distance_m": 300.0}, {"crashes": 1, "distance_m": 800.0}],
+    [
+        {"crashes": 0, "distance_m": 900.0},
+        {"crashes": 3, "distance_m": 300.0},
+        {"crashes": 1, "distance_m": 800.0},
+    ],
 ]
 
 
@@ -161,13 +181,19 @@ def check_crashes_per_km(fn) -> Feedback:
             if _close(out, ref):
                 continue
             if _close(out, float(np.mean([ci / (di / 1000) for ci, di in zip(c, d)]))):
-                return hint("a short run would weigh as much as a long one: pool the crashes and the distances of "
-                            "all runs first, then divide.")
+                return hint(
+                    "a short run would weigh as much as a long one: pool the crashes and the distances of "
+                    "all runs first, then divide."
+                )
             if _close(out, ref / 1000) or _close(out, ref * 1000):
                 return hint("the distances are in metres; the rate is per kilometre.")
             if _close(out, float(sum(c))):
-                return hint("a count alone does not compare routes of different lengths: divide by the distance.")
+                return hint(
+                    "a count alone does not compare routes of different lengths: divide by the distance."
+                )
             return hint(f"for these runs your rate is {out:.4f}: total crashes over total kilometres.")
-        return correct("Pooled crashes per km: the table of chapter 10 reports it per seed, then its mean and spread.")
+        return correct(
+            "Pooled crashes per km: the table of chapter 10 reports it per seed, then its mean and spread."
+        )
 
     return run_check(check, "`crashes_per_km`")

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import math
 import traceback
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import torch
 
@@ -40,8 +40,11 @@ class Feedback:
 
 
 def not_attempted(what: str = "this exercise") -> Feedback:
-    return Feedback(NOT_ATTEMPTED, f"Replace the `raise NotImplementedError` in {what} with your code, run the cell that "
-                    "defines your function, then run this checker cell.")
+    return Feedback(
+        NOT_ATTEMPTED,
+        f"Replace the `raise NotImplementedError` in {what} with your code, run the cell that "
+        "defines your function, then run this checker cell.",
+    )
 
 
 def correct(message: str = "Well done.") -> Feedback:
@@ -67,7 +70,7 @@ def run_check(check: Callable[[], Feedback], what: str = "this exercise") -> Fee
         return hint(f"your code raised {type(exc).__name__}: {exc} (line {last.lineno} of {last.name}).")
 
 
-def tensor_answer(out, name: str, shape: tuple, what: str = "") -> "torch.Tensor | Feedback":
+def tensor_answer(out, name: str, shape: tuple, what: str = "") -> torch.Tensor | Feedback:
     """The reader's ``out`` as a finite tensor of ``shape`` (detached), or a hint saying what is wrong.
 
     ``what`` is appended to the shape hint, e.g. "(one value per point)".
@@ -81,7 +84,7 @@ def tensor_answer(out, name: str, shape: tuple, what: str = "") -> "torch.Tensor
     return out.detach()
 
 
-def number_answer(value, name: str) -> "float | Feedback":
+def number_answer(value, name: str) -> float | Feedback:
     """A reader's function's return value as a finite float, or the hint that says why it is not one
     (``name`` is the function's name in the exercise). True and False are refused: they are not numbers."""
     if isinstance(value, bool) or type(value).__name__ == "bool_":

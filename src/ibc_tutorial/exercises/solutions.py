@@ -52,7 +52,6 @@ def ch02_beta_nll(alpha, beta, actions):
 def ch02_mdn_nll(logits, means, stds, actions):
     """-log Σ_k π_k Π_d N(y_d; μ_kd, σ_kd²), averaged over the batch, in log space."""
 
-
     log_w = torch.log_softmax(logits, dim=1)  # (B, K)
     z = (actions[:, None, :] - means) / stds  # (B, K, D)
     log_n = (-0.5 * z**2 - torch.log(stds) - 0.5 * math.log(2 * math.pi)).sum(dim=2)  # (B, K)
@@ -101,7 +100,6 @@ def ch04_expert_negatives(expert_actions, batch_size, n_neg, sigma, generator=No
 def ch04_grid_nll(pos_energy, grid_energy, cell_volume):
     """−log p(y|x) = E(x, y) + log Σ_g e^(−E(x, a_g)) + log ΔA, per sample: (B,)."""
 
-
     return pos_energy + torch.logsumexp(-grid_energy, dim=1) + math.log(cell_volume)
 
 
@@ -116,7 +114,6 @@ def ch04_predicted_shares(valid_actions, expert_actions, sigma):
 def ch05_kde_1d(x, data, h):
     """Eq. 4 of the DA-IBC paper: ĝ(x) = 1/(N h) Σ_j K((x − x_j)/h) with the Gaussian kernel, for every x."""
 
-
     u = (x[:, None] - data[None, :]) / h  # (Q, N)
     k = torch.exp(-0.5 * u**2) / math.sqrt(2 * math.pi)  # K(u)
     return k.sum(dim=1) / (len(data) * h)  # (Q,)
@@ -124,7 +121,6 @@ def ch05_kde_1d(x, data, h):
 
 def ch05_inverse_weights(actions, h):
     """w_i ∝ 1/ĝ(y_i) (eq. 5), normalised to sum to 1, with ĝ the product-kernel KDE over the actions themselves."""
-
 
     d = actions.shape[1]
     u = (actions[:, None, :] - actions[None, :, :]) / h  # (M, M, D)
@@ -239,7 +235,12 @@ def ch08_recipe(method):
         return {"loss": "beta nll", "negatives": None, "dfo_init": None, "dfo_select": None}
     if method == "ibc":
         return {"loss": "infonce", "negatives": "uniform", "dfo_init": "uniform", "dfo_select": "argmax"}
-    return {"loss": "infonce", "negatives": "expert + noise", "dfo_init": "inverse-kde", "dfo_select": "sample"}
+    return {
+        "loss": "infonce",
+        "negatives": "expert + noise",
+        "dfo_init": "inverse-kde",
+        "dfo_select": "sample",
+    }
 
 
 # =========================================================================== chapter 09: the replication
@@ -261,7 +262,7 @@ def ch10_swerve_rate(offsets, slight, clear):
 def ch10_command_whiteness(segments, dt):
     """W_cmd (eq. 2 of the steering-EBM paper) pooled over the stretches between restarts."""
     rates = np.concatenate([np.diff(np.asarray(s, dtype=float)) / dt for s in segments if len(s) >= 2])
-    return float(np.sqrt(np.mean(rates ** 2)))
+    return float(np.sqrt(np.mean(rates**2)))
 
 
 def ch10_crashes_per_km(runs):

@@ -25,9 +25,9 @@ from dataclasses import dataclass, field, replace
 
 import torch
 
-from ibc_tutorial.optimizers.grid import action_grid, grid_energies
 from ibc_tutorial.metrics import grid_nll
 from ibc_tutorial.objectives import info_nce_objective
+from ibc_tutorial.optimizers.grid import action_grid, grid_energies
 from ibc_tutorial.policies import EnergyModel, MLPEncoder
 from ibc_tutorial.toy.junction import JunctionWorld
 from ibc_tutorial.training import TrainConfig, train
@@ -105,11 +105,15 @@ def make_model(world: JunctionWorld, config: CounterExampleConfig, seed: int) ->
     """A small EnergyModel (MLP encoder, two-layer head), initialised from ``seed``."""
     torch.manual_seed(check_int("seed", seed, minimum=0))
     w = config.width
-    return EnergyModel(MLPEncoder(world.obs_dim, embed_dim=w, hidden=w, layers=2), world.action_dim, hidden=w, layers=2)
+    return EnergyModel(
+        MLPEncoder(world.obs_dim, embed_dim=w, hidden=w, layers=2), world.action_dim, hidden=w, layers=2
+    )
 
 
 @torch.no_grad()
-def evaluate(model: EnergyModel, heldout: dict, world: JunctionWorld, config: CounterExampleConfig) -> dict[str, float]:
+def evaluate(
+    model: EnergyModel, heldout: dict, world: JunctionWorld, config: CounterExampleConfig
+) -> dict[str, float]:
     """Held-out ``nll`` (nats, lower is better) and ``hit`` rate (higher is better); see the module docstring."""
     grid = action_grid(config.grid_n, 2)  # (G, 2)
     z = model.embed(heldout["obs"])  # (B, E)
@@ -123,7 +127,13 @@ def evaluate(model: EnergyModel, heldout: dict, world: JunctionWorld, config: Co
     return {"nll": float(nll), "hit": float((dist <= config.hit_radius).float().mean())}
 
 
-def run(world: JunctionWorld, sampler, config: CounterExampleConfig, seed: int, data: tuple[dict, dict] | None = None) -> CounterExampleRun:
+def run(
+    world: JunctionWorld,
+    sampler,
+    config: CounterExampleConfig,
+    seed: int,
+    data: tuple[dict, dict] | None = None,
+) -> CounterExampleRun:
     """Train one energy model with InfoNCE and ``sampler``'s counter-examples; evaluate along the way.
 
     ``seed`` sets the initial weights, the minibatches and the counter-examples (it replaces
@@ -140,7 +150,11 @@ def run(world: JunctionWorld, sampler, config: CounterExampleConfig, seed: int, 
         evaluate=lambda: evaluate(model, heldout, world, config),
     )
     return CounterExampleRun(
-        steps=res.steps, nll=[e["nll"] for e in res.evals], hit=[e["hit"] for e in res.evals], losses=res.losses, model=model
+        steps=res.steps,
+        nll=[e["nll"] for e in res.evals],
+        hit=[e["hit"] for e in res.evals],
+        losses=res.losses,
+        model=model,
     )
 
 
@@ -150,7 +164,14 @@ def expert_nll(world: JunctionWorld, heldout: dict) -> float:
 
 
 def negatives_histogram(
-    sampler, actions: torch.Tensor, n_neg: int, *, batches: int = 50, batch_size: int = 64, bins: int = 40, seed: int = 0
+    sampler,
+    actions: torch.Tensor,
+    n_neg: int,
+    *,
+    batches: int = 50,
+    batch_size: int = 64,
+    bins: int = 40,
+    seed: int = 0,
 ) -> torch.Tensor:
     """Where a sampler's counter-examples land: a (bins, bins) histogram over [-1, 1]², summing to 1.
 
@@ -173,7 +194,9 @@ def negatives_histogram(
 
 
 @torch.no_grad()
-def mode_masses(model: EnergyModel, obs: torch.Tensor, world: JunctionWorld, *, grid_n: int = 51, radius: float = 0.15) -> torch.Tensor:
+def mode_masses(
+    model: EnergyModel, obs: torch.Tensor, world: JunctionWorld, *, grid_n: int = 51, radius: float = 0.15
+) -> torch.Tensor:
     """Probability p_θ(y|x) puts within ``radius`` of each of the expert's three candidate actions.
 
     p_θ is normalised over a ``grid_n`` × ``grid_n`` grid of the box. For a junction observation

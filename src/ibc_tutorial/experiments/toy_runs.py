@@ -16,13 +16,20 @@ as one after another in the notebook's own process:
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import replace
-from typing import Callable, Sequence
 
 import torch
 
 from ibc_tutorial.objectives import likelihood_objective
-from ibc_tutorial.policies import BetaPolicy, ClassifierPolicy, EnergyModel, MDNPolicy, MLPEncoder, RegressionPolicy
+from ibc_tutorial.policies import (
+    BetaPolicy,
+    ClassifierPolicy,
+    EnergyModel,
+    MDNPolicy,
+    MLPEncoder,
+    RegressionPolicy,
+)
 from ibc_tutorial.policies.explicit import ExplicitPolicy
 from ibc_tutorial.toy.world import Demonstrations
 from ibc_tutorial.training import Objective, TrainConfig, TrainResult, train
@@ -38,7 +45,9 @@ EXPLICIT_TRAIN = TrainConfig(steps=2000, batch_size=128, lr=3e-3)
 
 def _check_demos(demos) -> Demonstrations:
     if not isinstance(demos, Demonstrations):
-        raise ValueError(f"demos must be Demonstrations (world.expert_demonstrations), got {type(demos).__name__}")
+        raise ValueError(
+            f"demos must be Demonstrations (world.expert_demonstrations), got {type(demos).__name__}"
+        )
     return demos
 
 
@@ -55,8 +64,9 @@ def make_explicit(name: str, obs_dim: int) -> ExplicitPolicy:
     raise ValueError(f"name must be one of {EXPLICIT}, got {name!r}")
 
 
-def train_explicit(demos: Demonstrations, seed: int, names: Sequence[str] = EXPLICIT, *,
-                   config: TrainConfig = EXPLICIT_TRAIN) -> dict[str, tuple[ExplicitPolicy, TrainResult]]:
+def train_explicit(
+    demos: Demonstrations, seed: int, names: Sequence[str] = EXPLICIT, *, config: TrainConfig = EXPLICIT_TRAIN
+) -> dict[str, tuple[ExplicitPolicy, TrainResult]]:
     """Chapter 02's policies ``names`` trained on ``demos``: ``{name: (policy, loss curve)}``.
 
     After ``torch.manual_seed(seed)`` the policies are built one after another in the order of
@@ -93,8 +103,16 @@ def fit_regression(demos: Demonstrations, seed: int = 0, *, steps: int = 1000) -
     return policy
 
 
-def fit_ebm(data: dict[str, torch.Tensor], obs_dim: int, objective: Callable[[EnergyModel], Objective], seed: int = 0, *,
-            steps: int = 1000, batch_size: int = 64, width: int = 64) -> tuple[EnergyModel, TrainResult]:
+def fit_ebm(
+    data: dict[str, torch.Tensor],
+    obs_dim: int,
+    objective: Callable[[EnergyModel], Objective],
+    seed: int = 0,
+    *,
+    steps: int = 1000,
+    batch_size: int = 64,
+    width: int = 64,
+) -> tuple[EnergyModel, TrainResult]:
     """Chapter 03's energy model for one steering action, trained on ``data`` by ``objective(model)``.
 
     The model: an MLP encoder of two layers of ``width`` and a head of two layers of ``width``
@@ -110,7 +128,9 @@ def fit_ebm(data: dict[str, torch.Tensor], obs_dim: int, objective: Callable[[En
     if not callable(objective):
         raise ValueError(f"objective must be callable as objective(model), got {type(objective).__name__}")
     torch.manual_seed(seed)  # the initial weights
-    model = EnergyModel(MLPEncoder(obs_dim, embed_dim=width, hidden=width), action_dim=1, hidden=width, layers=2)
+    model = EnergyModel(
+        MLPEncoder(obs_dim, embed_dim=width, hidden=width), action_dim=1, hidden=width, layers=2
+    )
     config = TrainConfig(steps=steps, batch_size=batch_size, lr=3e-3, seed=seed)
     curve = train(model, objective(model), data, config)
     return model, curve

@@ -51,7 +51,9 @@ class ActionOptimizer(Protocol):
     it holds from its construction; random draws come from ``generator``.
     """
 
-    def infer(self, model: EmbeddingEnergyModel, obs, *, generator: torch.Generator | None = None) -> torch.Tensor:
+    def infer(
+        self, model: EmbeddingEnergyModel, obs, *, generator: torch.Generator | None = None
+    ) -> torch.Tensor:
         """(B, D) one action per observation of the batch ``obs`` (a tensor, or a dict of tensors)."""
         ...
 

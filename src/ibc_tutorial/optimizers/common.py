@@ -66,12 +66,16 @@ def bounds(low, high, d: int) -> tuple[torch.Tensor, torch.Tensor]:
     hi = torch.as_tensor(high, dtype=torch.get_default_dtype()).reshape(-1)
     for name, t in (("low", lo), ("high", hi)):
         if t.numel() not in (1, d):
-            raise ValueError(f"{name} must be a number or have one entry per action dimension (D = {d}), got {t.numel()} entries")
+            raise ValueError(
+                f"{name} must be a number or have one entry per action dimension (D = {d}), got {t.numel()} entries"
+            )
         if not torch.isfinite(t).all():
             raise ValueError(f"{name} must be finite, got {t.tolist()}")
     lo, hi = lo.expand(d).clone(), hi.expand(d).clone()  # (D,), (D,)
     if not (lo < hi).all():
-        raise ValueError(f"low must be < high in every action dimension, got low={lo.tolist()}, high={hi.tolist()}")
+        raise ValueError(
+            f"low must be < high in every action dimension, got low={lo.tolist()}, high={hi.tolist()}"
+        )
     return lo, hi
 
 
@@ -90,19 +94,25 @@ def energies(energy_fn, y: torch.Tensor) -> torch.Tensor:
     e = energy_fn(y)
     if not isinstance(e, torch.Tensor) or tuple(e.shape) != tuple(y.shape[:2]):
         got = tuple(e.shape) if isinstance(e, torch.Tensor) else type(e).__name__
-        raise ValueError(f"energy_fn must return one energy per candidate action, shape {tuple(y.shape[:2])}, got {got}")
+        raise ValueError(
+            f"energy_fn must return one energy per candidate action, shape {tuple(y.shape[:2])}, got {got}"
+        )
     if not torch.isfinite(e).all():
         raise ValueError("energy_fn returned NaN or inf energies")
     return e.to(y.dtype)  # (B, N), in the populations' dtype
 
 
-def multinomial(p: torch.Tensor, n: int, generator: torch.Generator | None, replacement: bool = False) -> torch.Tensor:
+def multinomial(
+    p: torch.Tensor, n: int, generator: torch.Generator | None, replacement: bool = False
+) -> torch.Tensor:
     """``torch.multinomial(p, n, replacement)``, drawn on the generator's device and returned on p's."""
     where = draw_device(generator)
     return torch.multinomial(p.to(where), n, replacement=replacement, generator=generator).to(p.device)
 
 
-def select_action(y: torch.Tensor, p: torch.Tensor, select: str, generator: torch.Generator | None) -> torch.Tensor:
+def select_action(
+    y: torch.Tensor, p: torch.Tensor, select: str, generator: torch.Generator | None
+) -> torch.Tensor:
     """Line 14 of Algorithm 1 ("sample") or the original argmax: y (B, N, D), p (B, N) -> (B, D)."""
     check_choice("select", select, SELECTIONS)
     if select == "sample":
@@ -119,7 +129,9 @@ def single_observation(energy_fn):
         e = energy_fn(y[0])
         if not isinstance(e, torch.Tensor) or tuple(e.shape) != (y.shape[1],):
             got = tuple(e.shape) if isinstance(e, torch.Tensor) else type(e).__name__
-            raise ValueError(f"energy_fn must map actions (N, D) to energies (N,) = ({y.shape[1]},), got {got}")
+            raise ValueError(
+                f"energy_fn must map actions (N, D) to energies (N,) = ({y.shape[1]},), got {got}"
+            )
         return e[None]
 
     return batched

@@ -16,7 +16,14 @@ import torch
 
 from ibc_tutorial.kde import DEFAULT_BANDWIDTH, inverse_density_weights, kde_density
 from ibc_tutorial.optimizers.common import (
-    SELECTIONS, bounds, check_box, check_call, check_expert_actions, energies, multinomial, select_action,
+    SELECTIONS,
+    bounds,
+    check_box,
+    check_call,
+    check_expert_actions,
+    energies,
+    multinomial,
+    select_action,
     single_observation,
 )
 from ibc_tutorial.utils import check_choice, check_int, check_positive, check_tensor, draw_device
@@ -93,7 +100,9 @@ class DFOTrace:
 
 
 # --------------------------------------------------------------------------- line 2: the initial population
-def initial_weights(expert_actions: torch.Tensor, config: DFOConfig | LangevinConfig = DFOConfig()) -> torch.Tensor | None:
+def initial_weights(
+    expert_actions: torch.Tensor, config: DFOConfig | LangevinConfig = DFOConfig()
+) -> torch.Tensor | None:
     """The Categorical weights over expert actions of Algorithm 1 line 2; None for ``init="uniform"``.
 
     "kde": w_i ∝ ĝ(y_i) (the algorithm as printed), from ``kde.kde_density``; "inverse-kde":
@@ -256,7 +265,9 @@ def dfo(
     else:
         b, fn = check_int("n_obs", n_obs, minimum=1), energy_fn
     with torch.no_grad():
-        y = initial_samples(expert_actions, b, config, init_weights=init_weights, generator=generator)  # (B, N, D)
+        y = initial_samples(
+            expert_actions, b, config, init_weights=init_weights, generator=generator
+        )  # (B, N, D)
         action, _ = _dfo_core(fn, y, config, lo, hi, generator, record=False)  # (B, D)
     return action[0] if n_obs is None else action
 
@@ -276,7 +287,9 @@ def dfo_trace(
     """
     lo, hi = check_call(expert_actions, config, DFOConfig)
     with torch.no_grad():
-        y = initial_samples(expert_actions, 1, config, init_weights=init_weights, generator=generator)  # (1, N, D)
+        y = initial_samples(
+            expert_actions, 1, config, init_weights=init_weights, generator=generator
+        )  # (1, N, D)
         action, rec = _dfo_core(single_observation(energy_fn), y, config, lo, hi, generator, record=True)
     return DFOTrace(
         samples=[s[0] for s in rec["samples"]],
@@ -300,7 +313,13 @@ class DFOOptimizer:
             (``initial_weights``).
     """
 
-    def __init__(self, expert_actions: torch.Tensor, config: DFOConfig = DFOConfig(), *, init_weights: torch.Tensor | None = None):
+    def __init__(
+        self,
+        expert_actions: torch.Tensor,
+        config: DFOConfig = DFOConfig(),
+        *,
+        init_weights: torch.Tensor | None = None,
+    ):
         bounds_ = check_call(expert_actions, config, DFOConfig)
         check_expert_actions(expert_actions, *bounds_)
         self.expert_actions, self.config = expert_actions, config
@@ -315,12 +334,24 @@ class DFOOptimizer:
         dict observations work too.
         """
         z = model.embed(obs)  # (B, E), once per observation
-        return dfo(lambda a: model.energy_from_embedding(z, a), self.expert_actions, self.config,
-                   n_obs=len(z), init_weights=self.init_weights, generator=generator)  # (B, D)
+        return dfo(
+            lambda a: model.energy_from_embedding(z, a),
+            self.expert_actions,
+            self.config,
+            n_obs=len(z),
+            init_weights=self.init_weights,
+            generator=generator,
+        )  # (B, D)
 
 
-def dfo_policy(model, expert_actions: torch.Tensor, config: DFOConfig = DFOConfig(), *,
-               init_weights: torch.Tensor | None = None, generator: torch.Generator | None = None):
+def dfo_policy(
+    model,
+    expert_actions: torch.Tensor,
+    config: DFOConfig = DFOConfig(),
+    *,
+    init_weights: torch.Tensor | None = None,
+    generator: torch.Generator | None = None,
+):
     """A closed-loop policy ``policy(obs) -> actions (B, D)`` running ``dfo`` on ``model`` in eval mode.
 
     ``model`` is an energy model with ``embed(obs) -> z`` and ``energy_from_embedding(z, actions

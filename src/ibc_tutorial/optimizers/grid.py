@@ -35,7 +35,9 @@ def action_grid(n_per_dim: int, action_dim: int = 1, low: float = -1.0, high: fl
     return torch.cartesian_prod(*[axis] * action_dim).reshape(-1, action_dim)  # (n^D, D)
 
 
-def grid_energies(model, z: torch.Tensor, grid: torch.Tensor, *, chunk_elements: int = CHUNK_ELEMENTS) -> torch.Tensor:
+def grid_energies(
+    model, z: torch.Tensor, grid: torch.Tensor, *, chunk_elements: int = CHUNK_ELEMENTS
+) -> torch.Tensor:
     """Energies of a shared grid of candidates for embeddings ``z`` (B, E), in blocks of observations.
 
     Same result as ``model.energy_from_embedding(z, grid)`` (B, G), computed over blocks of

@@ -27,7 +27,12 @@ import torch
 
 from ibc_tutorial.kde import DEFAULT_BANDWIDTH
 from ibc_tutorial.optimizers.common import (
-    SELECTIONS, check_box, check_call, energies, select_action, single_observation,
+    SELECTIONS,
+    check_box,
+    check_call,
+    energies,
+    select_action,
+    single_observation,
 )
 from ibc_tutorial.optimizers.dfo import INITS, initial_samples, initial_weights
 from ibc_tutorial.utils import check_choice, check_int, check_positive, draw_device
@@ -105,7 +110,9 @@ class LangevinTrace:
     """The settings the trace was run with."""
 
 
-def polynomial_schedule(step: int, n_steps: int, init: float = 1e-1, final: float = 1e-5, power: float = 2.0) -> float:
+def polynomial_schedule(
+    step: int, n_steps: int, init: float = 1e-1, final: float = 1e-5, power: float = 2.0
+) -> float:
     """Step size ε of Langevin step ``step`` (0-based) of ``n_steps``: the IBC paper's polynomial decay.
 
     ε_k = (ε_init − ε_final) · (1 − k / (n_steps − 1))^power + ε_final, from ε_init at the first step
@@ -125,7 +132,9 @@ def _langevin_core(energy_fn, y: torch.Tensor, config: LangevinConfig, lo, hi, g
     DFO's is: a run on a GPU draws the same numbers from the same seeded CPU generator as on the CPU."""
     c = config
     lo, hi, where = lo.to(y.device), hi.to(y.device), draw_device(generator)  # bounds (D,) on y's device
-    max_delta = c.delta_clip * 0.5 * (hi - lo)  # (D,) the reference scales the clip as if actions were in [-1, 1]
+    max_delta = (
+        c.delta_clip * 0.5 * (hi - lo)
+    )  # (D,) the reference scales the clip as if actions were in [-1, 1]
     rec = {"samples": [y.detach().clone()], "steps": []} if record else None
     for k in range(c.n_iters):
         eps = polynomial_schedule(k, c.n_iters, c.step_init, c.step_final, c.power)
@@ -137,7 +146,9 @@ def _langevin_core(energy_fn, y: torch.Tensor, config: LangevinConfig, lo, hi, g
         if c.noise == "ibc":
             delta = eps * (0.5 * grad + c.noise_scale * n)  # the reference's langevin_step
         else:
-            delta = eps * 0.5 * grad + math.sqrt(eps) * c.noise_scale * n  # ULA: gradient step η = ε/2, noise √(2η)
+            delta = (
+                eps * 0.5 * grad + math.sqrt(eps) * c.noise_scale * n
+            )  # ULA: gradient step η = ε/2, noise √(2η)
         delta = torch.clamp(delta, -max_delta, max_delta)  # clip each move to ±delta_clip of the half-range
         y = torch.clamp(y.detach() - delta, lo, hi)  # stay inside the box
         if rec is not None:
@@ -182,7 +193,9 @@ def langevin(
         b, fn = 1, single_observation(energy_fn)
     else:
         b, fn = check_int("n_obs", n_obs, minimum=1), energy_fn
-    y = initial_samples(expert_actions, b, config, init_weights=init_weights, generator=generator)  # (B, N, D)
+    y = initial_samples(
+        expert_actions, b, config, init_weights=init_weights, generator=generator
+    )  # (B, N, D)
     action, _ = _langevin_core(fn, y, config, lo, hi, generator, record=False)
     action = action.detach()  # (B, D)
     return action[0] if n_obs is None else action
@@ -198,7 +211,9 @@ def langevin_trace(
 ) -> LangevinTrace:
     """``langevin`` for one observation, also returning the population after every step (same draws)."""
     lo, hi = check_call(expert_actions, config, LangevinConfig)
-    y = initial_samples(expert_actions, 1, config, init_weights=init_weights, generator=generator)  # (1, N, D)
+    y = initial_samples(
+        expert_actions, 1, config, init_weights=init_weights, generator=generator
+    )  # (1, N, D)
     action, rec = _langevin_core(single_observation(energy_fn), y, config, lo, hi, generator, record=True)
     return LangevinTrace(
         samples=[s[0] for s in rec["samples"]],
@@ -213,8 +228,13 @@ def langevin_trace(
 class LangevinOptimizer:
     """``langevin`` on an energy model, an ``ActionOptimizer``: expert actions and weights fixed once."""
 
-    def __init__(self, expert_actions: torch.Tensor, config: LangevinConfig = LangevinConfig(), *,
-                 init_weights: torch.Tensor | None = None):
+    def __init__(
+        self,
+        expert_actions: torch.Tensor,
+        config: LangevinConfig = LangevinConfig(),
+        *,
+        init_weights: torch.Tensor | None = None,
+    ):
         check_call(expert_actions, config, LangevinConfig)
         self.expert_actions, self.config = expert_actions, config
         self.init_weights = initial_weights(expert_actions, config) if init_weights is None else init_weights
@@ -223,5 +243,11 @@ class LangevinOptimizer:
         """(B, D) actions for a batch of B observations; the observations are embedded once."""
         with torch.no_grad():
             z = model.embed(obs)  # (B, E)
-        return langevin(lambda a: model.energy_from_embedding(z, a), self.expert_actions, self.config,
-                        n_obs=len(z), init_weights=self.init_weights, generator=generator)  # (B, D)
+        return langevin(
+            lambda a: model.energy_from_embedding(z, a),
+            self.expert_actions,
+            self.config,
+            n_obs=len(z),
+            init_weights=self.init_weights,
+            generator=generator,
+        )  # (B, D)

@@ -17,7 +17,9 @@ METHOD_LABELS = {"bc": "BC (Beta)", "ibc": "IBC", "da-ibc": "DA-IBC", "expert": 
 """Name of each method in legends and titles."""
 
 
-def plot_agent_architecture(bev_size: int = 64, channels=(16, 32, 32, 64), embed_dim: int = 256, head_hidden: int = 128):
+def plot_agent_architecture(
+    bev_size: int = 64, channels=(16, 32, 32, 64), embed_dim: int = 256, head_hidden: int = 128
+):
     """The DA-IBC paper's Fig. 2 as boxes and arrows: BEV CNN and state MLP, concatenated, then the
     Beta head (BC) or the energy head with its factorised first layer (IBC, DA-IBC)."""
     fig, ax = plt.subplots(figsize=(11, 4.6))
@@ -36,24 +38,59 @@ def plot_agent_architecture(bev_size: int = 64, channels=(16, 32, 32, 64), embed
     for c in channels:
         side = (side + 1) // 2
         convs.append(f"{c}x{side}x{side}")
-    box(0.1, 3.2, 1.6, 1.2, f"BEV\n5 x {bev_size} x {bev_size}\n(road, lanes,\nlights t-16, -9, -1\nby intensity)", "#dde8f5")
-    box(2.1, 3.2, 2.0, 1.2, "CNN: 3x3 stride-2 convs\n" + " -> ".join(convs[:2]) + "\n-> " + " -> ".join(convs[2:]), "#c6dbef")
+    box(
+        0.1,
+        3.2,
+        1.6,
+        1.2,
+        f"BEV\n5 x {bev_size} x {bev_size}\n(road, lanes,\nlights t-16, -9, -1\nby intensity)",
+        "#dde8f5",
+    )
+    box(
+        2.1,
+        3.2,
+        2.0,
+        1.2,
+        "CNN: 3x3 stride-2 convs\n" + " -> ".join(convs[:2]) + "\n-> " + " -> ".join(convs[2:]),
+        "#c6dbef",
+    )
     box(4.5, 3.3, 1.3, 1.0, f"linear\n-> {embed_dim}", "#c6dbef")
     box(0.1, 1.3, 1.6, 1.0, "state (3)\nspeed, previous\nsteer, acceleration", "#e5f5e0")
     box(2.1, 1.3, 3.7, 1.0, f"MLP: 3 -> {embed_dim} -> {embed_dim}", "#c7e9c0")
     box(6.2, 2.2, 1.2, 1.2, f"z\nconcat\n{2 * embed_dim}", "#fdd0a2")
     box(7.9, 3.5, 2.9, 1.0, "BC: linear -> (α, β) per action\nBeta(α, β) on [-1, 1]  (eq. 1)", "#fcbba1")
-    box(7.9, 0.6, 2.9, 2.4, f"IBC / DA-IBC energy head:\nW_z z + b  (once per x)\n+ W_a y  (per candidate y)\nReLU -> {head_hidden} -> ReLU\n-> E(x, y)  (scalar)", "#fcbba1")
+    box(
+        7.9,
+        0.6,
+        2.9,
+        2.4,
+        f"IBC / DA-IBC energy head:\nW_z z + b  (once per x)\n+ W_a y  (per candidate y)\nReLU -> {head_hidden} -> ReLU\n-> E(x, y)  (scalar)",
+        "#fcbba1",
+    )
     box(6.2, 0.3, 1.2, 0.9, "action y\n(steer, acc)", "#f0f0f0")
-    for x0, y0, x1, y1 in ((1.7, 3.8, 2.1, 3.8), (4.1, 3.8, 4.5, 3.8), (1.7, 1.8, 2.1, 1.8), (5.8, 3.8, 6.5, 3.4),
-                           (5.8, 1.8, 6.5, 2.2), (7.4, 3.0, 7.9, 3.9), (7.4, 2.6, 7.9, 2.2), (7.4, 0.75, 7.9, 1.2)):
+    for x0, y0, x1, y1 in (
+        (1.7, 3.8, 2.1, 3.8),
+        (4.1, 3.8, 4.5, 3.8),
+        (1.7, 1.8, 2.1, 1.8),
+        (5.8, 3.8, 6.5, 3.4),
+        (5.8, 1.8, 6.5, 2.2),
+        (7.4, 3.0, 7.9, 3.9),
+        (7.4, 2.6, 7.9, 2.2),
+        (7.4, 0.75, 7.9, 1.2),
+    ):
         arrow(x0, y0, x1, y1)
     ax.set_title("The agents' network (the DA-IBC paper's Fig. 2, at the laptop preset's sizes)")
     return fig
 
 
-def plot_training_curves(curves: dict, *, key: str = "score", ylabel: str = "town02 score (m x 0.7^infractions)",
-                         title: str = "Score in town02 during training (mean ± std over seeds)", ax=None):
+def plot_training_curves(
+    curves: dict,
+    *,
+    key: str = "score",
+    ylabel: str = "town02 score (m x 0.7^infractions)",
+    title: str = "Score in town02 during training (mean ± std over seeds)",
+    ax=None,
+):
     """Score (or another key of ``curves[method][seed]``) against epoch: mean and ±1 std over seeds per method."""
     if ax is None:
         _, ax = plt.subplots(figsize=(7.5, 4.2))
@@ -61,10 +98,14 @@ def plot_training_curves(curves: dict, *, key: str = "score", ylabel: str = "tow
         if not per_seed:
             continue
         epochs = sorted(set.intersection(*(set(c["epoch"]) for c in per_seed.values())))
-        vals = np.array([[c[key][c["epoch"].index(e)] for e in epochs] for c in per_seed.values()])  # (seeds, E)
+        vals = np.array(
+            [[c[key][c["epoch"].index(e)] for e in epochs] for c in per_seed.values()]
+        )  # (seeds, E)
         m, s = vals.mean(0), vals.std(0)
         color = METHOD_COLORS.get(method)
-        ax.plot(epochs, m, "o-", color=color, label=f"{METHOD_LABELS.get(method, method)} ({len(vals)} seeds)")
+        ax.plot(
+            epochs, m, "o-", color=color, label=f"{METHOD_LABELS.get(method, method)} ({len(vals)} seeds)"
+        )
         ax.fill_between(epochs, m - s, m + s, color=color, alpha=0.2)
     label_axes(ax, "epoch", ylabel, title)
     ax.legend()
@@ -78,12 +119,19 @@ def plot_loss_curves(curves: dict, *, title: str = "Training loss"):
     fig, axes = plt.subplots(1, n, figsize=(4.0 * n, 3.3), squeeze=False)
     for ax, (method, (x, loss)) in zip(axes[0], curves.items()):
         ax.plot(x, loss, "o-", color=METHOD_COLORS.get(method))
-        label_axes(ax, "epoch", "Beta NLL (eq. 1)" if method == "bc" else "InfoNCE (eq. 2)", METHOD_LABELS.get(method, method))
+        label_axes(
+            ax,
+            "epoch",
+            "Beta NLL (eq. 1)" if method == "bc" else "InfoNCE (eq. 2)",
+            METHOD_LABELS.get(method, method),
+        )
         ax.grid(alpha=0.3)
     return finish(fig, True, title=title)
 
 
-def plot_trajectories(town, trajectories: dict, *, titles: dict | None = None, suptitle: str = "Free driving in town02"):
+def plot_trajectories(
+    town, trajectories: dict, *, titles: dict | None = None, suptitle: str = "Free driving in town02"
+):
     """One map per entry of ``trajectories`` ({name: [xy (T, 2), ...]}), each episode a line, starts as dots."""
     n = check_panels("trajectories", trajectories)
     fig, axes = plt.subplots(1, n, figsize=(6.0 * n, 5.4), squeeze=False)
@@ -102,8 +150,13 @@ def plot_trajectories(town, trajectories: dict, *, titles: dict | None = None, s
 def plot_energy_landscapes(panels: list, steer, accel, *, suptitle: str = "Energy landscapes of DA-IBC"):
     """Per panel (title, E (A, S) over accel x steer, points (K, 2), bev (5, S, S) or None): the BEV and E with the points."""
     check_panels("panels", panels)
-    fig, axes = plt.subplots(len(panels), 2, figsize=(9.5, 4.1 * len(panels)), squeeze=False,
-                             gridspec_kw={"width_ratios": [1, 1.5]})
+    fig, axes = plt.subplots(
+        len(panels),
+        2,
+        figsize=(9.5, 4.1 * len(panels)),
+        squeeze=False,
+        gridspec_kw={"width_ratios": [1, 1.5]},
+    )
     for (ax_b, ax_e), (title, e, points, bev) in zip(axes, panels):
         if bev is not None:
             draw_bev(ax_b, bev)
@@ -114,7 +167,15 @@ def plot_energy_landscapes(panels: list, steer, accel, *, suptitle: str = "Energ
         cs = ax_e.contourf(steer, accel, e - e.min(), levels=20, cmap="viridis")
         fig.colorbar(cs, ax=ax_e, label="E(x, y) - min E")
         p = as_array(points)  # (K, 2)
-        ax_e.scatter(p[:, 0], p[:, 1], c="red", s=28, edgecolors="white", linewidths=0.8, label=f"{len(p)} DFO inferences")
+        ax_e.scatter(
+            p[:, 0],
+            p[:, 1],
+            c="red",
+            s=28,
+            edgecolors="white",
+            linewidths=0.8,
+            label=f"{len(p)} DFO inferences",
+        )
         label_axes(ax_e, f"y_1: {STEER_LABEL}", f"y_2: {ACCEL_LABEL}", title, legend=True, loc="lower right")
     return finish(fig, True, title=suptitle)
 
@@ -126,8 +187,9 @@ def plot_exit_counts(counts: dict, *, title: str = "Exits taken at each junction
     Only approaches that some method visited are drawn, in the same order in every panel."""
     n = check_panels("counts", counts)
     approaches = sorted({int(a) for c in counts.values() for a in c})
-    fig, axes = plt.subplots(n, 1, figsize=(max(6.0, 0.45 * len(approaches) + 2.0), 2.6 * n), squeeze=False,
-                             sharex=True)
+    fig, axes = plt.subplots(
+        n, 1, figsize=(max(6.0, 0.45 * len(approaches) + 2.0), 2.6 * n), squeeze=False, sharex=True
+    )
     x = np.arange(len(approaches))
     for ax, (method, per) in zip(axes[:, 0], counts.items()):
         bottom = np.zeros(len(approaches))
@@ -136,14 +198,22 @@ def plot_exit_counts(counts: dict, *, title: str = "Exits taken at each junction
             ax.bar(x, h, bottom=bottom, color=color, label=turn, width=0.7)
             bottom += h
         ax.set_xticks(x, [str(a) for a in approaches])
-        label_axes(ax, "junction approach (id)", "visits", METHOD_LABELS.get(method, method), legend=True,
-                   loc="upper right", fontsize=8)
+        label_axes(
+            ax,
+            "junction approach (id)",
+            "visits",
+            METHOD_LABELS.get(method, method),
+            legend=True,
+            loc="upper right",
+            fontsize=8,
+        )
         ax.grid(alpha=0.3, axis="y")
     return finish(fig, True, title=title)
 
 
-def plot_labels_at_rest(labels: dict, *, title: str = "The expert's acceleration labels in states at rest",
-                        bins: int = 20):
+def plot_labels_at_rest(
+    labels: dict, *, title: str = "The expert's acceleration labels in states at rest", bins: int = 20
+):
     """One histogram per dataset of the expert's acceleration labels in the states where the car is at rest.
 
     ``labels``: ``{name: (N,) acceleration labels in [-1, 1]}``; each histogram shows the share of the
@@ -155,13 +225,19 @@ def plot_labels_at_rest(labels: dict, *, title: str = "The expert's acceleration
         acc = as_array(acc, float).ravel()  # (N,)
         ax.hist(acc, bins=edges, weights=np.full(len(acc), 1.0 / max(len(acc), 1)), color="C0")
         go = float((acc > 0.2).mean()) if len(acc) else 0.0
-        label_axes(ax, ACCEL_LABEL, "share of the states at rest", f"{name}\n{len(acc)} states at rest, {go:.0%} say go")
+        label_axes(
+            ax,
+            ACCEL_LABEL,
+            "share of the states at rest",
+            f"{name}\n{len(acc)} states at rest, {go:.0%} say go",
+        )
         ax.grid(alpha=0.3, axis="y")
     return finish(fig, True, title=title)
 
 
-
-def plot_crossing_steering(crossings: dict, *, title: str = "Steering during each junction crossing in town02"):
+def plot_crossing_steering(
+    crossings: dict, *, title: str = "Steering during each junction crossing in town02"
+):
     """One panel per agent kind: each junction crossing as a point (most leftward, most rightward steering).
 
     ``crossings``: ``{name: {label: (N, 2)}}``, the (``steer_min``, ``steer_max``) of the crossings of each
@@ -175,21 +251,42 @@ def plot_crossing_steering(crossings: dict, *, title: str = "Steering during eac
         for label, points in groups.items():
             pts = as_array(points, float).reshape(-1, 2)  # (N, 2): most leftward, most rightward steering
             if label.startswith("ended"):
-                ax.scatter(pts[:, 0], pts[:, 1], s=70, marker="x", color="C3", zorder=3, label=f"{label} ({len(pts)})")
+                ax.scatter(
+                    pts[:, 0],
+                    pts[:, 1],
+                    s=70,
+                    marker="x",
+                    color="C3",
+                    zorder=3,
+                    label=f"{label} ({len(pts)})",
+                )
             else:
                 ax.scatter(pts[:, 0], pts[:, 1], s=8, alpha=0.5, color=f"C{k}", label=f"{label} ({len(pts)})")
                 k += 1
         ax.plot([-1, 1], [-1, 1], color="0.7", lw=0.8)  # steer_max >= steer_min: points lie above it
-        label_axes(ax, "most leftward steering (−1 … +1)", "most rightward steering (−1 … +1)", name,
-                   legend=True, loc="upper left", fontsize=7)
+        label_axes(
+            ax,
+            "most leftward steering (−1 … +1)",
+            "most rightward steering (−1 … +1)",
+            name,
+            legend=True,
+            loc="upper left",
+            fontsize=7,
+        )
         ax.set_xlim(-1.05, 1.05)
         ax.set_ylim(-1.05, 1.05)
         ax.grid(alpha=0.3)
     return finish(fig, True, title=title)
 
 
-def plot_crossing_energies(panels: dict, steer, *, clip: float = 10.0, dt: float = 0.1,
-                           title: str = "Energy over steering in the crossings that ended in a building"):
+def plot_crossing_energies(
+    panels: dict,
+    steer,
+    *,
+    clip: float = 10.0,
+    dt: float = 0.1,
+    title: str = "Energy over steering in the crossings that ended in a building",
+):
     """One panel per crossing: its energy over steering (relative to each state's minimum) against time.
 
     ``panels``: ``{title: (T, G) energies}`` (``energy_by_steer`` of ``evaluate --crossings``), over the
@@ -210,8 +307,15 @@ def plot_crossing_energies(panels: dict, steer, *, clip: float = 10.0, dt: float
         if len(e) == 0:
             raise ValueError(f"panels[{name!r}] must hold at least one state's energies")
         t = np.arange(len(e)) * dt
-        image = ax.imshow(np.minimum(e, clip), aspect="auto", cmap="viridis_r", vmin=0, vmax=clip, origin="upper",
-                          extent=(steer[0], steer[-1], t[-1] + dt, 0))
+        image = ax.imshow(
+            np.minimum(e, clip),
+            aspect="auto",
+            cmap="viridis_r",
+            vmin=0,
+            vmax=clip,
+            origin="upper",
+            extent=(steer[0], steer[-1], t[-1] + dt, 0),
+        )
         ax.plot(steer[e.argmin(axis=1)], t + dt / 2, color="C3", lw=1.2, label="lowest energy")
         label_axes(ax, STEER_LABEL, "time (s)", name, legend=True, loc="lower right", fontsize=7)
     fig.subplots_adjust(left=0.07, right=0.84, top=0.86 if rows == 1 else 0.9, wspace=0.3, hspace=0.45)

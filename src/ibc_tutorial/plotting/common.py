@@ -60,7 +60,18 @@ def label_axes(ax, xlabel: str, ylabel: str, title: str, *, legend: bool = False
         ax.legend(**{"fontsize": 8, **legend_kwargs})
 
 
-def plot_lines(x, series: dict, *, xlabel: str, ylabel: str, title: str, logx: bool = False, logy: bool = False, ax=None, markers: bool = True):
+def plot_lines(
+    x,
+    series: dict,
+    *,
+    xlabel: str,
+    ylabel: str,
+    title: str,
+    logx: bool = False,
+    logy: bool = False,
+    ax=None,
+    markers: bool = True,
+):
     """Several lines against one x axis (e.g. hit rate against the number of samples, one per init).
 
     Args:
@@ -85,7 +96,16 @@ def plot_lines(x, series: dict, *, xlabel: str, ylabel: str, title: str, logx: b
     return finish(fig, own)
 
 
-def plot_bars(categories, series: dict, *, ylabel: str, title: str, points: dict | None = None, reference: dict | None = None, ax=None):
+def plot_bars(
+    categories,
+    series: dict,
+    *,
+    ylabel: str,
+    title: str,
+    points: dict | None = None,
+    reference: dict | None = None,
+    ax=None,
+):
     """Grouped bars: one group per category, one bar per series (e.g. shares of situations per sampler).
 
     Args:
@@ -105,7 +125,15 @@ def plot_bars(categories, series: dict, *, ylabel: str, title: str, points: dict
             for row in as_array(points[label], float):
                 ax.scatter(pos, row, color="k", s=10, zorder=3)
     for j, (label, values) in enumerate((reference or {}).items()):
-        ax.hlines(as_array(values, float), x - 0.45, x + 0.45, colors="k", linestyles=["--", ":"][j % 2], lw=1.2, label=label)
+        ax.hlines(
+            as_array(values, float),
+            x - 0.45,
+            x + 0.45,
+            colors="k",
+            linestyles=["--", ":"][j % 2],
+            lw=1.2,
+            label=label,
+        )
     ax.set_xticks(x)
     ax.set_xticklabels(categories)
     ax.set_ylabel(ylabel)

@@ -10,13 +10,28 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.colors import LogNorm
 
-from ibc_tutorial.plotting.common import ACCEL_LABEL, STEER_LABEL, as_array, check_panels, figure_and_axes, finish, label_axes
+from ibc_tutorial.plotting.common import (
+    ACCEL_LABEL,
+    STEER_LABEL,
+    as_array,
+    check_panels,
+    figure_and_axes,
+    finish,
+    label_axes,
+)
 from ibc_tutorial.plotting.multimodality import rollout_figure
 from ibc_tutorial.utils import check_int, check_positive
 
 
 # =========================================================================== chapter 04: DA-IBC counter-examples
-def plot_counter_examples(expert_actions, situation, negatives: dict, *, situation_names=("cruise", "junction", "red light"), max_points: int = 3000):
+def plot_counter_examples(
+    expert_actions,
+    situation,
+    negatives: dict,
+    *,
+    situation_names=("cruise", "junction", "red light"),
+    max_points: int = 3000,
+):
     """Expert actions coloured by situation, then one panel per sampler with its counter-examples.
 
     Args:
@@ -60,7 +75,9 @@ def plot_sigma_sweep(sigmas, values, *, uniform=None, ylabel: str, title: str):
     fig, ax = plt.subplots(figsize=(6.0, 3.8))
     for j in range(v.shape[1]):
         ax.scatter(s, v[:, j], color="C1", s=14, alpha=0.6)
-    ax.plot(s, v.mean(axis=1), color="C1", lw=2, marker="o", label="expert + N(0, σ²) (DA-IBC), mean over seeds")
+    ax.plot(
+        s, v.mean(axis=1), color="C1", lw=2, marker="o", label="expert + N(0, σ²) (DA-IBC), mean over seeds"
+    )
     if uniform is not None:
         u = as_array(uniform, float)
         ax.axhspan(u.min(), u.max(), color="C0", alpha=0.2)
@@ -91,10 +108,22 @@ def plot_energy_2d(energies, axis, *, title: str, unvisited=None, modes=None, ar
         ax.contourf(x, x, u.T, levels=[0.5, 1.5], colors="none", hatches=["//"])
         ax.contour(x, x, u.T, levels=[0.5], colors="w", linewidths=0.8)
         # a legend entry for the hatching (contourf makes none)
-        ax.add_patch(plt.Rectangle((0, 0), 0, 0, facecolor="none", edgecolor="k", hatch="//", label="never visited by a counter-example"))
+        ax.add_patch(
+            plt.Rectangle(
+                (0, 0),
+                0,
+                0,
+                facecolor="none",
+                edgecolor="k",
+                hatch="//",
+                label="never visited by a counter-example",
+            )
+        )
     if modes is not None:
         m = as_array(modes, float)
-        ax.scatter(m[:, 0], m[:, 1], s=80, facecolors="none", edgecolors="w", lw=1.5, label="expert's actions")
+        ax.scatter(
+            m[:, 0], m[:, 1], s=80, facecolors="none", edgecolors="w", lw=1.5, label="expert's actions"
+        )
     if argmin is not None:
         ax.scatter([argmin[0]], [argmin[1]], marker="x", s=80, color="red", lw=2, label="argmin of E")
     if modes is not None or argmin is not None or unvisited is not None:
@@ -116,10 +145,18 @@ def plot_kde_by_hand(data, grid, bandwidth: float, density):
     fig, ax = plt.subplots(figsize=(6.4, 3.6))
     for j, xj in enumerate(d):
         k = np.exp(-0.5 * ((x - xj) / h) ** 2) / np.sqrt(2 * np.pi) / (m * h)  # (G,) one term of eq. 4
-        ax.plot(x, k, color="C0", lw=0.9, alpha=0.7, label="one kernel, 1/(Mh) K((x − x_j)/h)" if j == 0 else None)
+        ax.plot(
+            x, k, color="C0", lw=0.9, alpha=0.7, label="one kernel, 1/(Mh) K((x − x_j)/h)" if j == 0 else None
+        )
     ax.plot(x, as_array(density, float), color="C1", lw=2.2, label="their sum: ĝ(x), eq. 4")
     ax.plot(d, np.zeros_like(d), "|", color="k", ms=14, mew=1.5, label="data points x_j")
-    label_axes(ax, "action (steer)", "density (1 / action unit)", f"Kernel density estimate by hand: M = {m} points, h = {h:g}", legend=True)
+    label_axes(
+        ax,
+        "action (steer)",
+        "density (1 / action unit)",
+        f"Kernel density estimate by hand: M = {m} points, h = {h:g}",
+        legend=True,
+    )
     return finish(fig, True)
 
 
@@ -147,7 +184,9 @@ def plot_kde_bandwidths(densities: dict, axis, actions=None, *, max_points: int 
         ax.set_aspect("equal")
     axes[0].set_ylabel(ACCEL_LABEL)
     fig.colorbar(mesh, ax=list(axes), label="log10 ĝ(y) (density per unit area)")
-    return finish(fig, False, title="KDE of the expert actions (eq. 4) for several bandwidths; dots: the actions")
+    return finish(
+        fig, False, title="KDE of the expert actions (eq. 4) for several bandwidths; dots: the actions"
+    )
 
 
 def plot_bandwidth_choice(bandwidths, heldout_loglik, rare_share, *, chosen: float = 0.2):
@@ -165,8 +204,20 @@ def plot_bandwidth_choice(bandwidths, heldout_loglik, rare_share, *, chosen: flo
     for ax in (a1, a2):
         ax.set_xscale("log")
         ax.axvline(chosen, color="k", ls="--", lw=1, label=f"h = {chosen:g} (the paper)")
-    label_axes(a1, "bandwidth h (action units)", "mean log ĝ(held-out action) (nats)", "How well ĝ predicts new actions", legend=True)
-    label_axes(a2, "bandwidth h (action units)", "share of rare situations in minibatches", "What the weights 1/ĝ do to minibatches", legend=True)
+    label_axes(
+        a1,
+        "bandwidth h (action units)",
+        "mean log ĝ(held-out action) (nats)",
+        "How well ĝ predicts new actions",
+        legend=True,
+    )
+    label_axes(
+        a2,
+        "bandwidth h (action units)",
+        "share of rare situations in minibatches",
+        "What the weights 1/ĝ do to minibatches",
+        legend=True,
+    )
     return finish(fig, True)
 
 
@@ -196,7 +247,15 @@ def draw_dfo_iteration(ax, trace, it: int, x, e, bins: int):
     s = trace.samples[it - 1].numpy()[:, 0]  # (N,) the population's actions
     lo, hi = float(x.min()), float(x.max())
     counts, edges = np.histogram(s, bins=check_int("bins", bins, minimum=1), range=(lo, hi))
-    ax.bar(edges[:-1], counts / len(s), width=edges[1] - edges[0], align="edge", color="C0", alpha=0.7, label="samples ỹ_i")
+    ax.bar(
+        edges[:-1],
+        counts / len(s),
+        width=edges[1] - edges[0],
+        align="edge",
+        color="C0",
+        alpha=0.7,
+        label="samples ỹ_i",
+    )
     ax.set_ylim(0, 1.05 * max(0.25, (counts / len(s)).max()))
     ax2 = ax.twinx()
     ax2.plot(x, e, color="C3", lw=1.5)
@@ -213,7 +272,15 @@ def draw_dfo_iteration(ax, trace, it: int, x, e, bins: int):
     return ax2
 
 
-def plot_dfo_iterations(trace, grid, energy, *, iterations=None, bins: int = 60, title: str = "Algorithm 1, iteration by iteration"):
+def plot_dfo_iterations(
+    trace,
+    grid,
+    energy,
+    *,
+    iterations=None,
+    bins: int = 60,
+    title: str = "Algorithm 1, iteration by iteration",
+):
     """A 1-D energy landscape and the DFO population at each iteration (from ``dfo_trace``).
 
     Args:
@@ -233,7 +300,14 @@ def plot_dfo_iterations(trace, grid, energy, *, iterations=None, bins: int = 60,
     return finish(fig, True, title=title)
 
 
-def plot_valley_shares(n_iters, shares: dict, *, prediction=None, ylabel: str = "share of calls ending in the shallow valley", title: str = ""):
+def plot_valley_shares(
+    n_iters,
+    shares: dict,
+    *,
+    prediction=None,
+    ylabel: str = "share of calls ending in the shallow valley",
+    title: str = "",
+):
     """Shares (e.g. of the shallow valley) against N_iters: one line per setting, optional prediction.
 
     Args:
@@ -251,7 +325,9 @@ def plot_valley_shares(n_iters, shares: dict, *, prediction=None, ylabel: str = 
     return finish(fig, True)
 
 
-def plot_populations_2d(energies, axis, populations: dict, *, modes=None, title: str = "", max_points: int = 600):
+def plot_populations_2d(
+    energies, axis, populations: dict, *, modes=None, title: str = "", max_points: int = 600
+):
     """Final populations of several optimisers over one 2-D energy landscape (one panel each).
 
     Args:
@@ -278,5 +354,14 @@ def plot_tree_rollouts(world, rollouts: dict, *, max_episodes: int = 60):
     """Closed-loop trajectories in the tree world, one panel per policy: passes left (blue), right
     (orange), collisions (red), the tree as a disc."""
     n = check_panels("rollouts", rollouts)
-    return rollout_figure(world, rollouts, _tree_counts, title="Closed-loop rollouts of the energy model with DFO inference",
-                          figsize=(9.0, 2.1 * n + 0.6), max_episodes=max_episodes, crosses=False, alpha=0.7, fontsize=9)
+    return rollout_figure(
+        world,
+        rollouts,
+        _tree_counts,
+        title="Closed-loop rollouts of the energy model with DFO inference",
+        figsize=(9.0, 2.1 * n + 0.6),
+        max_episodes=max_episodes,
+        crosses=False,
+        alpha=0.7,
+        fontsize=9,
+    )

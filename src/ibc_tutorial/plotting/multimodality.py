@@ -12,7 +12,17 @@ import torch
 from matplotlib.lines import Line2D
 from matplotlib.patches import Polygon
 
-from ibc_tutorial.plotting.common import STEER_LABEL, TIME_LABEL, X_LABEL, Y_LABEL, as_array, check_panels, figure_and_axes, finish, label_axes
+from ibc_tutorial.plotting.common import (
+    STEER_LABEL,
+    TIME_LABEL,
+    X_LABEL,
+    Y_LABEL,
+    as_array,
+    check_panels,
+    figure_and_axes,
+    finish,
+    label_axes,
+)
 from ibc_tutorial.utils import check_int
 
 TREE_SIDE_COLORS = {-1: "C0", 1: "C1", 0: "C3"}
@@ -30,7 +40,11 @@ def draw_tree(ax, world) -> None:
     """The tree (green disc) and, dashed, the circle the car's centre must stay out of."""
     c = world.config
     ax.add_patch(plt.Circle((c.tree_x, 0.0), c.tree_radius, color="forestgreen", zorder=3))
-    ax.add_patch(plt.Circle((c.tree_x, 0.0), world.clearance, fill=False, ls="--", lw=0.8, color="forestgreen", zorder=3))
+    ax.add_patch(
+        plt.Circle(
+            (c.tree_x, 0.0), world.clearance, fill=False, ls="--", lw=0.8, color="forestgreen", zorder=3
+        )
+    )
 
 
 def draw_side_road(ax, world, x_end: float) -> None:
@@ -64,11 +78,22 @@ def rollout_colors(world, rollouts) -> list[str]:
     if hasattr(world, "pass_side"):
         return [TREE_SIDE_COLORS[int(v)] for v in world.pass_side(rollouts)]
     main, took = world.stayed_on_main_road(rollouts), world.took_side_road(rollouts)
-    names = ["main road" if m else ("side road" if t else "off road") for m, t in zip(main.tolist(), took.tolist())]
+    names = [
+        "main road" if m else ("side road" if t else "off road") for m, t in zip(main.tolist(), took.tolist())
+    ]
     return [SIDE_ROAD_COLORS[n] for n in names]
 
 
-def draw_rollouts(ax, world, rollouts, *, max_episodes: int = 60, x_end: float | None = None, crosses: bool = True, alpha: float = 0.6) -> None:
+def draw_rollouts(
+    ax,
+    world,
+    rollouts,
+    *,
+    max_episodes: int = 60,
+    x_end: float | None = None,
+    crosses: bool = True,
+    alpha: float = 0.6,
+) -> None:
     """One panel of closed-loop ``rollouts`` in the tree or the side-road ``world``: the scene
     (roads up to ``x_end`` m, by default just past the furthest position), the first
     ``max_episodes`` trajectories coloured by outcome (``rollout_colors``), with ``crosses`` a
@@ -80,7 +105,14 @@ def draw_rollouts(ax, world, rollouts, *, max_episodes: int = 60, x_end: float |
     else:
         draw_side_road(ax, world, x_end)
     ends = rollouts.collided.tolist() if crosses else None
-    draw_tracks(ax, rollouts.states, rollout_colors(world, rollouts), max_episodes=max_episodes, ends=ends, alpha=alpha)
+    draw_tracks(
+        ax,
+        rollouts.states,
+        rollout_colors(world, rollouts),
+        max_episodes=max_episodes,
+        ends=ends,
+        alpha=alpha,
+    )
     ax.set_aspect("equal")
 
 
@@ -88,18 +120,37 @@ def outcome_key(world, *, crosses: bool = True) -> list:
     """Legend handles of the outcome colours of ``rollout_colors`` in ``world`` (the tree or the
     side road), and, with ``crosses``, of the red cross where an episode collided."""
     if hasattr(world, "pass_side"):
-        items = [("passed on the left", TREE_SIDE_COLORS[-1]), ("passed on the right", TREE_SIDE_COLORS[1]),
-                 ("collided", TREE_SIDE_COLORS[0])]
+        items = [
+            ("passed on the left", TREE_SIDE_COLORS[-1]),
+            ("passed on the right", TREE_SIDE_COLORS[1]),
+            ("collided", TREE_SIDE_COLORS[0]),
+        ]
     else:
-        items = [(f"ended on the {name}" if name != "off road" else "left the road", color) for name, color in SIDE_ROAD_COLORS.items()]
+        items = [
+            (f"ended on the {name}" if name != "off road" else "left the road", color)
+            for name, color in SIDE_ROAD_COLORS.items()
+        ]
     handles = [Line2D([], [], color=color, lw=1.5, label=label) for label, color in items]
     if crosses:
         handles.append(Line2D([], [], color="C3", marker="x", ls="none", ms=4, label="where it collided"))
     return handles
 
 
-def rollout_figure(world, rollouts: dict, summary, *, title: str, figsize: tuple, ncols: int = 1, max_episodes: int = 60,
-                   crosses: bool = True, alpha: float = 0.6, fontsize: float = 10, xlabel: str = X_LABEL, compressed: bool = False):
+def rollout_figure(
+    world,
+    rollouts: dict,
+    summary,
+    *,
+    title: str,
+    figsize: tuple,
+    ncols: int = 1,
+    max_episodes: int = 60,
+    crosses: bool = True,
+    alpha: float = 0.6,
+    fontsize: float = 10,
+    xlabel: str = X_LABEL,
+    compressed: bool = False,
+):
     """Closed-loop ``rollouts`` ({name: Rollouts}) of several policies, one ``draw_rollouts`` panel
     each in ``ncols`` columns, titled ``f"{name}: {summary(world, rollouts[name])}"``; empty
     panels are hidden; the colour key (``outcome_key``) sits in the first panel. ``compressed``
@@ -107,7 +158,15 @@ def rollout_figure(world, rollouts: dict, summary, *, title: str, figsize: tuple
     n = check_panels("rollouts", rollouts)
     ncols = check_int("ncols", ncols, minimum=1)
     nrows = -(-n // ncols)
-    fig, axes = plt.subplots(nrows, ncols, figsize=figsize, sharex=True, sharey=True, squeeze=False, layout="compressed" if compressed else None)
+    fig, axes = plt.subplots(
+        nrows,
+        ncols,
+        figsize=figsize,
+        sharex=True,
+        sharey=True,
+        squeeze=False,
+        layout="compressed" if compressed else None,
+    )
     x_end = max(float(r.states[:, :, 0].max()) for r in rollouts.values()) + 1.0
     for ax, (name, r) in zip(axes.flat, rollouts.items()):
         draw_rollouts(ax, world, r, max_episodes=max_episodes, x_end=x_end, crosses=crosses, alpha=alpha)
@@ -122,14 +181,23 @@ def rollout_figure(world, rollouts: dict, summary, *, title: str, figsize: tuple
     for ax in axes[-1]:
         if ax.axison:
             ax.set_xlabel(xlabel)
-    axes.flat[0].legend(handles=outcome_key(world, crosses=crosses), loc="upper left", fontsize=7, framealpha=0.9,
-                        title="colour: outcome", title_fontsize=7)
+    axes.flat[0].legend(
+        handles=outcome_key(world, crosses=crosses),
+        loc="upper left",
+        fontsize=7,
+        framealpha=0.9,
+        title="colour: outcome",
+        title_fontsize=7,
+    )
     return finish(fig, not compressed, title=title)
 
 
 def _tree_shares(world, r) -> str:
     side = world.pass_side(r).numpy()
-    counts = ", ".join(f"{label} {float(np.mean(side == v)):.0%}" for v, label in ((-1, "left"), (1, "right"), (0, "collided")))
+    counts = ", ".join(
+        f"{label} {float(np.mean(side == v)):.0%}"
+        for v, label in ((-1, "left"), (1, "right"), (0, "collided"))
+    )
     return f"{counts} of {len(side)} episodes"
 
 
@@ -155,7 +223,15 @@ def _mode_colors(mode_names) -> list[str]:
     return [TREE_MODE_COLORS.get(name, f"C{k}") for k, name in enumerate(mode_names)]
 
 
-def plot_tree_scene(world, states, modes, *, title: str = "Expert demonstrations in the tree world", max_episodes: int = 100, ax=None):
+def plot_tree_scene(
+    world,
+    states,
+    modes,
+    *,
+    title: str = "Expert demonstrations in the tree world",
+    max_episodes: int = 100,
+    ax=None,
+):
     """Expert trajectories ``states`` (E, T+1, 3) seen from above, coloured by ``modes`` (E,),
     indices into ``world.mode_names`` (0 passes on the right, orange; 1 on the left, blue, as
     in ``TREE_MODE_COLORS``); the tree as a green disc, the dashed circle marks where the car's
@@ -172,7 +248,15 @@ def plot_tree_scene(world, states, modes, *, title: str = "Expert demonstrations
     return fig
 
 
-def plot_actions_by_distance(world, demos, *, predictions: dict | None = None, window: tuple | None = None, title: str = "What the policy sees, and what the experts did", max_points: int = 6000):
+def plot_actions_by_distance(
+    world,
+    demos,
+    *,
+    predictions: dict | None = None,
+    window: tuple | None = None,
+    title: str = "What the policy sees, and what the experts did",
+    max_points: int = 6000,
+):
     """Each expert sample as a dot: the observation (distance to the tree, m) against the action
     (steering), coloured by the expert's side (``world.mode_names``, ``TREE_MODE_COLORS``);
     optional ``predictions`` {name: (distances, actions)} drawn as lines, ``window`` = (low, high)
@@ -188,12 +272,27 @@ def plot_actions_by_distance(world, demos, *, predictions: dict | None = None, w
     if window is not None:
         ax.axvspan(window[0], window[1], color="0.85", zorder=0, label="window of the histogram")
     for i, (name, (x, y)) in enumerate((predictions or {}).items()):
-        ax.plot(as_array(x).reshape(-1), as_array(y).reshape(-1), color=["k", "C3", "C2", "C4"][i % 4], lw=2, ls=["-", "--", "-.", ":"][i % 4], label=name)
+        ax.plot(
+            as_array(x).reshape(-1),
+            as_array(y).reshape(-1),
+            color=["k", "C3", "C2", "C4"][i % 4],
+            lw=2,
+            ls=["-", "--", "-.", ":"][i % 4],
+            label=name,
+        )
     ax.axvline(0.0, color="forestgreen", lw=1.5)
     ax.text(0.0, 1.02, " tree", color="forestgreen", va="bottom", fontsize=8)
     ax.set_xlim(d.max() + 0.5, d.min() - 0.5)
     ax.set_ylim(-1.1, 1.15)
-    label_axes(ax, "observation: distance ahead to the tree (m)", STEER_LABEL, title, legend=True, loc="lower left", markerscale=3)
+    label_axes(
+        ax,
+        "observation: distance ahead to the tree (m)",
+        STEER_LABEL,
+        title,
+        legend=True,
+        loc="lower left",
+        markerscale=3,
+    )
     return fig
 
 
@@ -206,14 +305,27 @@ def plot_action_histogram(actions, modes, *, title: str, bins: int = 40, mode_na
         mode_names = TreeWorld.mode_names
     a, m = as_array(actions), as_array(modes)
     fig, ax = plt.subplots(figsize=(6.4, 3.4))
-    ax.hist([a[m == k] for k in range(len(mode_names))], bins=check_int("bins", bins, minimum=1), range=(-1, 1), stacked=True,
-            color=_mode_colors(mode_names), label=list(mode_names))
+    ax.hist(
+        [a[m == k] for k in range(len(mode_names))],
+        bins=check_int("bins", bins, minimum=1),
+        range=(-1, 1),
+        stacked=True,
+        color=_mode_colors(mode_names),
+        label=list(mode_names),
+    )
     ax.axvline(float(a.mean()), color="k", ls="--", lw=1.2, label=f"mean of all ({a.mean():+.2f})")
     label_axes(ax, STEER_LABEL, "number of samples", title, legend=True)
     return fig
 
 
-def plot_constant_losses(constants, losses: dict, *, minimisers: dict | None = None, flat: dict | None = None, title: str = "Loss of predicting one constant action for all the samples"):
+def plot_constant_losses(
+    constants,
+    losses: dict,
+    *,
+    minimisers: dict | None = None,
+    flat: dict | None = None,
+    title: str = "Loss of predicting one constant action for all the samples",
+):
     """Curves ``losses`` {name: (G,)} over the constant prediction ``constants`` (G,); ``minimisers``
     {name: value} marked with a dot, ``flat`` {name: (low, high)} shaded (an interval of minimisers)."""
     n = check_panels("losses", losses)
@@ -229,23 +341,37 @@ def plot_constant_losses(constants, losses: dict, *, minimisers: dict | None = N
         if minimisers and name in minimisers:
             v = float(minimisers[name])
             ax.plot([v], [np.interp(v, c, loss)], "o", color="k", label=f"minimiser {v:+.2f}")
-        label_axes(ax, "constant prediction c (steering)", f"{name} loss", name, legend=True, loc="upper center")
+        label_axes(
+            ax, "constant prediction c (steering)", f"{name} loss", name, legend=True, loc="upper center"
+        )
     return finish(fig, True, title=title)
 
 
-def plot_tree_closed_loop(world, rollouts: dict, *, title: str = "Closed-loop rollouts in the tree world", max_episodes: int = 60):
+def plot_tree_closed_loop(
+    world, rollouts: dict, *, title: str = "Closed-loop rollouts in the tree world", max_episodes: int = 60
+):
     """One panel per policy ({name: Rollouts}): trajectories from above, coloured by how they pass
     the tree (``TREE_SIDE_COLORS``: left blue, right orange, collided red, with a cross where
     the car stopped)."""
     n = check_panels("rollouts", rollouts)
-    return rollout_figure(world, rollouts, _tree_shares, title=title, figsize=(8.5, 2.2 * n), max_episodes=max_episodes)
+    return rollout_figure(
+        world, rollouts, _tree_shares, title=title, figsize=(8.5, 2.2 * n), max_episodes=max_episodes
+    )
 
 
 def plot_side_road(world, rollouts: dict, *, title: str = "The side road", max_episodes: int = 60):
     """One panel per policy ({name: Rollouts}) over the roads: episodes that end on the main road
     (blue), on the side road (green), off the road (red)."""
     n = check_panels("rollouts", rollouts)
-    return rollout_figure(world, rollouts, _side_road_shares, title=title, figsize=(8.5, 2.8 * n), max_episodes=max_episodes, crosses=False)
+    return rollout_figure(
+        world,
+        rollouts,
+        _side_road_shares,
+        title=title,
+        figsize=(8.5, 2.8 * n),
+        max_episodes=max_episodes,
+        crosses=False,
+    )
 
 
 # =========================================================================== chapter 02: explicit policies
@@ -255,13 +381,26 @@ def plot_beta_shapes(params, *, title: str = "Beta densities f(y'; α, β) of eq
     fig, ax = plt.subplots(figsize=(7, 4))
     z = torch.linspace(1e-3, 1 - 1e-3, 999, dtype=torch.float64)
     for a, b in params:
-        dens = torch.distributions.Beta(torch.tensor(float(a), dtype=torch.float64), torch.tensor(float(b), dtype=torch.float64)).log_prob(z).exp()
+        dens = (
+            torch.distributions.Beta(
+                torch.tensor(float(a), dtype=torch.float64), torch.tensor(float(b), dtype=torch.float64)
+            )
+            .log_prob(z)
+            .exp()
+        )
         style = "--" if a < 1 and b < 1 else "-"
         ax.plot(z.numpy(), np.minimum(dens.numpy(), 10.0), style, label=f"α = {a:g}, β = {b:g}")
     ax.set_ylim(0, 4)
     ax.set_xlim(0, 1)
-    label_axes(ax, "rescaled action y' = (y + 1)/2 (y: steering, −1 = full left, +1 = full right)", "density f(y'; α, β) (per unit y')", title)
-    ax.legend(fontsize=8, loc="center left", bbox_to_anchor=(1.01, 0.5), title="dashed: U-shapes", title_fontsize=8)
+    label_axes(
+        ax,
+        "rescaled action y' = (y + 1)/2 (y: steering, −1 = full left, +1 = full right)",
+        "density f(y'; α, β) (per unit y')",
+        title,
+    )
+    ax.legend(
+        fontsize=8, loc="center left", bbox_to_anchor=(1.01, 0.5), title="dashed: U-shapes", title_fontsize=8
+    )
     return fig
 
 
@@ -273,11 +412,20 @@ def _policy_point_actions(policy, obs):
 
 def _data_histogram(ax, data, bins: int, label: str) -> float:
     """Grey density histogram of ``data`` (N,) over [-1, 1]; returns its highest bar (per unit action)."""
-    heights, _, _ = ax.hist(data, bins=check_int("bins", bins, minimum=1), range=(-1, 1), density=True, color="0.75", label=f"{label} (n = {len(data)})")
+    heights, _, _ = ax.hist(
+        data,
+        bins=check_int("bins", bins, minimum=1),
+        range=(-1, 1),
+        density=True,
+        color="0.75",
+        label=f"{label} (n = {len(data)})",
+    )
     return float(np.max(heights))
 
 
-def plot_action_distributions(policies, obs, data_actions, *, dim: int = 0, where: str = "", n_values: int = 801):
+def plot_action_distributions(
+    policies, obs, data_actions, *, dim: int = 0, where: str = "", n_values: int = 801
+):
     """One panel per policy: the histogram of the expert's actions ``data_actions`` (M,) near the
     observation ``obs`` (1, obs_dim), the policy's predicted density of action dimension ``dim``
     there (``action_density``) and vertical lines at its deterministic actions.
@@ -334,12 +482,32 @@ def plot_rollout_grid(world, rollouts: dict, *, title: str, ncols: int = 2, max_
     n = check_panels("rollouts", rollouts)
     ncols = check_int("ncols", ncols, minimum=1)
     nrows = -(-n // ncols)
-    return rollout_figure(world, rollouts, _grid_shares, title=title, figsize=(5.6 * ncols, 2.0 * nrows + 0.4), ncols=ncols,
-                          max_episodes=max_episodes, fontsize=9, compressed=True)
+    return rollout_figure(
+        world,
+        rollouts,
+        _grid_shares,
+        title=title,
+        figsize=(5.6 * ncols, 2.0 * nrows + 0.4),
+        ncols=ncols,
+        max_episodes=max_episodes,
+        fontsize=9,
+        compressed=True,
+    )
 
 
 # =========================================================================== chapter 03: energy models and InfoNCE
-def plot_energy_landscape(distances, actions, energies, *, expert=None, path=None, title: str = "The energy landscape", xlabel: str = "distance to the tree (m)", ylabel: str = STEER_LABEL, ax=None):
+def plot_energy_landscape(
+    distances,
+    actions,
+    energies,
+    *,
+    expert=None,
+    path=None,
+    title: str = "The energy landscape",
+    xlabel: str = "distance to the tree (m)",
+    ylabel: str = STEER_LABEL,
+    ax=None,
+):
     """E(x, y) with the observation along x and the action along y, shifted per observation so
     that its minimum over actions is 0 (dark = low energy = likely action).
 
@@ -359,7 +527,9 @@ def plot_energy_landscape(distances, actions, energies, *, expert=None, path=Non
     mesh = ax.pcolormesh(x, y, e.T, cmap="viridis", shading="nearest", vmax=np.percentile(e, 90))
     fig.colorbar(mesh, ax=ax, label="E − min over actions (nats)")
     if expert is not None:
-        ax.scatter(as_array(expert[0]), as_array(expert[1]), s=2, color="w", alpha=0.35, label="expert samples")
+        ax.scatter(
+            as_array(expert[0]), as_array(expert[1]), s=2, color="w", alpha=0.35, label="expert samples"
+        )
     if path is not None:
         ax.plot(x, as_array(path, float), color="red", lw=1.5, label="argmin over actions")
     if expert is not None or path is not None:
@@ -369,7 +539,9 @@ def plot_energy_landscape(distances, actions, energies, *, expert=None, path=Non
     return finish(fig, own)
 
 
-def plot_energy_curves(actions, curves: dict, *, title: str, xlabel: str = STEER_LABEL, probability: bool = True, ax=None):
+def plot_energy_curves(
+    actions, curves: dict, *, title: str, xlabel: str = STEER_LABEL, probability: bool = True, ax=None
+):
     """Energy over actions for a few observations (one line each), as p(y|x) ∝ exp(-E) or as E.
 
     Args:
@@ -392,7 +564,14 @@ def plot_energy_curves(actions, curves: dict, *, title: str, xlabel: str = STEER
     return finish(fig, own)
 
 
-def plot_command_traces(dt: float, traces: dict, *, title: str = "Steering commands of one episode", ylabel: str = "steering command", reference: str | None = None):
+def plot_command_traces(
+    dt: float,
+    traces: dict,
+    *,
+    title: str = "Steering commands of one episode",
+    ylabel: str = "steering command",
+    reference: str | None = None,
+):
     """Command sequences over time (to see what whiteness measures), one panel per policy, stacked
     on a shared time axis, so that traces that nearly coincide stay apart and readable.
 
@@ -422,7 +601,14 @@ def plot_command_traces(dt: float, traces: dict, *, title: str = "Steering comma
     return finish(fig, True)
 
 
-def plot_response_map(prev, responses: dict, *, title: str, xlabel: str = "previous steering (−1 left … +1 right)", ylabel: str = "next steering command (−1 left … +1 right)"):
+def plot_response_map(
+    prev,
+    responses: dict,
+    *,
+    title: str,
+    xlabel: str = "previous steering (−1 left … +1 right)",
+    ylabel: str = "next steering command (−1 left … +1 right)",
+):
     """What a policy fed its previous action does with it: the next command against the previous
     one at one observation, one line per policy, with the diagonal of a policy that copies
     (dashed). Where a line crosses the diagonal, the command repeats itself: a fixed point.

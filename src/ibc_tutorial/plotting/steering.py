@@ -15,8 +15,9 @@ import numpy as np
 from ibc_tutorial.plotting.common import STEER_LABEL, TIME_LABEL, as_array, check_panels
 
 
-def plot_study_metrics(models, labels: dict, metrics: dict, *, paper: dict | None = None,
-                       title: str = "The road-following study"):
+def plot_study_metrics(
+    models, labels: dict, metrics: dict, *, paper: dict | None = None, title: str = "The road-following study"
+):
     """Bars of the mean over seeds with a dot per seed, one panel per metric.
 
     Args:
@@ -36,13 +37,21 @@ def plot_study_metrics(models, labels: dict, metrics: dict, *, paper: dict | Non
         ax.bar(x, means, width=0.7, color=[f"C{i}" for i in range(len(models))], alpha=0.7)
         for i, m in enumerate(models):
             v = as_array(values[m], float)  # (S,)
-            ax.scatter(np.full(len(v), x[i]), v, color="k", s=12, zorder=3,
-                       label="one seed" if i == 0 else None)
+            ax.scatter(
+                np.full(len(v), x[i]), v, color="k", s=12, zorder=3, label="one seed" if i == 0 else None
+            )
         ref = (paper or {}).get(ylabel)
         if ref:
             pts = [(i, ref[m]) for i, m in enumerate(models) if ref.get(m) is not None]
-            ax.hlines([p[1] for p in pts], [p[0] - 0.4 for p in pts], [p[0] + 0.4 for p in pts],
-                      colors="k", linestyles="--", lw=1.5, label="the paper")
+            ax.hlines(
+                [p[1] for p in pts],
+                [p[0] - 0.4 for p in pts],
+                [p[0] + 0.4 for p in pts],
+                colors="k",
+                linestyles="--",
+                lw=1.5,
+                label="the paper",
+            )
         ax.set_xticks(x)
         ax.set_xticklabels([labels.get(m, m) for m in models], rotation=30, ha="right", fontsize=8)
         ax.set_xlabel("model")
@@ -54,10 +63,17 @@ def plot_study_metrics(models, labels: dict, metrics: dict, *, paper: dict | Non
     return fig
 
 
-def plot_fig5_analogue(time_s, grid, steer: dict, scores: dict, expert, *,
-                       titles: dict | None = None,
-                       junction_s: float | None = None,
-                       title: str = "Steering along 5 s of an expert pass of a side road"):
+def plot_fig5_analogue(
+    time_s,
+    grid,
+    steer: dict,
+    scores: dict,
+    expert,
+    *,
+    titles: dict | None = None,
+    junction_s: float | None = None,
+    title: str = "Steering along 5 s of an expert pass of a side road",
+):
     """One panel per model: its scores over the steering grid against time, and its output.
 
     Args:
@@ -84,9 +100,15 @@ def plot_fig5_analogue(time_s, grid, steer: dict, scores: dict, expert, *,
             e = as_array(scores[model], float)  # (T, G)
             # per time step, the scores relative to their minimum: each column shows its own shape
             rel = e - e.min(axis=1, keepdims=True)
-            im = ax.imshow(rel.T, origin="lower", aspect="auto", cmap="viridis_r",
-                           extent=(t[0] - dt / 2, t[-1] + dt / 2, g[0], g[-1]),
-                           vmin=0.0, vmax=max(float(np.percentile(rel, 90)), 1e-6))
+            im = ax.imshow(
+                rel.T,
+                origin="lower",
+                aspect="auto",
+                cmap="viridis_r",
+                extent=(t[0] - dt / 2, t[-1] + dt / 2, g[0], g[-1]),
+                vmin=0.0,
+                vmax=max(float(np.percentile(rel, 90)), 1e-6),
+            )
             fig.colorbar(im, ax=ax, label="score − its minimum")
         ax.plot(t, as_array(out, float), color="r", lw=1.5, label="model's output")
         ax.plot(t, ex, color="w" if model in scores else "k", ls="--", lw=1.2, label="expert")

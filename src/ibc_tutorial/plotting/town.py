@@ -9,7 +9,15 @@ from matplotlib.colors import ListedColormap
 
 from ibc_tutorial.driving.bev import CHANNELS, get_raster
 from ibc_tutorial.driving.render import bev_to_rgb, draw_ego, town_rgb
-from ibc_tutorial.plotting.common import ACCEL_LABEL, STEER_LABEL, TIME_LABEL, as_array, check_panels, finish, label_axes
+from ibc_tutorial.plotting.common import (
+    ACCEL_LABEL,
+    STEER_LABEL,
+    TIME_LABEL,
+    as_array,
+    check_panels,
+    finish,
+    label_axes,
+)
 from ibc_tutorial.utils import check_positive
 
 LIGHT_COLORS = ("#2ca02c", "#ffbf00", "#d62728")
@@ -23,8 +31,16 @@ def draw_bev(ax, bev) -> None:
     ax.set_yticks([])
 
 
-def plot_town(town, *, stop_flags=None, ax=None, title: str | None = None, step: int = 2, margin: float = 8.0,
-              markers: bool = True):
+def plot_town(
+    town,
+    *,
+    stop_flags=None,
+    ax=None,
+    title: str | None = None,
+    step: int = 2,
+    margin: float = 8.0,
+    markers: bool = True,
+):
     """A town's map: roads (grey), lane boundaries (white), buildings (brown), stop lines coloured
     red where ``stop_flags`` (L,) is True and green elsewhere (white if None), and with
     ``markers`` a dot on each light so that it shows at the scale of a whole town."""
@@ -54,12 +70,19 @@ def plot_towns(towns, stop_flags: dict | None = None):
     """Both towns side by side at the same scale, with their lights at one moment."""
     check_panels("towns", towns)
     widths = [t.size[0] for t in towns]
-    fig, axes = plt.subplots(1, len(towns), figsize=(11, 5.0), gridspec_kw={"width_ratios": widths}, squeeze=False)
+    fig, axes = plt.subplots(
+        1, len(towns), figsize=(11, 5.0), gridspec_kw={"width_ratios": widths}, squeeze=False
+    )
     for ax, town in zip(axes[0], towns):
         flags = None if stop_flags is None else stop_flags[town.name]
         w, h = town.size
         n_red = "" if flags is None else f", {int(np.sum(flags))} of {town.n_lights} lights red or yellow"
-        plot_town(town, stop_flags=flags, ax=ax, title=f"{town.name}: {w:.0f} x {h:.0f} m, {town.n_junctions} T-junctions{n_red}")
+        plot_town(
+            town,
+            stop_flags=flags,
+            ax=ax,
+            title=f"{town.name}: {w:.0f} x {h:.0f} m, {town.n_junctions} T-junctions{n_red}",
+        )
         ax.title.set_fontsize(9)
     return finish(fig, True)
 
@@ -84,19 +107,31 @@ def plot_junction(town, node: int, *, radius: float = 30.0, stop_flags=None, tit
         if len(k) > 2:
             i = k[len(k) // 2]
             d = np.array([np.cos(lane.headings[i]), np.sin(lane.headings[i])])
-            ax.annotate("", xy=pts[i] + 1.5 * d, xytext=pts[i], arrowprops=dict(arrowstyle="->", color=c, lw=1.2))
+            ax.annotate(
+                "", xy=pts[i] + 1.5 * d, xytext=pts[i], arrowprops=dict(arrowstyle="->", color=c, lw=1.2)
+            )
     ax.set_xlim(cx - radius, cx + radius)
     ax.set_ylim(cy - radius, cy + radius)
     ax.legend(loc="lower left", fontsize=7, framealpha=0.9)
     return finish(fig, True)
 
 
-def plot_light_timeline(states, *, dt: float = 0.1, labels=None, title: str = "The three heads of one junction"):
+def plot_light_timeline(
+    states, *, dt: float = 0.1, labels=None, title: str = "The three heads of one junction"
+):
     """Light states (T, H) (0 green, 1 yellow, 2 red) as coloured bars against time."""
     states = as_array(states)
     T, H = states.shape
     fig, ax = plt.subplots(figsize=(9.0, 0.6 * H + 1.2))
-    ax.imshow(states.T, aspect="auto", cmap=ListedColormap(LIGHT_COLORS), vmin=0, vmax=2, interpolation="nearest", extent=(0, T * dt, H - 0.5, -0.5))
+    ax.imshow(
+        states.T,
+        aspect="auto",
+        cmap=ListedColormap(LIGHT_COLORS),
+        vmin=0,
+        vmax=2,
+        interpolation="nearest",
+        extent=(0, T * dt, H - 0.5, -0.5),
+    )
     ax.set_yticks(range(H))
     ax.set_yticklabels(labels if labels is not None else [f"head {h}" for h in range(H)])
     ax.set_xlabel(TIME_LABEL)
@@ -109,7 +144,9 @@ def plot_step_and_turn(t, speed, reference, trajectories: dict, *, radii: dict |
     fig, (a, b) = plt.subplots(1, 2, figsize=(11, 4.2))
     a.plot(t, speed, label="simulated car")
     a.plot(t, reference, "k--", lw=1, label="3 m/s² up, then 8 m/s² down (no drag)")
-    label_axes(a, TIME_LABEL, "speed (m/s)", "Step response: full throttle for 5 s, then full brake", legend=True)
+    label_axes(
+        a, TIME_LABEL, "speed (m/s)", "Step response: full throttle for 5 s, then full brake", legend=True
+    )
     for i, (label, xy) in enumerate(trajectories.items()):
         xy = as_array(xy)  # (T, 2)
         b.plot(xy[:, 0], xy[:, 1], color=f"C{i}", label=label)
@@ -152,7 +189,11 @@ def plot_drive(town, xy, actions, speed, *, dt: float = 0.1, title: str = "An ex
     t = np.arange(len(xy)) * dt
     sc = ax.scatter(xy[:, 0], xy[:, 1], c=t, s=2, cmap="viridis")
     fig.colorbar(sc, ax=ax, label=TIME_LABEL, shrink=0.7)
-    names = [("steering\n(−1 left … +1 right)", actions[:, 0]), ("acceleration\n(< 0: braking)", actions[:, 1]), ("speed (m/s)", speed)]
+    names = [
+        ("steering\n(−1 left … +1 right)", actions[:, 0]),
+        ("acceleration\n(< 0: braking)", actions[:, 1]),
+        ("speed (m/s)", speed),
+    ]
     for k, (name, v) in enumerate(names):
         a = fig.add_subplot(gs[k, 1])
         a.plot(t, v, lw=0.7, color=f"C{k}")
@@ -165,7 +206,9 @@ def plot_drive(town, xy, actions, speed, *, dt: float = 0.1, title: str = "An ex
     return finish(fig, True)
 
 
-def plot_light_stop(t, gap, speed, light_states, *, gap_no_brake=None, title: str = "The expert at a red light"):
+def plot_light_stop(
+    t, gap, speed, light_states, *, gap_no_brake=None, title: str = "The expert at a red light"
+):
     """Distance to the stop line and speed against time, the light's state as the background."""
     t, gap, speed, light_states = map(as_array, (t, gap, speed, light_states))
     fig, (a, b) = plt.subplots(2, 1, figsize=(8.5, 5.0), sharex=True)
@@ -208,10 +251,19 @@ def plot_routes(town, routes_xy, *, title: str = "The demonstration routes", arr
             i = int(np.searchsorted(s, d))
             j = int(np.searchsorted(s, d + 1.0))  # a point about a metre further on
             if j < len(xy) and i < j:
-                ax.annotate("", xy=xy[j], xytext=xy[i],
-                            arrowprops=dict(arrowstyle="-|>", color=color, lw=1.2, mutation_scale=14))
-    ax.legend(fontsize=10, loc="center left", bbox_to_anchor=(1.0, 0.5),
-              title="arrows: direction\nof travel", title_fontsize=9)
+                ax.annotate(
+                    "",
+                    xy=xy[j],
+                    xytext=xy[i],
+                    arrowprops=dict(arrowstyle="-|>", color=color, lw=1.2, mutation_scale=14),
+                )
+    ax.legend(
+        fontsize=10,
+        loc="center left",
+        bbox_to_anchor=(1.0, 0.5),
+        title="arrows: direction\nof travel",
+        title_fontsize=9,
+    )
     return finish(fig, True)
 
 
@@ -238,8 +290,17 @@ def plot_exit_counts(town, counts: dict, *, title: str = "Exits taken at each ju
         p = np.asarray(ap.entry) + back * 14.0
         text = " ".join(f"{letters[k]}{c[k]}" for k in ("left", "straight", "right") if c.get(k))
         multi = len(c) > 1
-        ax.text(p[0], p[1], text, fontsize=6.5, ha="center", va="center",
-                bbox=dict(boxstyle="round,pad=0.2", fc="white", ec="red" if multi else "0.6", lw=1.4 if multi else 0.6))
+        ax.text(
+            p[0],
+            p[1],
+            text,
+            fontsize=6.5,
+            ha="center",
+            va="center",
+            bbox=dict(
+                boxstyle="round,pad=0.2", fc="white", ec="red" if multi else "0.6", lw=1.4 if multi else 0.6
+            ),
+        )
     return finish(fig, True)
 
 

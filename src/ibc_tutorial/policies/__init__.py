@@ -6,7 +6,13 @@ from ibc_tutorial.policies.encoders import BEVStateEncoder, MLPEncoder, Observat
 from ibc_tutorial.policies.energy import EnergyModel, GridArgminPolicy, GridSamplePolicy
 
 # explicit policies (chapter 02)
-from ibc_tutorial.policies.explicit import BetaPolicy, ClassifierPolicy, ExplicitPolicy, MDNPolicy, RegressionPolicy
+from ibc_tutorial.policies.explicit import (
+    BetaPolicy,
+    ClassifierPolicy,
+    ExplicitPolicy,
+    MDNPolicy,
+    RegressionPolicy,
+)
 
 __all__ = [
     "ObservationEncoder",

@@ -67,7 +67,9 @@ class BEVStateEncoder(ObservationEncoder):
     ``embed_dim`` (the paper's 256-d state embedding). z is their concatenation (sec. 3.3).
     """
 
-    def __init__(self, bev_size: int = 64, channels=(16, 32, 32, 64), embed_dim: int = 256, in_channels: int = 5):
+    def __init__(
+        self, bev_size: int = 64, channels=(16, 32, 32, 64), embed_dim: int = 256, in_channels: int = 5
+    ):
         super().__init__()
         self.bev_size = check_int("bev_size", bev_size, minimum=8)
         self.in_channels = check_int("in_channels", in_channels, minimum=1)
@@ -83,7 +85,9 @@ class BEVStateEncoder(ObservationEncoder):
             c_in = c
         side = _conv_out(bev_size, len(channels))
         self.cnn = nn.Sequential(*convs, nn.Flatten(), nn.Linear(c_in * side * side, embed_dim), nn.ReLU())
-        self.state_mlp = nn.Sequential(nn.Linear(3, embed_dim), nn.ReLU(), nn.Linear(embed_dim, embed_dim), nn.ReLU())
+        self.state_mlp = nn.Sequential(
+            nn.Linear(3, embed_dim), nn.ReLU(), nn.Linear(embed_dim, embed_dim), nn.ReLU()
+        )
         self.branch_dim = embed_dim
         self.embed_dim = 2 * embed_dim
 
@@ -98,6 +102,8 @@ class BEVStateEncoder(ObservationEncoder):
         check_tensor("obs['bev']", bev, shape=(None, self.in_channels, s, s), finite=False)
         check_tensor("obs['state']", state, shape=(len(bev), 3))
         x = bev.float()  # (B, 5, S, S) of 0./1.
-        scale = torch.tensor([1.0 / SPEED_SCALE, 1.0, 1.0], device=state.device)  # (3,), on the state's device
+        scale = torch.tensor(
+            [1.0 / SPEED_SCALE, 1.0, 1.0], device=state.device
+        )  # (3,), on the state's device
         st = state.float() * scale  # (B, 3), speed rescaled
         return torch.cat([self.cnn(x), self.state_mlp(st)], dim=1)  # (B, 2 E)

@@ -48,7 +48,9 @@ class EnergyModel(nn.Module):
     def __init__(self, encoder: ObservationEncoder, action_dim: int, hidden: int = 64, layers: int = 2):
         super().__init__()
         if not isinstance(encoder, nn.Module) or not hasattr(encoder, "embed_dim"):
-            raise ValueError(f"encoder must be an ObservationEncoder (an nn.Module with embed_dim), got {type(encoder).__name__}")
+            raise ValueError(
+                f"encoder must be an ObservationEncoder (an nn.Module with embed_dim), got {type(encoder).__name__}"
+            )
         self.encoder = encoder
         self.action_dim = check_int("action_dim", action_dim, minimum=1)
         self.hidden = check_int("hidden", hidden, minimum=1)
@@ -60,7 +62,10 @@ class EnergyModel(nn.Module):
         self._init_fused_layer()
         mods: list[nn.Module] = []
         for _ in range(layers - 1):
-            mods += [nn.Linear(hidden, hidden), nn.ReLU(inplace=True)]  # in place: no extra (B, N, H) temporary
+            mods += [
+                nn.Linear(hidden, hidden),
+                nn.ReLU(inplace=True),
+            ]  # in place: no extra (B, N, H) temporary
         mods.append(nn.Linear(hidden, 1))
         self.head = nn.Sequential(*mods)  # per candidate: (..., hidden) -> (..., 1)
 
@@ -109,7 +114,11 @@ class EnergyModel(nn.Module):
 
     # ------------------------------------------------------------------ checks
     def _check_actions(self, actions, batch: int) -> torch.Tensor:
-        ok = isinstance(actions, torch.Tensor) and actions.ndim in (2, 3) and actions.shape[-1] == self.action_dim
+        ok = (
+            isinstance(actions, torch.Tensor)
+            and actions.ndim in (2, 3)
+            and actions.shape[-1] == self.action_dim
+        )
         if ok and actions.ndim == 3 and actions.shape[0] != batch:
             ok = False
         if not ok:
@@ -164,6 +173,8 @@ class GridSamplePolicy:
             energies = grid_energies(self.model, self.model.embed(obs), self.grid)  # (B, G)
         finally:
             self.model.train(was_training)
-        probs = torch.softmax(-energies, dim=1).to(draw_device(self.generator))  # (B, G), drawn where the generator is
+        probs = torch.softmax(-energies, dim=1).to(
+            draw_device(self.generator)
+        )  # (B, G), drawn where the generator is
         idx = torch.multinomial(probs, 1, generator=self.generator)[:, 0]  # (B,)
         return self.grid[idx.to(self.grid.device)]  # (B, D)

@@ -29,7 +29,7 @@ Each class has a ``for_vectors(obs_dim, action_dim, ...)`` constructor with a sm
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import torch
 from torch import nn
@@ -87,9 +87,13 @@ class ExplicitPolicy(nn.Module):
 
     def action_density(self, obs, values: torch.Tensor) -> torch.Tensor:
         """Predicted density (B, G, D) of each action dimension at ``values`` (G,) in [-1, 1]."""
-        raise NotImplementedError(f"{type(self).__name__} predicts one action, not a distribution; plot act(obs) instead")
+        raise NotImplementedError(
+            f"{type(self).__name__} predicts one action, not a distribution; plot act(obs) instead"
+        )
 
-    def controller(self, mode: str | None = None, generator: torch.Generator | None = None) -> Callable[[torch.Tensor], torch.Tensor]:
+    def controller(
+        self, mode: str | None = None, generator: torch.Generator | None = None
+    ) -> Callable[[torch.Tensor], torch.Tensor]:
         """The callable ``obs -> act(obs, mode, generator)`` that the toy worlds' rollouts call."""
         mode = self._mode(mode)
 
@@ -154,7 +158,14 @@ class BetaPolicy(ExplicitPolicy):
 
     modes = ("mean", "mode", "sample")
 
-    def __init__(self, encoder: ObservationEncoder, action_dim: int = 1, *, min_concentration: float = 1.0, eps: float = 1e-3):
+    def __init__(
+        self,
+        encoder: ObservationEncoder,
+        action_dim: int = 1,
+        *,
+        min_concentration: float = 1.0,
+        eps: float = 1e-3,
+    ):
         super().__init__(encoder, action_dim, 2 * action_dim)
         self.min_concentration = check_positive("min_concentration", min_concentration, allow_zero=True)
         self.eps = check_positive("eps", eps)  # added so that α, β > 0 even when min_concentration = 0
@@ -177,8 +188,13 @@ class BetaPolicy(ExplicitPolicy):
             denom = alpha + beta - 2.0
             interior = (alpha - 1.0) / denom.clamp_min(1e-12)
             z = torch.where(
-                (alpha > 1) & (beta > 1), interior,
-                torch.where(alpha > beta, torch.ones_like(alpha), torch.where(beta > alpha, torch.zeros_like(alpha), alpha / (alpha + beta))),
+                (alpha > 1) & (beta > 1),
+                interior,
+                torch.where(
+                    alpha > beta,
+                    torch.ones_like(alpha),
+                    torch.where(beta > alpha, torch.zeros_like(alpha), alpha / (alpha + beta)),
+                ),
             )
         else:
             z = _sample_beta(alpha, beta, generator)
@@ -240,7 +256,9 @@ class ClassifierPolicy(ExplicitPolicy):
         if mode == "argmax":
             idx = logits.argmax(dim=-1)  # (B, D)
         else:
-            probs = torch.softmax(logits, dim=-1).reshape(-1, self.n_bins).to(draw_device(generator))  # (B*D, N)
+            probs = (
+                torch.softmax(logits, dim=-1).reshape(-1, self.n_bins).to(draw_device(generator))
+            )  # (B*D, N)
             idx = torch.multinomial(probs, 1, generator=generator).view(logits.shape[:2]).to(logits.device)
         return self.centers[idx]  # (B, D)
 
@@ -266,7 +284,14 @@ class MDNPolicy(ExplicitPolicy):
 
     modes = ("paper", "sample")
 
-    def __init__(self, encoder: ObservationEncoder, action_dim: int = 1, *, n_components: int = 5, min_std: float = 1e-3):
+    def __init__(
+        self,
+        encoder: ObservationEncoder,
+        action_dim: int = 1,
+        *,
+        n_components: int = 5,
+        min_std: float = 1e-3,
+    ):
         self.n_components = check_int("n_components", n_components, minimum=1)
         super().__init__(encoder, action_dim, n_components * (1 + 2 * action_dim))
         self.min_std = check_positive("min_std", min_std)
@@ -290,7 +315,9 @@ class MDNPolicy(ExplicitPolicy):
             y = means[torch.arange(len(comp), device=comp.device), comp]  # (B, D)
         else:
             where = draw_device(generator)  # drawn where the generator is, used on the means' device
-            comp = torch.multinomial(torch.softmax(logits, dim=1).to(where), 1, generator=generator).squeeze(1)  # (B,)
+            comp = torch.multinomial(torch.softmax(logits, dim=1).to(where), 1, generator=generator).squeeze(
+                1
+            )  # (B,)
             comp = comp.to(means.device)
             rows = torch.arange(len(comp), device=means.device)
             noise = torch.randn(means.shape[0], means.shape[2], generator=generator, device=where)  # (B, D)

@@ -20,10 +20,10 @@ in the tree and side-road worlds the observation is the distance ahead to the la
 (obs_dim = 1), optionally with the lateral offset (``obs_lateral=True``, obs_dim = 2).
 """
 
-from ibc_tutorial.toy.side_road import SideRoadConfig, SideRoadWorld
-from ibc_tutorial.toy.tree import TreeConfig, TreeWorld
 from ibc_tutorial.toy import car
 from ibc_tutorial.toy.junction import SITUATIONS, JunctionConfig, JunctionWorld
+from ibc_tutorial.toy.side_road import SideRoadConfig, SideRoadWorld
+from ibc_tutorial.toy.tree import TreeConfig, TreeWorld
 from ibc_tutorial.toy.world import Demonstrations, Policy, Rollouts, ToyConfig, ToyWorld, check_policy_actions
 
 __all__ = [

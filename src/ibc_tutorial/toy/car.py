@@ -26,7 +26,9 @@ import torch
 from ibc_tutorial.utils import check_positive, check_tensor
 
 
-def step(states: torch.Tensor, steer: torch.Tensor, *, speed: float, heading_max: float, dt: float) -> torch.Tensor:
+def step(
+    states: torch.Tensor, steer: torch.Tensor, *, speed: float, heading_max: float, dt: float
+) -> torch.Tensor:
     """Advance ``states`` (B, 3) by one step of steering ``steer`` (B, 1) or (B,); returns (B, 3)."""
     check_tensor("states", states, ndim=2, shape=(None, 3))
     check_positive("speed", speed)
@@ -34,14 +36,18 @@ def step(states: torch.Tensor, steer: torch.Tensor, *, speed: float, heading_max
     check_positive("dt", dt)
     steer = steer.reshape(-1)  # (B,)
     if steer.shape[0] != states.shape[0]:
-        raise ValueError(f"steer must hold one action per state ({states.shape[0]}), got shape {tuple(steer.shape)}")
+        raise ValueError(
+            f"steer must hold one action per state ({states.shape[0]}), got shape {tuple(steer.shape)}"
+        )
     heading = -heading_max * steer  # (B,): +1 = full right = the heading turned clockwise
     x = states[:, 0] + speed * torch.cos(heading) * dt
     y = states[:, 1] + speed * torch.sin(heading) * dt
     return torch.stack([x, y, heading], dim=-1)  # (B, 3)
 
 
-def segment_circle_contact(p0: torch.Tensor, p1: torch.Tensor, centre: torch.Tensor, radius: float) -> torch.Tensor:
+def segment_circle_contact(
+    p0: torch.Tensor, p1: torch.Tensor, centre: torch.Tensor, radius: float
+) -> torch.Tensor:
     """Fraction ``s`` in [0, 1] of the way from ``p0`` to ``p1`` (both (B, 2)) at which a point
     moving on that segment enters the open disc of ``radius`` around ``centre`` (2,); ``inf``
     where it never does.

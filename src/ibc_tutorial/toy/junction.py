@@ -71,7 +71,9 @@ class JunctionWorld:
         check_probability("config.p_junction", config.p_junction)
         check_probability("config.p_red", config.p_red)
         if not config.p_junction + config.p_red < 1:
-            raise ValueError(f"config.p_junction + config.p_red must be < 1 (some cruising), got {config.p_junction} + {config.p_red}")
+            raise ValueError(
+                f"config.p_junction + config.p_red must be < 1 (some cruising), got {config.p_junction} + {config.p_red}"
+            )
         self.config = config
 
     # ------------------------------------------------------------------ the expert

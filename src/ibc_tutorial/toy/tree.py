@@ -80,9 +80,21 @@ class TreeWorld(ToyWorld):
         config = TreeConfig() if config is None else config
         super().__init__(config)
         c = config
-        check_positive_fields(c, ("tree_radius", "car_radius", "pass_offset", "swerve_start_min", "swerve_start_max", "return_after"))
+        check_positive_fields(
+            c,
+            (
+                "tree_radius",
+                "car_radius",
+                "pass_offset",
+                "swerve_start_min",
+                "swerve_start_max",
+                "return_after",
+            ),
+        )
         if not c.swerve_start_min <= c.swerve_start_max:
-            raise ValueError(f"config.swerve_start_min must be <= config.swerve_start_max, got {c.swerve_start_min} and {c.swerve_start_max}")
+            raise ValueError(
+                f"config.swerve_start_min must be <= config.swerve_start_max, got {c.swerve_start_min} and {c.swerve_start_max}"
+            )
         check_probability("config.right_prob", c.right_prob)
 
     @property
@@ -102,7 +114,9 @@ class TreeWorld(ToyWorld):
         at which the expert starts to swerve (m), uniform in [swerve_start_min, swerve_start_max]]."""
         c = self.config
         base = super().sample_plans(start, generator)  # (E, 2)
-        where = c.swerve_start_min + (c.swerve_start_max - c.swerve_start_min) * torch.rand(len(start), 1, generator=generator)
+        where = c.swerve_start_min + (c.swerve_start_max - c.swerve_start_min) * torch.rand(
+            len(start), 1, generator=generator
+        )
         return torch.cat([base, where], dim=1)
 
     def reference_lateral(self, x: torch.Tensor, plan: torch.Tensor) -> torch.Tensor:

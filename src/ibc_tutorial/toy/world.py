@@ -23,8 +23,8 @@ same ``seed`` gives the same start states to ``rollout``, ``expert_rollouts`` an
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 import torch
@@ -137,7 +137,9 @@ class Rollouts:
 def check_policy_actions(actions, batch: int) -> torch.Tensor:
     """Return ``actions`` in the default dtype (B, 1), or raise ValueError saying what a policy must return."""
     if not isinstance(actions, torch.Tensor):
-        raise ValueError(f"policy must return a torch.Tensor of shape ({batch}, 1), got {type(actions).__name__}")
+        raise ValueError(
+            f"policy must return a torch.Tensor of shape ({batch}, 1), got {type(actions).__name__}"
+        )
     if actions.shape != (batch, 1):
         raise ValueError(f"policy must return actions of shape ({batch}, 1), got {tuple(actions.shape)}")
     if not actions.is_floating_point():
@@ -146,13 +148,17 @@ def check_policy_actions(actions, batch: int) -> torch.Tensor:
         raise ValueError("policy must return finite actions in [-1, 1], got NaN or inf")
     if (actions.abs() > 1.0).any():
         worst = float(actions.abs().max())
-        raise ValueError(f"policy must return actions in [-1, 1] (they are not clipped), got |action| up to {worst:.3g}")
+        raise ValueError(
+            f"policy must return actions in [-1, 1] (they are not clipped), got |action| up to {worst:.3g}"
+        )
     return actions.detach().to(torch.get_default_dtype())
 
 
 def _as_1d(name: str, value) -> torch.Tensor:
     dtype = torch.get_default_dtype()
-    t = torch.as_tensor(np.asarray(value, dtype=np.float64) if not isinstance(value, torch.Tensor) else value, dtype=dtype)
+    t = torch.as_tensor(
+        np.asarray(value, dtype=np.float64) if not isinstance(value, torch.Tensor) else value, dtype=dtype
+    )
     t = t.reshape(-1)
     if not torch.isfinite(t).all():
         raise ValueError(f"{name} must be finite, got {value!r}")
@@ -183,11 +189,17 @@ class ToyWorld:
 
     def __init__(self, config: ToyConfig):
         c = config
-        check_positive_fields(c, ("speed", "dt", "heading_max", "expert_lookahead", "obs_distance_scale", "obs_lateral_scale"))
-        check_positive_fields(c, ("start_lateral_range", "expert_noise_std", "obs_noise_std"), allow_zero=True)
+        check_positive_fields(
+            c, ("speed", "dt", "heading_max", "expert_lookahead", "obs_distance_scale", "obs_lateral_scale")
+        )
+        check_positive_fields(
+            c, ("start_lateral_range", "expert_noise_std", "obs_noise_std"), allow_zero=True
+        )
         check_int("config.horizon", c.horizon, minimum=1)
         if not c.heading_max < math.pi / 2:
-            raise ValueError(f"config.heading_max must be < pi/2 (the car drives forward), got {c.heading_max}")
+            raise ValueError(
+                f"config.heading_max must be < pi/2 (the car drives forward), got {c.heading_max}"
+            )
         self.config = c
 
     @property
@@ -220,7 +232,9 @@ class ToyWorld:
         expert's path runs at away from the landmark (see ``expert_holds_start_offset``);
         subclasses may add columns (e.g. where the tree expert starts to swerve)."""
         n = len(start)
-        modes = torch.multinomial(self.mode_probs(), n, replacement=True, generator=generator).to(torch.get_default_dtype())
+        modes = torch.multinomial(self.mode_probs(), n, replacement=True, generator=generator).to(
+            torch.get_default_dtype()
+        )
         base = start[:, 1] if self.config.expert_holds_start_offset else torch.zeros(n)
         return torch.stack([modes, base], dim=1)  # (E, 2)
 
@@ -254,7 +268,9 @@ class ToyWorld:
         prev = _as_1d("prev_action", prev_action)
         if (prev.abs() > 1).any():
             raise ValueError(f"prev_action must be in [-1, 1], got {prev_action!r}")
-        d, right, prev = torch.broadcast_tensors(_as_1d("distance", distance), _as_1d("lateral", lateral), prev)
+        d, right, prev = torch.broadcast_tensors(
+            _as_1d("distance", distance), _as_1d("lateral", lateral), prev
+        )
         heading = -self.config.heading_max * prev
         return torch.stack([self.anchor_x - d, -right, heading], dim=-1)  # (N, 3)
 
@@ -264,7 +280,9 @@ class ToyWorld:
         e.g. to plot a policy's action there."""
         return self.observe(self.states_at(distance, lateral, prev_action))
 
-    def in_window(self, obs: torch.Tensor, distance: tuple[float, float], max_abs_lateral: float = 0.5) -> torch.Tensor:
+    def in_window(
+        self, obs: torch.Tensor, distance: tuple[float, float], max_abs_lateral: float = 0.5
+    ) -> torch.Tensor:
         """(M,) bool: which observations ``obs`` (M, obs_dim) lie ``distance`` = (low, high) m
         before the landmark with |lateral offset| <= ``max_abs_lateral`` m (if it is observed)."""
         lo, hi = distance
@@ -287,7 +305,9 @@ class ToyWorld:
         y = self.config.start_lateral_range * (1.0 - 2.0 * torch.rand(n, generator=generator))
         return torch.stack([torch.zeros(n), y, torch.zeros(n)], dim=-1)
 
-    def expert_steer(self, states: torch.Tensor, plan: torch.Tensor, generator: torch.Generator | None = None) -> torch.Tensor:
+    def expert_steer(
+        self, states: torch.Tensor, plan: torch.Tensor, generator: torch.Generator | None = None
+    ) -> torch.Tensor:
         """The expert's steering (B, 1) at ``states`` (B, 3) following ``plan`` (B, P): pure
         pursuit, i.e. head for the point of its path ``expert_lookahead`` m ahead, plus Gaussian
         noise when a ``generator`` is given, clipped to [-1, 1] (+1 = right)."""
@@ -301,7 +321,9 @@ class ToyWorld:
         return steer.clamp(-1.0, 1.0)[:, None]  # (B, 1)
 
     # ------------------------------------------------------------------ closed loop
-    def _simulate(self, act: Callable[[torch.Tensor, torch.Tensor], torch.Tensor], start: torch.Tensor, seed: int) -> Rollouts:
+    def _simulate(
+        self, act: Callable[[torch.Tensor, torch.Tensor], torch.Tensor], start: torch.Tensor, seed: int
+    ) -> Rollouts:
         """Drive all episodes from ``start`` (E, 3) for ``horizon`` steps with ``act(obs, states) -> (E, 1)``;
         ``seed`` seeds the observation noise (``config.obs_noise_std``)."""
         e, t_max = len(start), self.config.horizon
@@ -333,16 +355,27 @@ class ToyWorld:
             done = done | hit
             s = nxt
             states[:, t + 1] = s
-        return Rollouts(states=states, actions=actions, obs=obs_all, collided=collision_step >= 0, collision_step=collision_step, alive=alive)
+        return Rollouts(
+            states=states,
+            actions=actions,
+            obs=obs_all,
+            collided=collision_step >= 0,
+            collision_step=collision_step,
+            alive=alive,
+        )
 
-    def rollout(self, policy: Policy, n_episodes: int, seed: int, *, initial_states: torch.Tensor | None = None) -> Rollouts:
+    def rollout(
+        self, policy: Policy, n_episodes: int, seed: int, *, initial_states: torch.Tensor | None = None
+    ) -> Rollouts:
         """Run ``policy`` in closed loop on ``n_episodes`` episodes at once, started from the
         start distribution drawn with ``seed`` (or from ``initial_states`` (E, 3) when given).
 
         The same ``seed`` gives the same starts as ``expert_rollouts`` and ``expert_demonstrations``
         (and, with ``config.obs_noise_std`` > 0, the same observation noise at each step)."""
         if not callable(policy):
-            raise ValueError(f"policy must be callable as policy(obs) -> actions, got {type(policy).__name__}")
+            raise ValueError(
+                f"policy must be callable as policy(obs) -> actions, got {type(policy).__name__}"
+            )
         n = check_int("n_episodes", n_episodes, minimum=1)
         check_int("seed", seed, minimum=0)
         if initial_states is None:

@@ -34,14 +34,22 @@ from ibc_tutorial.experiments.agents.presets import Preset
 from ibc_tutorial.utils import check_choice
 
 ABLATIONS = {
-    "no-brake-noise": ("demonstrations without the expert's held brakes (as the paper's)",
-                       {"brake_noise": 0.0}),
-    "intensity-lights": ("the lights drawn by state (red 1.0, yellow 0.6, green 0.3), not as one 'must stop' bit",
-                         {"light_encoding": "intensity"}),
-    "constant-lr": ("6 epochs at a constant step size (the previous laptop training)",
-                    {"epochs": 6, "lr_schedule": "constant"}),
-    "previous-preset": ("the previous edition's laptop preset: no held brakes, 6 epochs at a constant step size",
-                        {"brake_noise": 0.0, "epochs": 6, "lr_schedule": "constant"}),
+    "no-brake-noise": (
+        "demonstrations without the expert's held brakes (as the paper's)",
+        {"brake_noise": 0.0},
+    ),
+    "intensity-lights": (
+        "the lights drawn by state (red 1.0, yellow 0.6, green 0.3), not as one 'must stop' bit",
+        {"light_encoding": "intensity"},
+    ),
+    "constant-lr": (
+        "6 epochs at a constant step size (the previous laptop training)",
+        {"epochs": 6, "lr_schedule": "constant"},
+    ),
+    "previous-preset": (
+        "the previous edition's laptop preset: no held brakes, 6 epochs at a constant step size",
+        {"brake_noise": 0.0, "epochs": 6, "lr_schedule": "constant"},
+    ),
 }
 """Each variant: (what it changes, in words; the preset fields it changes)."""
 
@@ -55,8 +63,15 @@ def ablation_preset(base: Preset, name: str) -> Preset:
     """``base`` with the variant ``name`` of ``ABLATIONS`` applied, trained for ``ABLATION_METHODS`` and
     ``ABLATION_SEEDS`` and evaluated on the table's starts only."""
     check_choice("ablation", name, tuple(ABLATIONS))
-    return replace(base, name=f"{base.name}+{name}", methods=ABLATION_METHODS, seeds=ABLATION_SEEDS,
-                   routeless_episodes=0, heldout_episodes=0, **ABLATIONS[name][1])
+    return replace(
+        base,
+        name=f"{base.name}+{name}",
+        methods=ABLATION_METHODS,
+        seeds=ABLATION_SEEDS,
+        routeless_episodes=0,
+        heldout_episodes=0,
+        **ABLATIONS[name][1],
+    )
 
 
 STILL_M = 10.0
@@ -102,9 +117,15 @@ def compare_folders(variant, reference, methods: tuple[str, ...] = ABLATION_METH
             tables[key] = (pick(a), pick(b))
         va, vb = tables["score"]
         diff = stats.difference_interval(va, vb)
-        rows.append(AblationRow(
-            m, seeds, (float(va.mean()), float(vb.mean())),
-            tuple(float(x.mean()) for x in tables["red_light_infractions"]),
-            tuple(int((x < STILL_M).sum()) for x in tables["distance_m"]),
-            diff, stats.verdict(diff)))
+        rows.append(
+            AblationRow(
+                m,
+                seeds,
+                (float(va.mean()), float(vb.mean())),
+                tuple(float(x.mean()) for x in tables["red_light_infractions"]),
+                tuple(int((x < STILL_M).sum()) for x in tables["distance_m"]),
+                diff,
+                stats.verdict(diff),
+            )
+        )
     return rows

@@ -53,9 +53,14 @@ minibatches the predicted mean acceleration follows the label (correlation 0.94)
 def architecture(method: str, preset: Preset) -> dict:
     """The Fig. 2 network of ``method`` at ``preset``'s sizes, as plain data: what must match for weights to be reused."""
     check_choice("method", method, METHODS)
-    arch = {"network": "BetaPolicy" if method == "bc" else "EnergyModel", "encoder": "BEVStateEncoder",
-            "bev_size": preset.bev_size, "cnn_channels": [int(c) for c in preset.cnn_channels],
-            "embed_dim": preset.embed_dim, "action_dim": ACTION_DIM}
+    arch = {
+        "network": "BetaPolicy" if method == "bc" else "EnergyModel",
+        "encoder": "BEVStateEncoder",
+        "bev_size": preset.bev_size,
+        "cnn_channels": [int(c) for c in preset.cnn_channels],
+        "embed_dim": preset.embed_dim,
+        "action_dim": ACTION_DIM,
+    }
     if method == "bc":
         arch.update(min_concentration=BC_MIN_CONCENTRATION)
     else:
@@ -66,12 +71,20 @@ def architecture(method: str, preset: Preset) -> dict:
 def network_from_architecture(arch: dict) -> nn.Module:
     """Build the (untrained) network an ``architecture`` dict describes."""
     heads = ("BetaPolicy", "EnergyModel")
-    if not isinstance(arch, dict) or arch.get("encoder") != "BEVStateEncoder" or arch.get("network") not in heads:
-        raise ValueError(f"arch must describe a BEVStateEncoder with a BetaPolicy or EnergyModel head, got {arch!r}")
+    if (
+        not isinstance(arch, dict)
+        or arch.get("encoder") != "BEVStateEncoder"
+        or arch.get("network") not in heads
+    ):
+        raise ValueError(
+            f"arch must describe a BEVStateEncoder with a BetaPolicy or EnergyModel head, got {arch!r}"
+        )
     enc = BEVStateEncoder(arch["bev_size"], tuple(arch["cnn_channels"]), arch["embed_dim"])
     if arch["network"] == "BetaPolicy":
         return BetaPolicy(enc, action_dim=arch["action_dim"], min_concentration=arch["min_concentration"])
-    return EnergyModel(enc, action_dim=arch["action_dim"], hidden=arch["head_hidden"], layers=arch["head_layers"])
+    return EnergyModel(
+        enc, action_dim=arch["action_dim"], hidden=arch["head_hidden"], layers=arch["head_layers"]
+    )
 
 
 def build_network(method: str, preset: Preset) -> nn.Module:
@@ -84,7 +97,11 @@ def to_tensor_obs(obs, device: torch.device | str | None = None) -> dict[str, to
     ``device`` if given."""
     bev, state = obs["bev"], obs["state"]
     bev = torch.from_numpy(np.ascontiguousarray(bev)) if isinstance(bev, np.ndarray) else bev
-    state = torch.from_numpy(np.asarray(state, dtype=np.float32)) if isinstance(state, np.ndarray) else state.float()
+    state = (
+        torch.from_numpy(np.asarray(state, dtype=np.float32))
+        if isinstance(state, np.ndarray)
+        else state.float()
+    )
     if device is not None:
         bev, state = bev.to(device), state.to(device)
     return {"bev": bev, "state": state}
@@ -100,8 +117,15 @@ def dfo_config(method: str, preset: Preset) -> DFOConfig | None:
         init, select = "uniform", "argmax"  # the original IBC's DFO: uniform start, lowest energy
     else:
         init, select = "inverse-kde", "sample"  # Algorithm 1: w ∝ 1 / ĝ start, ŷ ~ Categorical(p̃) (line 14)
-    return DFOConfig(n_samples=p.dfo_samples, n_iters=p.dfo_iters, sigma_init=p.dfo_sigma_init, shrink=p.dfo_shrink,
-                     bandwidth=p.kde_bandwidth, init=init, select=select)
+    return DFOConfig(
+        n_samples=p.dfo_samples,
+        n_iters=p.dfo_iters,
+        sigma_init=p.dfo_sigma_init,
+        shrink=p.dfo_shrink,
+        bandwidth=p.kde_bandwidth,
+        init=init,
+        select=select,
+    )
 
 
 class Agent:
@@ -119,14 +143,22 @@ class Agent:
     The agent acts on the device of its network's weights (``to`` moves it; the CPU by default).
     """
 
-    def __init__(self, method: str, network: nn.Module, preset: Preset, expert_actions: torch.Tensor,
-                 init_weights: torch.Tensor | None = None):
+    def __init__(
+        self,
+        method: str,
+        network: nn.Module,
+        preset: Preset,
+        expert_actions: torch.Tensor,
+        init_weights: torch.Tensor | None = None,
+    ):
         self.method = check_choice("method", method, METHODS)
         self.network = network
         self.preset = preset
         self.expert_actions = check_tensor("expert_actions", expert_actions, ndim=2).float()  # (M, 2)
         if method == "da-ibc" and init_weights is None:
-            init_weights = inverse_density_weights(self.expert_actions.cpu(), preset.kde_bandwidth)  # (M,) eqs. 4-5
+            init_weights = inverse_density_weights(
+                self.expert_actions.cpu(), preset.kde_bandwidth
+            )  # (M,) eqs. 4-5
         self.init_weights = None if init_weights is None else init_weights.cpu()  # drawn from on the CPU
         self.dfo_config = dfo_config(method, preset)
         """Algorithm 1's settings for this agent (None for bc)."""
@@ -136,7 +168,7 @@ class Agent:
         """Where the network's weights are (and the agent computes)."""
         return next(self.network.parameters()).device
 
-    def to(self, device: torch.device | str) -> "Agent":
+    def to(self, device: torch.device | str) -> Agent:
         """Move the network and the expert actions to ``device`` (checked: ``utils.check_device``); returns self."""
         device = check_device("device", device)
         self.network.to(device)
@@ -152,8 +184,14 @@ class Agent:
             return self.network.act(obs, mode="mean").cpu()  # (B, 2)
         z = self.network.embed(obs)  # (B, E), once per observation
         weights = self.init_weights if self.method == "da-ibc" else None
-        return dfo(lambda a: self.network.energy_from_embedding(z, a), self.expert_actions, self.dfo_config,
-                   n_obs=len(z), init_weights=weights, generator=generator).cpu()  # (B, 2)
+        return dfo(
+            lambda a: self.network.energy_from_embedding(z, a),
+            self.expert_actions,
+            self.dfo_config,
+            n_obs=len(z),
+            init_weights=weights,
+            generator=generator,
+        ).cpu()  # (B, 2)
 
     def policy(self, seed: int = 0) -> Policy:
         """The seeded ``driving.rollout.Policy`` of this agent: numpy obs batch -> numpy actions (B, 2).

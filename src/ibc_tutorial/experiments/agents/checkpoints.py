@@ -51,10 +51,22 @@ def _cpu_copy(t: torch.Tensor, dtype: torch.dtype | None = None) -> torch.Tensor
     return t.detach().to("cpu", dtype=t.dtype if dtype is None else dtype, copy=True)
 
 
-def save_checkpoint(path, *, method: str, preset: Preset, network: torch.nn.Module, data_sha256: str, epoch: int,
-                    expert_actions: torch.Tensor, init_weights: torch.Tensor | None = None,
-                    optimizer: dict | None = None, generator: torch.Tensor | None = None,
-                    metrics: list | None = None, seed: int | None = None, half: bool = False) -> Path:
+def save_checkpoint(
+    path,
+    *,
+    method: str,
+    preset: Preset,
+    network: torch.nn.Module,
+    data_sha256: str,
+    epoch: int,
+    expert_actions: torch.Tensor,
+    init_weights: torch.Tensor | None = None,
+    optimizer: dict | None = None,
+    generator: torch.Tensor | None = None,
+    metrics: list | None = None,
+    seed: int | None = None,
+    half: bool = False,
+) -> Path:
     """Write an agent checkpoint atomically (see the module docstring for its contents).
 
     ``half`` stores the network's floating-point weights as float16 (a final checkpoint: half the
@@ -76,8 +88,10 @@ def save_checkpoint(path, *, method: str, preset: Preset, network: torch.nn.Modu
         "data_sha256": str(data_sha256),
         "epoch": int(epoch),
         "seed": None if seed is None else int(seed),
-        "model": {k: _cpu_copy(v, torch.float16 if half and v.is_floating_point() else None)
-                  for k, v in network.state_dict().items()},
+        "model": {
+            k: _cpu_copy(v, torch.float16 if half and v.is_floating_point() else None)
+            for k, v in network.state_dict().items()
+        },
         "expert_actions": _cpu_copy(expert_actions, torch.float32),
         "init_weights": None if init_weights is None else _cpu_copy(init_weights, torch.float32),
         "optimizer": optimizer,
@@ -127,8 +141,9 @@ def _check_fields(path: Path, ckpt: dict, resumable: bool) -> None:
     epoch = _field(path, ckpt, "epoch", int, "an integer")
     if epoch < 0:
         raise bad(f"epoch must be >= 0, got {epoch}")
-    if ckpt.get("seed") is not None and (not isinstance(ckpt["seed"], int) or isinstance(ckpt["seed"], bool)
-                                         or ckpt["seed"] < 0):
+    if ckpt.get("seed") is not None and (
+        not isinstance(ckpt["seed"], int) or isinstance(ckpt["seed"], bool) or ckpt["seed"] < 0
+    ):
         raise bad(f"seed must be an integer >= 0, got {ckpt['seed']!r}")
     try:
         preset = Preset.from_dict(preset_d)
@@ -142,14 +157,19 @@ def _check_fields(path: Path, ckpt: dict, resumable: bool) -> None:
     except (KeyError, TypeError, ValueError) as exc:
         raise bad(f"its architecture cannot be built ({type(exc).__name__}: {exc})") from None
     if set(model) != set(want):
-        raise bad(f"its weights do not fit its architecture (missing {sorted(set(want) - set(model))[:3]}, "
-                  f"unexpected {sorted(set(model) - set(want))[:3]})")
+        raise bad(
+            f"its weights do not fit its architecture (missing {sorted(set(want) - set(model))[:3]}, "
+            f"unexpected {sorted(set(model) - set(want))[:3]})"
+        )
     for k, v in model.items():
-        dtype_ok = isinstance(v, torch.Tensor) and (v.dtype == want[k].dtype or (
-            v.dtype == torch.float16 and want[k].dtype == torch.float32))  # a final checkpoint's float16 weights
+        dtype_ok = isinstance(v, torch.Tensor) and (
+            v.dtype == want[k].dtype or (v.dtype == torch.float16 and want[k].dtype == torch.float32)
+        )  # a final checkpoint's float16 weights
         if not dtype_ok or v.shape != want[k].shape:
             got = tuple(v.shape) if isinstance(v, torch.Tensor) else type(v).__name__
-            raise bad(f"its weights do not fit its architecture: {k} must be {tuple(want[k].shape)}, got {got}")
+            raise bad(
+                f"its weights do not fit its architecture: {k} must be {tuple(want[k].shape)}, got {got}"
+            )
         if v.is_floating_point() and not torch.isfinite(v).all():
             raise bad(f"its weight {k} holds NaN or inf")
     acts = _field(path, ckpt, "expert_actions", torch.Tensor, "a tensor")
@@ -161,7 +181,9 @@ def _check_fields(path: Path, ckpt: dict, resumable: bool) -> None:
     if w is not None:
         if not isinstance(w, torch.Tensor) or w.shape != (len(acts),) or not w.is_floating_point():
             got = tuple(w.shape) if isinstance(w, torch.Tensor) else type(w).__name__
-            raise bad(f"init_weights must be a float tensor of shape ({len(acts)},), one per expert action, got {got}")
+            raise bad(
+                f"init_weights must be a float tensor of shape ({len(acts)},), one per expert action, got {got}"
+            )
         if not torch.isfinite(w).all() or (w < 0).any() or not w.sum() > 0:
             raise bad("init_weights must be finite, >= 0 and not all 0")
     metrics = ckpt.get("metrics", [])
@@ -169,13 +191,17 @@ def _check_fields(path: Path, ckpt: dict, resumable: bool) -> None:
         raise bad("metrics must be a list of dicts")
     if resumable:
         if not isinstance(ckpt.get("optimizer"), dict) or not isinstance(ckpt.get("generator"), torch.Tensor):
-            raise ValueError(f"{path} has no optimiser and generator states (a final checkpoint?): a run resumes "
-                             "only from the last.pt its training wrote")
+            raise ValueError(
+                f"{path} has no optimiser and generator states (a final checkpoint?): a run resumes "
+                "only from the last.pt its training wrote"
+            )
         if len(metrics) < 1 or not isinstance(metrics[-1].get("epoch"), int):
             raise bad("a resumable checkpoint must hold the metrics so far")
 
 
-def load_checkpoint(path, *, method: str | None = None, preset: Preset | None = None, resumable: bool = False) -> dict:
+def load_checkpoint(
+    path, *, method: str | None = None, preset: Preset | None = None, resumable: bool = False
+) -> dict:
     """Read a checkpoint with ``weights_only=True`` and check every field before use.
 
     Args:
@@ -192,20 +218,30 @@ def load_checkpoint(path, *, method: str | None = None, preset: Preset | None = 
     if not isinstance(ckpt, dict) or ckpt.get("format") != FORMAT:
         raise ValueError(f"{path} is not an ibc-tutorial agent checkpoint (no '{FORMAT}' header)")
     if ckpt.get("format_version") != FORMAT_VERSION:
-        raise ValueError(f"{path} is a checkpoint of format version {ckpt.get('format_version')}; "
-                         f"this library reads version {FORMAT_VERSION}: train it again")
+        raise ValueError(
+            f"{path} is a checkpoint of format version {ckpt.get('format_version')}; "
+            f"this library reads version {FORMAT_VERSION}: train it again"
+        )
     if _minor(ckpt.get("package_version", "")) != _minor(__version__):
-        raise ValueError(f"{path} was written by ibc_tutorial {ckpt.get('package_version')}; this is {__version__}: "
-                         "train it again with this version")
+        raise ValueError(
+            f"{path} was written by ibc_tutorial {ckpt.get('package_version')}; this is {__version__}: "
+            "train it again with this version"
+        )
     if ckpt.get("method") not in METHODS:
-        raise ValueError(f"{path} is damaged: its method must be one of {METHODS}, got {ckpt.get('method')!r}")
+        raise ValueError(
+            f"{path} is damaged: its method must be one of {METHODS}, got {ckpt.get('method')!r}"
+        )
     _check_fields(path, ckpt, resumable)
     if method is not None and ckpt["method"] != method:
         raise ValueError(f"{path} is a checkpoint of method {ckpt['method']!r}, expected {method!r}")
     if preset is not None:
         want = architecture(ckpt["method"], preset)
         if ckpt["architecture"] != want:
-            diff = {k: (ckpt["architecture"].get(k), v) for k, v in want.items() if ckpt["architecture"].get(k) != v}
+            diff = {
+                k: (ckpt["architecture"].get(k), v)
+                for k, v in want.items()
+                if ckpt["architecture"].get(k) != v
+            }
             raise ValueError(f"{path} holds another architecture: (checkpoint, expected) differ in {diff}")
     return ckpt
 
@@ -235,5 +271,7 @@ def load_agent(path, *, method: str | None = None, preset: Preset | None = None)
     """An ``Agent`` from a checkpoint file (checked as ``load_checkpoint`` does); returns (agent, ckpt)."""
     ckpt = load_checkpoint(path, method=method, preset=preset)
     net = network_from_checkpoint(ckpt)
-    agent = Agent(ckpt["method"], net, Preset.from_dict(ckpt["preset"]), ckpt["expert_actions"], ckpt["init_weights"])
+    agent = Agent(
+        ckpt["method"], net, Preset.from_dict(ckpt["preset"]), ckpt["expert_actions"], ckpt["init_weights"]
+    )
     return agent, ckpt

@@ -59,8 +59,10 @@ def combine(*verdicts: str) -> str:
     """A claim made of several parts holds if every part does, does not hold if one part does not, else cannot tell."""
     for v in verdicts:
         if v not in (stats.HOLDS, stats.DOES_NOT_HOLD, stats.CANNOT_TELL):
-            raise ValueError(f"verdicts must be {stats.HOLDS!r}, {stats.DOES_NOT_HOLD!r} or {stats.CANNOT_TELL!r}, "
-                             f"got {v!r}")
+            raise ValueError(
+                f"verdicts must be {stats.HOLDS!r}, {stats.DOES_NOT_HOLD!r} or {stats.CANNOT_TELL!r}, "
+                f"got {v!r}"
+            )
     if verdicts and all(v == stats.HOLDS for v in verdicts):
         return stats.HOLDS
     return stats.DOES_NOT_HOLD if stats.DOES_NOT_HOLD in verdicts else stats.CANNOT_TELL
@@ -72,7 +74,9 @@ def spread_interval(x, seed: int = 0, n_resamples: int = stats.DEFAULT_RESAMPLES
     if x.ndim != 1 or len(x) < 2 or not np.isfinite(x).all():
         raise ValueError(f"x must be a finite 1-D array of at least 2 values, got shape {x.shape}")
     n_resamples = check_int("n_resamples", n_resamples, minimum=1)
-    draws = np.random.default_rng(check_int("seed", seed, minimum=0)).integers(len(x), size=(n_resamples, len(x)))
+    draws = np.random.default_rng(check_int("seed", seed, minimum=0)).integers(
+        len(x), size=(n_resamples, len(x))
+    )
     reps = x[draws].std(1)  # (R,)
     lo, hi = np.percentile(reps, [2.5, 97.5])
     return stats.Interval(float(x.std()), float(lo), float(hi), stats.LEVEL, n_resamples)
@@ -86,8 +90,10 @@ def first_eval_scores(folder, method: str, preset: Preset) -> np.ndarray:
         d = run_dir(folder, method, seed)
         first = read_metrics(d)  # ValueError naming a damaged file
         if not first or first[0]["epoch"] != preset.eval_every or not first[0].get("episodes"):
-            raise ValueError(f"{d / 'metrics.jsonl'} does not start with the evaluation of epoch {preset.eval_every} "
-                             "and its episodes: the run is not one of this replication's")
+            raise ValueError(
+                f"{d / 'metrics.jsonl'} does not start with the evaluation of epoch {preset.eval_every} "
+                "and its episodes: the run is not one of this replication's"
+            )
         rows.append([float(e["score"]) for e in first[0]["episodes"]])
     if len({len(r) for r in rows}) != 1:
         raise ValueError(f"the {method} agents of {folder} have first evaluations of different lengths")
@@ -144,24 +150,38 @@ def _check_folder(folder) -> tuple[Path, dict, dict, Preset]:
         raise ValueError(f"folder must be a path to a replication folder, got {type(folder).__name__}")
     folder = Path(folder)
     if not folder.is_dir():
-        raise ValueError(f"folder {folder} is not a folder: expected a replication folder (ibc-tutorial replicate --out)")
+        raise ValueError(
+            f"folder {folder} is not a folder: expected a replication folder (ibc-tutorial replicate --out)"
+        )
     loaded = load_results(folder)  # ValueError naming a missing or damaged file
     res, prov = loaded["results"], loaded["provenance"]
     try:
         preset = Preset.from_dict(res["preset"])
     except (KeyError, TypeError, ValueError) as exc:
-        raise ValueError(f"{folder / 'results.json'} has no valid preset ({exc}): not a replication's results") from None
+        raise ValueError(
+            f"{folder / 'results.json'} has no valid preset ({exc}): not a replication's results"
+        ) from None
     again = f"run 'ibc-tutorial replicate --preset {preset.name} --out {folder}' to finish it"
     if not (res.get("complete") and prov.get("complete")):
-        raise ValueError(f"folder {folder} is not a finished replication (results.json or provenance.json says it is "
-                         f"not complete): {again}")
+        raise ValueError(
+            f"folder {folder} is not a finished replication (results.json or provenance.json says it is "
+            f"not complete): {again}"
+        )
     if not set(CLAIM_METHODS) <= set(preset.methods):
-        raise ValueError(f"folder {folder} trained {', '.join(preset.methods)} only: the claims need "
-                         f"{', '.join(CLAIM_METHODS)} (an ablation folder is not judged)")
+        raise ValueError(
+            f"folder {folder} trained {', '.join(preset.methods)} only: the claims need "
+            f"{', '.join(CLAIM_METHODS)} (an ablation folder is not judged)"
+        )
     fd = res.get("free_driving")
-    if not isinstance(fd, dict) or not all(m in fd for m in FREE_METHODS) or not isinstance(res.get("landscapes"), dict):
-        raise ValueError(f"folder {folder} has no free driving or energy landscapes in its results.json "
-                         f"(claims 4 and 5 need them): {again}")
+    if (
+        not isinstance(fd, dict)
+        or not all(m in fd for m in FREE_METHODS)
+        or not isinstance(res.get("landscapes"), dict)
+    ):
+        raise ValueError(
+            f"folder {folder} has no free driving or energy landscapes in its results.json "
+            f"(claims 4 and 5 need them): {again}"
+        )
     return folder, res, loaded["landscapes"], preset
 
 
@@ -184,15 +204,28 @@ def judge_claims(folder) -> ClaimVerdicts:
 
     # claim 1 (Fig. 4): BC's mean score above each energy-based method's at the first evaluation
     first = {m: first_eval_scores(folder, m, preset) for m in CLAIM_METHODS}  # (A, E_eval) each
-    parts1 = tuple(stats.compare(first["bc"], first[m], f"BC > {m.upper()} at the first evaluation")
-                   for m in ("ibc", "da-ibc"))
+    parts1 = tuple(
+        stats.compare(first["bc"], first[m], f"BC > {m.upper()} at the first evaluation")
+        for m in ("ibc", "da-ibc")
+    )
     # claim 2 (the table): DA-IBC's mean distance above IBC's, on each set of starts
-    parts2 = tuple(stats.compare(table("da-ibc", "distance_m", ev), table("ibc", "distance_m", ev),
-                                 f"DA-IBC drives farther than IBC ({EVALUATIONS[ev]}, m)") for ev in evaluations)
+    parts2 = tuple(
+        stats.compare(
+            table("da-ibc", "distance_m", ev),
+            table("ibc", "distance_m", ev),
+            f"DA-IBC drives farther than IBC ({EVALUATIONS[ev]}, m)",
+        )
+        for ev in evaluations
+    )
     # claim 3 (the table): DA-IBC's mean red lights run per episode above BC's, on each set of starts
-    parts3 = tuple(stats.compare(table("da-ibc", "red_light_infractions", ev), table("bc", "red_light_infractions", ev),
-                                 f"DA-IBC runs more red lights than BC ({EVALUATIONS[ev]}, per episode)")
-                   for ev in evaluations)
+    parts3 = tuple(
+        stats.compare(
+            table("da-ibc", "red_light_infractions", ev),
+            table("bc", "red_light_infractions", ev),
+            f"DA-IBC runs more red lights than BC ({EVALUATIONS[ev]}, per episode)",
+        )
+        for ev in evaluations
+    )
     for k, parts in ((1, parts1), (2, parts2), (3, parts3)):
         claims[k] = ClaimVerdict(k, CLAIMS[k], combine(*(j.verdict for j in parts)), parts)
 
@@ -205,14 +238,24 @@ def judge_claims(folder) -> ClaimVerdicts:
     parts5, missing = [], []
     if res["landscapes"].get("junction") and "junction_points" in ls:
         junc = np.asarray(ls["junction_points"], dtype=float)  # (n_inferences, 2): (steer, acceleration)
-        parts5.append(stats.judge(f"junction: steering std of DFO's draws above {STEER_SPREAD:g}",
-                                  spread_interval(junc[:, 0]), STEER_SPREAD))
+        parts5.append(
+            stats.judge(
+                f"junction: steering std of DFO's draws above {STEER_SPREAD:g}",
+                spread_interval(junc[:, 0]),
+                STEER_SPREAD,
+            )
+        )
     else:
         missing.append("no junction moment in the free driving")
     if res["landscapes"].get("red_light") and "red_light_points" in ls:
         red = np.asarray(ls["red_light_points"], dtype=float)  # (n_inferences, 2)
-        parts5.append(stats.judge("red light: DFO's draws brake (minus mean acceleration above 0)",
-                                  stats.mean_interval(-red[None, :, 1]), 0.0))  # (1, n_inferences): one "agent"
+        parts5.append(
+            stats.judge(
+                "red light: DFO's draws brake (minus mean acceleration above 0)",
+                stats.mean_interval(-red[None, :, 1]),
+                0.0,
+            )
+        )  # (1, n_inferences): one "agent"
     else:
         missing.append("no red-light moment in the free driving")
     v5 = combine(*(j.verdict for j in parts5), *(stats.CANNOT_TELL for _ in missing))

@@ -30,9 +30,9 @@ import numpy as np
 import torch
 
 from ibc_tutorial import __version__
+from ibc_tutorial.cli import UserError, check_input_file, check_output_file
 from ibc_tutorial.driving.analysis import junction_crossings
 from ibc_tutorial.driving.rollout import EpisodeResult, rollout
-from ibc_tutorial.cli import UserError, check_input_file, check_output_file
 from ibc_tutorial.experiments.agents.agent import Agent
 from ibc_tutorial.experiments.agents.checkpoints import load_agent, training_seed
 from ibc_tutorial.utils import atomic_write_bytes, check_device, check_int
@@ -47,10 +47,21 @@ EXPERT_BEV_SIZE = 64
 """BEV size of the environments when the PID expert drives (it does not look at the BEV)."""
 
 
-def evaluate_agent(agent: Agent | str, town: str = "town02", episodes: int = 10, steps: int = 3000, *,
-                   seed: int = EVAL_SEED, policy_seed: int = 0, routeless: bool = True, record_xy: bool = False,
-                   record_steps: bool = False, keep_obs: bool = False,
-                   show_progress: bool | None = None, on_step=None) -> list[EpisodeResult]:
+def evaluate_agent(
+    agent: Agent | str,
+    town: str = "town02",
+    episodes: int = 10,
+    steps: int = 3000,
+    *,
+    seed: int = EVAL_SEED,
+    policy_seed: int = 0,
+    routeless: bool = True,
+    record_xy: bool = False,
+    record_steps: bool = False,
+    keep_obs: bool = False,
+    show_progress: bool | None = None,
+    on_step=None,
+) -> list[EpisodeResult]:
     """Drive ``agent`` (an ``Agent``, or "expert") for ``episodes`` batched episodes; one result each.
 
     ``policy_seed`` seeds the agent's DFO draws; ``record_xy``, ``record_steps``, ``keep_obs`` and
@@ -61,17 +72,41 @@ def evaluate_agent(agent: Agent | str, town: str = "town02", episodes: int = 10,
     if agent == "expert":
         policy, bev_size, encoding = "expert", EXPERT_BEV_SIZE, "intensity"
     else:
-        policy, bev_size, encoding = agent.policy(policy_seed), agent.preset.bev_size, agent.preset.light_encoding
-    return rollout(policy, town=town, episodes=episodes, steps=steps, bev_size=bev_size, seed=seed, routeless=routeless,
-                   record_xy=record_xy, record_steps=record_steps, keep_obs=keep_obs, show_progress=show_progress,
-                   light_encoding=encoding, on_step=on_step)
+        policy, bev_size, encoding = (
+            agent.policy(policy_seed),
+            agent.preset.bev_size,
+            agent.preset.light_encoding,
+        )
+    return rollout(
+        policy,
+        town=town,
+        episodes=episodes,
+        steps=steps,
+        bev_size=bev_size,
+        seed=seed,
+        routeless=routeless,
+        record_xy=record_xy,
+        record_steps=record_steps,
+        keep_obs=keep_obs,
+        show_progress=show_progress,
+        light_encoding=encoding,
+        on_step=on_step,
+    )
 
 
 def episode_rows(results: list[EpisodeResult]) -> list[dict]:
     """JSON rows, one per episode: seed, steps, distance, infractions, score, how it ended."""
-    return [{"seed": r.seed, "steps": int(r.steps), "distance_m": round(float(r.distance_m), 2),
-             "red_light_infractions": int(r.red_light_infractions), "score": round(float(r.score), 2),
-             "termination": r.termination} for r in results]
+    return [
+        {
+            "seed": r.seed,
+            "steps": int(r.steps),
+            "distance_m": round(float(r.distance_m), 2),
+            "red_light_infractions": int(r.red_light_infractions),
+            "score": round(float(r.score), 2),
+            "termination": r.termination,
+        }
+        for r in results
+    ]
 
 
 def crossing_rows(town: str, result: EpisodeResult) -> list[dict]:
@@ -89,8 +124,17 @@ ENERGY_GRID = 41
 """Values per action dimension of the (steer, acceleration) grid of ``ended_crossing_energies``."""
 
 
-def ended_crossing_energies(agent: Agent, town: str, rows: list[dict], *, steps: int, seed: int, policy_seed: int,
-                            routeless: bool = True, n_grid: int = ENERGY_GRID) -> np.ndarray | None:
+def ended_crossing_energies(
+    agent: Agent,
+    town: str,
+    rows: list[dict],
+    *,
+    steps: int,
+    seed: int,
+    policy_seed: int,
+    routeless: bool = True,
+    n_grid: int = ENERGY_GRID,
+) -> np.ndarray | None:
     """The energy over steering at every state of each crossing that ended in a building or off the road.
 
     ``rows`` are the episode rows of one evaluation (``episode_rows``) with their ``junction_crossings``
@@ -108,8 +152,11 @@ def ended_crossing_energies(agent: Agent, town: str, rows: list[dict], *, steps:
         raise ValueError("ended_crossing_energies needs an energy agent (ibc or da-ibc), got bc")
     check_int("n_grid", n_grid, minimum=2)
     check_int("steps", steps, minimum=1)
-    wanted = {i: r["junction_crossings"][-1] for i, r in enumerate(rows)
-              if r["termination"] and r.get("junction_crossings") and not r["junction_crossings"][-1]["finished"]}
+    wanted = {
+        i: r["junction_crossings"][-1]
+        for i, r in enumerate(rows)
+        if r["termination"] and r.get("junction_crossings") and not r["junction_crossings"][-1]["finished"]
+    }
     if not wanted:
         return None
     captured: dict[int, list] = {i: [] for i in wanted}
@@ -118,16 +165,31 @@ def ended_crossing_energies(agent: Agent, town: str, rows: list[dict], *, steps:
         for k, i in enumerate(episodes):
             c = wanted.get(i)
             if c is not None and c["start"] <= t < c["stop"]:
-                captured[i].append({"bev": batch["bev"][k:k + 1], "state": batch["state"][k:k + 1]})
+                captured[i].append({"bev": batch["bev"][k : k + 1], "state": batch["state"][k : k + 1]})
 
     horizon = min(steps, max(c["stop"] for c in wanted.values()))
-    replay = evaluate_agent(agent, town, len(rows), horizon, seed=seed, policy_seed=policy_seed, routeless=routeless,
-                            record_xy=False, show_progress=False, on_step=keep)
+    replay = evaluate_agent(
+        agent,
+        town,
+        len(rows),
+        horizon,
+        seed=seed,
+        policy_seed=policy_seed,
+        routeless=routeless,
+        record_xy=False,
+        show_progress=False,
+        on_step=keep,
+    )
     for i in wanted:
-        if replay[i].termination != rows[i]["termination"] or round(float(replay[i].distance_m), 2) != rows[i]["distance_m"]:
-            raise ValueError(f"the replay of episode {i} ended {replay[i].termination or 'later'} after "
-                             f"{replay[i].distance_m:.2f} m, not as evaluated ({rows[i]['termination']} after "
-                             f"{rows[i]['distance_m']} m): the energies would not be those of the crossing")
+        if (
+            replay[i].termination != rows[i]["termination"]
+            or round(float(replay[i].distance_m), 2) != rows[i]["distance_m"]
+        ):
+            raise ValueError(
+                f"the replay of episode {i} ended {replay[i].termination or 'later'} after "
+                f"{replay[i].distance_m:.2f} m, not as evaluated ({rows[i]['termination']} after "
+                f"{rows[i]['distance_m']} m): the energies would not be those of the crossing"
+            )
     steer = None
     for i, c in wanted.items():
         profiles = []
@@ -179,32 +241,60 @@ def run(args: argparse.Namespace) -> int:
     routeless = not getattr(args, "routed", False)
     if threads:
         torch.set_num_threads(threads)
-    results = evaluate_agent(agent, args.town, episodes, steps, seed=seed, policy_seed=policy_seed, routeless=routeless,
-                             record_steps=crossings)
+    results = evaluate_agent(
+        agent,
+        args.town,
+        episodes,
+        steps,
+        seed=seed,
+        policy_seed=policy_seed,
+        routeless=routeless,
+        record_steps=crossings,
+    )
     rows = episode_rows(results)
     energy_steer = None
     if crossings:
         for row, r in zip(rows, results):
             row["junction_crossings"] = crossing_rows(args.town, r)
         if agent.method != "bc":
-            energy_steer = ended_crossing_energies(agent, args.town, rows, steps=steps, seed=seed,
-                                                   policy_seed=policy_seed, routeless=routeless)
-    print(f"{ckpt['method']} agent (epoch {ckpt['epoch']}) in {args.town}, {episodes} {'routeless' if routeless else 'routed'} "
-          f"episodes of {steps} steps from seed {seed}, policy seed {policy_seed}:")
+            energy_steer = ended_crossing_energies(
+                agent, args.town, rows, steps=steps, seed=seed, policy_seed=policy_seed, routeless=routeless
+            )
+    print(
+        f"{ckpt['method']} agent (epoch {ckpt['epoch']}) in {args.town}, {episodes} {'routeless' if routeless else 'routed'} "
+        f"episodes of {steps} steps from seed {seed}, policy seed {policy_seed}:"
+    )
     print(f"{'episode':>8} {'seed':>6} {'steps':>6} {'distance m':>11} {'infractions':>12} {'score':>8}  end")
     for k, r in enumerate(rows):
-        print(f"{k:>8} {r['seed']:>6} {r['steps']:>6} {r['distance_m']:>11.1f} {r['red_light_infractions']:>12} "
-              f"{r['score']:>8.1f}  {r['termination'] or '-'}")
+        print(
+            f"{k:>8} {r['seed']:>6} {r['steps']:>6} {r['distance_m']:>11.1f} {r['red_light_infractions']:>12} "
+            f"{r['score']:>8.1f}  {r['termination'] or '-'}"
+        )
     s = summarize(rows)
-    print(f"mean score {s['score_mean']:.1f} ± {s['score_std']:.1f}, distance {s['distance_m_mean']:.1f} m, "
-          f"infractions {s['red_light_infractions_mean']:.2f}")
+    print(
+        f"mean score {s['score_mean']:.1f} ± {s['score_std']:.1f}, distance {s['distance_m_mean']:.1f} m, "
+        f"infractions {s['red_light_infractions_mean']:.2f}"
+    )
     if args.out:
-        from ibc_tutorial.experiments.agents.results import git_commit, machine  # deferred: results imports this module
+        from ibc_tutorial.experiments.agents.results import (
+            git_commit,
+            machine,
+        )  # deferred: results imports this module
 
-        payload = {"checkpoint": str(args.checkpoint), "method": ckpt["method"], "town": args.town, "steps": steps,
-                   "seed": seed, "policy_seed": policy_seed, "routeless": routeless,
-                   "package_version": __version__, "commit": git_commit(), "machine": machine(),
-                   "summary": s, "episodes": rows}
+        payload = {
+            "checkpoint": str(args.checkpoint),
+            "method": ckpt["method"],
+            "town": args.town,
+            "steps": steps,
+            "seed": seed,
+            "policy_seed": policy_seed,
+            "routeless": routeless,
+            "package_version": __version__,
+            "commit": git_commit(),
+            "machine": machine(),
+            "summary": s,
+            "episodes": rows,
+        }
         if energy_steer is not None:  # the steering values of the ended crossings' energy_by_steer
             payload["energy_steer_grid"] = [round(float(v), 4) for v in energy_steer]
         atomic_write_bytes(args.out, json.dumps(payload, indent=1).encode())

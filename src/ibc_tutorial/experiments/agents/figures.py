@@ -41,8 +41,17 @@ def record_drive(agent: Agent, steps: int, seed: int, policy_seed: int = 0) -> d
     Returns ``EpisodeResult.trace`` (pose, speed, lane, red_ahead, entry_dist, actions, bev, state)
     plus the episode's ``result`` row (``evaluate.episode_rows``).
     """
-    (r,) = evaluate_agent(agent, TOWN, 1, steps, seed=seed, policy_seed=policy_seed, record_steps=True, keep_obs=True,
-                          show_progress=False)
+    (r,) = evaluate_agent(
+        agent,
+        TOWN,
+        1,
+        steps,
+        seed=seed,
+        policy_seed=policy_seed,
+        record_steps=True,
+        keep_obs=True,
+        show_progress=False,
+    )
     return dict(r.trace, result=episode_rows([r])[0])
 
 
@@ -58,17 +67,30 @@ def free_driving(out, preset: Preset, agents: dict[str, Agent], log=print) -> tu
         for i in range(preset.routeless_episodes):
             rec = record_drive(agent, preset.routeless_steps, seed=EVAL_SEED + i)
             visits = junction_visits(TOWN, rec["lane"])
-            eps.append({"result": rec["result"], "coverage": round(road_coverage(TOWN, rec["pose"]), 4),
-                        "visits": visits, "exits": {str(k): v for k, v in exits_per_approach(visits).items()}})
+            eps.append(
+                {
+                    "result": rec["result"],
+                    "coverage": round(road_coverage(TOWN, rec["pose"]), 4),
+                    "visits": visits,
+                    "exits": {str(k): v for k, v in exits_per_approach(visits).items()},
+                }
+            )
             arrays[f"{method}_{i}_xy"] = rec["pose"][:, :2].astype(np.float32)
             recordings[(method, i)] = rec
-        all_poses = np.concatenate([recordings[(method, i)]["pose"] for i in range(preset.routeless_episodes)])
+        all_poses = np.concatenate(
+            [recordings[(method, i)]["pose"] for i in range(preset.routeless_episodes)]
+        )
         all_visits = [v for e in eps for v in e["visits"]]
-        summary[method] = {"episodes": eps, "coverage_all": round(road_coverage(TOWN, all_poses), 4),
-                           "exits_all": {str(k): v for k, v in exits_per_approach(all_visits).items()}}
+        summary[method] = {
+            "episodes": eps,
+            "coverage_all": round(road_coverage(TOWN, all_poses), 4),
+            "exits_all": {str(k): v for k, v in exits_per_approach(all_visits).items()},
+        }
         if log:
-            log(f"free driving {method}: coverage {summary[method]['coverage_all']:.3f}, "
-                f"{len(all_visits)} junction passes")
+            log(
+                f"free driving {method}: coverage {summary[method]['coverage_all']:.3f}, "
+                f"{len(all_visits)} junction passes"
+            )
     write_npz(Path(out) / FREE_DRIVING, arrays)
     return summary, recordings
 
@@ -98,8 +120,16 @@ def pick_junction(recordings: list[dict]) -> tuple | None:
         return False
 
     # a moving decision first (green light), then different exits (left and right best), then visits
-    ap = max(summary, key=lambda a: (green_in_range(a), ("left" in summary[a]["turns"]) and ("right" in summary[a]["turns"]),
-                                     len(summary[a]["turns"]), summary[a]["visits"], -a))
+    ap = max(
+        summary,
+        key=lambda a: (
+            green_in_range(a),
+            ("left" in summary[a]["turns"]) and ("right" in summary[a]["turns"]),
+            len(summary[a]["turns"]),
+            summary[a]["visits"],
+            -a,
+        ),
+    )
     candidates = []  # (out of range, red, |distance - 8 m|, order, step, rec)
     for order, (rec, v) in enumerate(x for x in all_visits if x[1]["approach"] == ap):
         k = v["step"]
@@ -117,13 +147,17 @@ def pick_junction(recordings: list[dict]) -> tuple | None:
 def pick_red(recordings: list[dict]) -> tuple | None:
     """(recording, step) of the red-light observation: the first drive with a red light 2-15 m ahead, closest to 6 m."""
     for rec in recordings:
-        ok = np.flatnonzero(rec["red_ahead"] & (rec["entry_dist"] >= RED_DISTANCE[0]) & (rec["entry_dist"] <= RED_DISTANCE[1]))
+        ok = np.flatnonzero(
+            rec["red_ahead"] & (rec["entry_dist"] >= RED_DISTANCE[0]) & (rec["entry_dist"] <= RED_DISTANCE[1])
+        )
         if len(ok):
             return rec, int(ok[np.argmin(np.abs(rec["entry_dist"][ok] - RED_TARGET))])
     return None
 
 
-def landscapes(out, agent: Agent, recordings: dict, n_grid: int = 41, n_inferences: int = 10, log=print) -> dict:
+def landscapes(
+    out, agent: Agent, recordings: dict, n_grid: int = 41, n_inferences: int = 10, log=print
+) -> dict:
     """Energy over (steer, acceleration) and ten DFO inferences at a junction and at a red light; writes ``landscapes.npz``.
 
     The moments are picked from ``agent``'s own drives first, then from the other agents'.
@@ -131,7 +165,10 @@ def landscapes(out, agent: Agent, recordings: dict, n_grid: int = 41, n_inferenc
     """
     own = [r for (m, _), r in sorted(recordings.items()) if m == agent.method]
     others = [r for (m, _), r in sorted(recordings.items()) if m != agent.method]
-    found = {"junction": pick_junction(own) or pick_junction(others), "red_light": pick_red(own) or pick_red(others)}
+    found = {
+        "junction": pick_junction(own) or pick_junction(others),
+        "red_light": pick_red(own) or pick_red(others),
+    }
     arrays, meta = {}, {}
     gen = torch.Generator().manual_seed(0)
     for name, pick in found.items():
@@ -142,14 +179,26 @@ def landscapes(out, agent: Agent, recordings: dict, n_grid: int = 41, n_inferenc
         obs = {"bev": rec["bev"][step][None], "state": rec["state"][step][None]}
         steer, accel, e = agent.energy_grid(obs, n_grid)
         points = np.stack([agent.act(obs, gen).numpy()[0] for _ in range(n_inferences)])  # (10, 2)
-        arrays.update({f"{name}_energy": e.astype(np.float32), f"{name}_points": points.astype(np.float32),
-                       f"{name}_bev": rec["bev"][step], f"{name}_state": rec["state"][step]})
+        arrays.update(
+            {
+                f"{name}_energy": e.astype(np.float32),
+                f"{name}_points": points.astype(np.float32),
+                f"{name}_bev": rec["bev"][step],
+                f"{name}_state": rec["state"][step],
+            }
+        )
         arrays["steer"], arrays["accel"] = steer.astype(np.float32), accel.astype(np.float32)
-        meta[name] = {"pose": [round(float(x), 3) for x in rec["pose"][step]], "speed": round(float(rec["speed"][step]), 3),
-                      "entry_dist_m": round(float(rec["entry_dist"][step]), 2), "red_ahead": bool(rec["red_ahead"][step]),
-                      "episode_seed": rec["result"]["seed"]}
+        meta[name] = {
+            "pose": [round(float(x), 3) for x in rec["pose"][step]],
+            "speed": round(float(rec["speed"][step]), 3),
+            "entry_dist_m": round(float(rec["entry_dist"][step]), 2),
+            "red_ahead": bool(rec["red_ahead"][step]),
+            "episode_seed": rec["result"]["seed"],
+        }
         if name == "junction":
-            meta[name].update(approach=pick[2], node=pick[3]["node"], visits=pick[3]["visits"], turns=pick[3]["turns"])
+            meta[name].update(
+                approach=pick[2], node=pick[3]["node"], visits=pick[3]["visits"], turns=pick[3]["turns"]
+            )
     write_npz(Path(out) / LANDSCAPES, arrays)
     if log:
         log(f"energy landscapes: {', '.join(k for k, v in meta.items() if v is not None) or 'none found'}")

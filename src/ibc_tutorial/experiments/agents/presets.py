@@ -122,14 +122,31 @@ class Preset:
     def __post_init__(self):
         check_int("routes", self.routes, minimum=1)
         check_int("bev_size", self.bev_size, minimum=8)
-        for f in ("embed_dim", "head_hidden", "head_layers", "epochs", "batch_size", "n_neg", "dfo_samples",
-                  "dfo_iters", "eval_every", "eval_episodes", "eval_steps", "final_episodes", "final_steps",
-                  "routeless_steps"):
+        for f in (
+            "embed_dim",
+            "head_hidden",
+            "head_layers",
+            "epochs",
+            "batch_size",
+            "n_neg",
+            "dfo_samples",
+            "dfo_iters",
+            "eval_every",
+            "eval_episodes",
+            "eval_steps",
+            "final_episodes",
+            "final_steps",
+            "routeless_steps",
+        ):
             check_int(f, getattr(self, f), minimum=1)
         for f in ("routeless_episodes", "heldout_episodes"):
             check_int(f, getattr(self, f), minimum=0)
         check_choice("light_encoding", self.light_encoding, LIGHT_ENCODINGS)
-        if not self.methods or any(m not in METHODS for m in self.methods) or len(set(self.methods)) < len(self.methods):
+        if (
+            not self.methods
+            or any(m not in METHODS for m in self.methods)
+            or len(set(self.methods)) < len(self.methods)
+        ):
             raise ValueError(f"methods must name distinct methods of {METHODS}, got {self.methods!r}")
         check_fraction("Preset.brake_noise", self.brake_noise)
         for f in ("lr", "kde_bandwidth", "min_minutes", "max_minutes"):
@@ -148,7 +165,7 @@ class Preset:
         return {k: list(v) if isinstance(v, tuple) else v for k, v in d.items()}
 
     @classmethod
-    def from_dict(cls, d: dict) -> "Preset":
+    def from_dict(cls, d: dict) -> Preset:
         """Inverse of ``to_dict``; unknown keys are refused."""
         names = {f.name for f in fields(cls)}
         unknown = set(d) - names

@@ -45,12 +45,35 @@ from ibc_tutorial.driving.collect import CollectConfig, collect
 from ibc_tutorial.driving.dataset import DemoDataset, DemoLog
 from ibc_tutorial.experiments.agents.ablations import ablation_preset
 from ibc_tutorial.experiments.agents.checkpoints import load_agent
-from ibc_tutorial.experiments.agents.evaluate import EVAL_SEED, HELDOUT_SEED, episode_rows, evaluate_agent, summarize
+from ibc_tutorial.experiments.agents.evaluate import (
+    EVAL_SEED,
+    HELDOUT_SEED,
+    episode_rows,
+    evaluate_agent,
+    summarize,
+)
 from ibc_tutorial.experiments.agents.figures import free_driving, landscapes
 from ibc_tutorial.experiments.agents.presets import Preset, differences, get_preset
 from ibc_tutorial.experiments.agents.results import (
-    DATA, FREE_DRIVING, LANDSCAPES, PROVENANCE, RESULTS, begin_invocation, check_only_entries, collect_results, delete_entries, expert_dir, finished_runs,
-    now, preset_results, read_json_dict, run_dir, run_name, write_json, write_provenance)
+    DATA,
+    FREE_DRIVING,
+    LANDSCAPES,
+    PROVENANCE,
+    RESULTS,
+    begin_invocation,
+    check_only_entries,
+    collect_results,
+    delete_entries,
+    expert_dir,
+    finished_runs,
+    now,
+    preset_results,
+    read_json_dict,
+    run_dir,
+    run_name,
+    write_json,
+    write_provenance,
+)
 from ibc_tutorial.experiments.agents.train import inspect_run, train_agent
 from ibc_tutorial.kde import inverse_density_weights
 from ibc_tutorial.utils import check_device, check_int
@@ -64,13 +87,21 @@ HEARTBEAT_S = 30.0
 
 
 def _init_worker(threads: int) -> None:
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the main process's to handle (it stops the workers)
+    signal.signal(
+        signal.SIGINT, signal.SIG_IGN
+    )  # Ctrl-C is the main process's to handle (it stops the workers)
     torch.set_num_threads(max(1, int(threads)))
 
 
 def _collect_config(preset: Preset) -> CollectConfig:
-    return CollectConfig("town01", preset.routes, preset.collect_seed, preset.min_minutes, preset.max_minutes,
-                         brake_noise=preset.brake_noise)
+    return CollectConfig(
+        "town01",
+        preset.routes,
+        preset.collect_seed,
+        preset.min_minutes,
+        preset.max_minutes,
+        brake_noise=preset.brake_noise,
+    )
 
 
 def _same_preset(stored, preset: Preset) -> bool:
@@ -90,7 +121,9 @@ def check_folder(out, preset: Preset) -> None:
         return
     names = {p.name for p in out.iterdir() if not p.name.startswith(".")}
     if names and not names & {"data", "runs", RESULTS, PROVENANCE}:
-        raise ValueError(f"{out} holds other files ({', '.join(sorted(names)[:3])}), not a replication: use another --out")
+        raise ValueError(
+            f"{out} holds other files ({', '.join(sorted(names)[:3])}), not a replication: use another --out"
+        )
     fix = "delete it and re-run the same command to make it again"
     stored = None
     for name in (PROVENANCE, RESULTS):
@@ -103,18 +136,23 @@ def check_folder(out, preset: Preset) -> None:
         except (TypeError, ValueError):
             diff = "a damaged preset"
         name = stored.get("name") if isinstance(stored, dict) else None
-        raise ValueError(f"{out} holds a replication of preset {name!r}, not {preset.name!r} (differs in {diff}): "
-                         "use another --out, or --force to start over")
+        raise ValueError(
+            f"{out} holds a replication of preset {name!r}, not {preset.name!r} (differs in {diff}): "
+            "use another --out, or --force to start over"
+        )
     data, checksum = out / DATA, None
     if data.exists():
         log = DemoLog.load(data)
         config = log.meta.get("config")
-        if not isinstance(config, dict) or any(config.get(k, 0.0 if k == "brake_noise" else None) != v
-                                               for k, v in asdict(_collect_config(preset)).items()
-                                               if k in ("town", "routes", "seed", "min_minutes", "max_minutes",
-                                                        "brake_noise")):
-            raise ValueError(f"{data} was collected with other settings than preset {preset.name!r}'s: use another "
-                             "--out, or --force to start over")
+        if not isinstance(config, dict) or any(
+            config.get(k, 0.0 if k == "brake_noise" else None) != v
+            for k, v in asdict(_collect_config(preset)).items()
+            if k in ("town", "routes", "seed", "min_minutes", "max_minutes", "brake_noise")
+        ):
+            raise ValueError(
+                f"{data} was collected with other settings than preset {preset.name!r}'s: use another "
+                "--out, or --force to start over"
+            )
         checksum = log.checksum()
     for m in preset.methods:
         for seed in preset.seeds:
@@ -139,26 +177,53 @@ def _dataset(data: Path, preset: Preset) -> tuple[DemoDataset, torch.Tensor]:
     return _WORKER_DATA[key]
 
 
-def final_evaluations(agent, out_dir: Path, preset: Preset, policy_seed: int, show_progress: bool | None = False,
-                      extra: dict | None = None) -> dict:
+def final_evaluations(
+    agent,
+    out_dir: Path,
+    preset: Preset,
+    policy_seed: int,
+    show_progress: bool | None = False,
+    extra: dict | None = None,
+) -> dict:
     """The table's evaluation (``final_eval.json``) and the held-out one (``heldout_eval.json``) of an agent
     (an ``Agent`` or "expert") into ``out_dir``; returns the first."""
     evals = {}
-    for name, seed, episodes in (("heldout_eval.json", HELDOUT_SEED, preset.heldout_episodes),
-                                 ("final_eval.json", EVAL_SEED, preset.final_episodes)):
+    for name, seed, episodes in (
+        ("heldout_eval.json", HELDOUT_SEED, preset.heldout_episodes),
+        ("final_eval.json", EVAL_SEED, preset.final_episodes),
+    ):
         if not episodes:
             continue
         te = time.perf_counter()
-        rows = episode_rows(evaluate_agent(agent, "town02", episodes, preset.final_steps, seed=seed,
-                                           policy_seed=policy_seed, show_progress=show_progress))
-        evals[name] = dict(extra or {}, town="town02", steps=preset.final_steps, start_seed=seed, summary=summarize(rows),
-                           episodes=rows, eval_seconds=round(time.perf_counter() - te, 1))
-        write_json(out_dir / name, evals[name])  # final_eval.json last: once it exists, the run counts as finished
+        rows = episode_rows(
+            evaluate_agent(
+                agent,
+                "town02",
+                episodes,
+                preset.final_steps,
+                seed=seed,
+                policy_seed=policy_seed,
+                show_progress=show_progress,
+            )
+        )
+        evals[name] = dict(
+            extra or {},
+            town="town02",
+            steps=preset.final_steps,
+            start_seed=seed,
+            summary=summarize(rows),
+            episodes=rows,
+            eval_seconds=round(time.perf_counter() - te, 1),
+        )
+        write_json(
+            out_dir / name, evals[name]
+        )  # final_eval.json last: once it exists, the run counts as finished
     return evals["final_eval.json"]
 
 
-def run_one(method: str, seed: int, out, preset, *, show_progress: bool | None = False, log=print,
-            device: str = "cpu") -> dict:
+def run_one(
+    method: str, seed: int, out, preset, *, show_progress: bool | None = False, log=print, device: str = "cpu"
+) -> dict:
     """Train one agent on ``device``, evaluate it finally in town02 and write its ``final_eval.json``; returns
     that dict."""
     preset = preset if isinstance(preset, Preset) else Preset.from_dict(preset)
@@ -166,10 +231,26 @@ def run_one(method: str, seed: int, out, preset, *, show_progress: bool | None =
     data = out / DATA
     dataset, probs = _dataset(data, preset)
     d = run_dir(out, method, seed)
-    res = train_agent(method, data, preset, seed, d, dataset=dataset, sample_probs=probs, show_progress=show_progress,
-                      log=log, device=device)
-    ev = final_evaluations(res.agent, d, preset, seed, show_progress,
-                           extra={"method": method, "seed": seed, "train_seconds": round(res.seconds, 1)})
+    res = train_agent(
+        method,
+        data,
+        preset,
+        seed,
+        d,
+        dataset=dataset,
+        sample_probs=probs,
+        show_progress=show_progress,
+        log=log,
+        device=device,
+    )
+    ev = final_evaluations(
+        res.agent,
+        d,
+        preset,
+        seed,
+        show_progress,
+        extra={"method": method, "seed": seed, "train_seconds": round(res.seconds, 1)},
+    )
     (d / "last.pt").unlink(missing_ok=True)
     return ev
 
@@ -185,8 +266,17 @@ def expert_row(out: Path, preset: Preset, log=print) -> None:
         log(f"expert: town02 score {ev['summary']['score_mean']:.1f} ± {ev['summary']['score_std']:.1f}")
 
 
-def replicate(preset: Preset, out, *, command: str = "", workers: int = 1, log=print,
-              show_progress: bool | None = None, force: bool = False, device: str = "cpu") -> dict:
+def replicate(
+    preset: Preset,
+    out,
+    *,
+    command: str = "",
+    workers: int = 1,
+    log=print,
+    show_progress: bool | None = None,
+    force: bool = False,
+    device: str = "cpu",
+) -> dict:
     """Run the whole replication (see the module docstring); returns the contents of ``results.json``.
 
     ``out`` is checked first (``check_folder``); ``force`` deletes the replication already there. ``device``
@@ -209,7 +299,9 @@ def replicate(preset: Preset, out, *, command: str = "", workers: int = 1, log=p
     def heartbeat(complete: bool = False) -> None:
         with lock:
             invocations[-1].update(last_seen=now(), seconds=round(time.perf_counter() - t0, 1))
-            write_provenance(out, preset, started, invocations, finished_runs(out, preset), planned, command, complete)
+            write_provenance(
+                out, preset, started, invocations, finished_runs(out, preset), planned, command, complete
+            )
 
     def save(complete: bool) -> None:
         results.update(collect_results(out, preset))
@@ -233,12 +325,22 @@ def replicate(preset: Preset, out, *, command: str = "", workers: int = 1, log=p
         if not results.get("complete"):
             heartbeat()  # an interrupted invocation's time counts too
     if log:
-        log(f"replication finished in {sum(i['seconds'] for i in invocations) / 60:.1f} min; results in {out}")
+        log(
+            f"replication finished in {sum(i['seconds'] for i in invocations) / 60:.1f} min; results in {out}"
+        )
     return results
 
 
-def _work(out: Path, preset: Preset, results: dict, save, workers: int, log, show_progress: bool | None,
-          device: str = "cpu") -> None:
+def _work(
+    out: Path,
+    preset: Preset,
+    results: dict,
+    save,
+    workers: int,
+    log,
+    show_progress: bool | None,
+    device: str = "cpu",
+) -> None:
     """Steps 1-3 of the module docstring; ``save(False)`` after each run."""
     # 1. the demonstrations
     data = out / DATA
@@ -250,18 +352,29 @@ def _work(out: Path, preset: Preset, results: dict, save, workers: int, log, sho
     results["data"] = {"file": DATA, "samples": len(DemoLog.load(data)), "routes": preset.routes}
 
     # 2-3. the runs, seed by seed (in ``workers`` processes: the first seed's runs are submitted first)
-    todo = [(m, s) for s in preset.seeds for m in preset.methods if not (run_dir(out, m, s) / "final_eval.json").exists()]
+    todo = [
+        (m, s)
+        for s in preset.seeds
+        for m in preset.methods
+        if not (run_dir(out, m, s) / "final_eval.json").exists()
+    ]
 
     def after_run(ev: dict) -> None:
         if log:
-            log(f"{ev['method']} seed {ev['seed']}: final town02 score {ev['summary']['score_mean']:.1f} ± "
-                f"{ev['summary']['score_std']:.1f} ({ev['train_seconds']:.0f} s training, {ev['eval_seconds']:.0f} s evaluation)")
+            log(
+                f"{ev['method']} seed {ev['seed']}: final town02 score {ev['summary']['score_mean']:.1f} ± "
+                f"{ev['summary']['score_std']:.1f} ({ev['train_seconds']:.0f} s training, {ev['eval_seconds']:.0f} s evaluation)"
+            )
         save(False)
 
     def figures_if_ready() -> None:
         s0 = preset.seeds[0]
-        if ("free_driving" in results or not preset.routeless_episodes or not set(FIGURE_METHODS) <= set(preset.methods)
-                or not all((run_dir(out, m, s0) / "final_eval.json").exists() for m in FIGURE_METHODS)):
+        if (
+            "free_driving" in results
+            or not preset.routeless_episodes
+            or not set(FIGURE_METHODS) <= set(preset.methods)
+            or not all((run_dir(out, m, s0) / "final_eval.json").exists() for m in FIGURE_METHODS)
+        ):
             return
         agents = {m: load_agent(run_dir(out, m, s0) / "final.pt")[0].to(device) for m in FIGURE_METHODS}
         summary, recordings = free_driving(out, preset, agents, log=log)
@@ -278,8 +391,9 @@ def _work(out: Path, preset: Preset, results: dict, save, workers: int, log, sho
             figures_if_ready()
         return
     ctx = multiprocessing.get_context("spawn")  # no fork after torch has started its threads
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_worker,
-                             initargs=(torch.get_num_threads(),)) as pool:
+    with ProcessPoolExecutor(
+        max_workers=workers, mp_context=ctx, initializer=_init_worker, initargs=(torch.get_num_threads(),)
+    ) as pool:
         try:
             futures = [pool.submit(run_one, m, s, str(out), preset.to_dict(), device=device) for m, s in todo]
             expert_row(out, preset, log)  # here, while the workers train
@@ -287,7 +401,9 @@ def _work(out: Path, preset: Preset, results: dict, save, workers: int, log, sho
             for fut in as_completed(futures):
                 after_run(fut.result())
                 figures_if_ready()
-        except KeyboardInterrupt:  # stop the workers now (their files are written atomically; the runs resume)
+        except (
+            KeyboardInterrupt
+        ):  # stop the workers now (their files are written atomically; the runs resume)
             for proc in list(getattr(pool, "_processes", {}).values()):
                 proc.terminate()
             pool.shutdown(wait=False, cancel_futures=True)

@@ -73,18 +73,30 @@ def machine() -> dict:
                 break
     except OSError:
         pass
-    return {"nproc": os.cpu_count(), "cpu": model, "os": platform.platform(), "python": platform.python_version(),
-            "torch": torch.__version__, "torch_threads": torch.get_num_threads(),
-            "cpu_capability": torch.backends.cpu.get_cpu_capability(),
-            "cpu_environment": {k: os.environ[k] for k in CPU_ENVIRONMENT if k in os.environ}}
+    return {
+        "nproc": os.cpu_count(),
+        "cpu": model,
+        "os": platform.platform(),
+        "python": platform.python_version(),
+        "torch": torch.__version__,
+        "torch_threads": torch.get_num_threads(),
+        "cpu_capability": torch.backends.cpu.get_cpu_capability(),
+        "cpu_environment": {k: os.environ[k] for k in CPU_ENVIRONMENT if k in os.environ},
+    }
 
 
 def git_commit() -> str:
     """``git rev-parse HEAD`` of the working tree (or "unknown"), with "+changes" if it is not clean."""
     try:
-        head = subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True, timeout=10).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], capture_output=True, text=True,
-                               timeout=10).stdout.strip()
+        head = subprocess.run(
+            ["git", "rev-parse", "HEAD"], capture_output=True, text=True, timeout=10
+        ).stdout.strip()
+        dirty = subprocess.run(
+            ["git", "status", "--porcelain", "--untracked-files=no"],
+            capture_output=True,
+            text=True,
+            timeout=10,
+        ).stdout.strip()
         return (head or "unknown") + (" +uncommitted changes" if dirty else "")
     except (OSError, subprocess.SubprocessError):
         return "unknown"
@@ -107,8 +119,12 @@ def run_name(method: str, seed: int) -> str:
 
 def finished_runs(out, preset: Preset) -> list[str]:
     """The runs of ``preset`` under ``out`` that have their ``final_eval.json``, in planned order."""
-    return [run_name(m, s) for s in preset.seeds for m in preset.methods
-            if (run_dir(out, m, s) / "final_eval.json").exists()]
+    return [
+        run_name(m, s)
+        for s in preset.seeds
+        for m in preset.methods
+        if (run_dir(out, m, s) / "final_eval.json").exists()
+    ]
 
 
 def write_json(path, obj) -> Path:
@@ -133,10 +149,16 @@ def read_final_eval(path) -> dict:
     fix = f"delete {Path(path).parent} and re-run the same command to train and evaluate that run again"
     ev = read_json_dict(path, fix)
     rows = ev.get("episodes")
-    if (not isinstance(ev.get("summary"), dict) or not isinstance(rows, list) or not rows
-            or not all(isinstance(r, dict) and all(k in r for k in EPISODE_KEYS) for r in rows)
-            or not all(isinstance(r["score"], (int, float)) for r in rows)):
-        raise ValueError(f"{path} is damaged: not a final evaluation (summary, episodes with {', '.join(EPISODE_KEYS)}): {fix}")
+    if (
+        not isinstance(ev.get("summary"), dict)
+        or not isinstance(rows, list)
+        or not rows
+        or not all(isinstance(r, dict) and all(k in r for k in EPISODE_KEYS) for r in rows)
+        or not all(isinstance(r["score"], (int, float)) for r in rows)
+    ):
+        raise ValueError(
+            f"{path} is damaged: not a final evaluation (summary, episodes with {', '.join(EPISODE_KEYS)}): {fix}"
+        )
     return ev
 
 
@@ -159,10 +181,13 @@ def collect_results(out, preset: Preset) -> dict:
             d = run_dir(out, method, seed)
             if (d / "metrics.jsonl").exists():
                 m = read_metrics(d)
-                curves[method][str(seed)] = {"epoch": [e["epoch"] for e in m], "score": [e["eval"]["score_mean"] for e in m],
-                                             "distance_m": [e["eval"]["distance_m_mean"] for e in m],
-                                             "infractions": [e["eval"]["red_light_infractions_mean"] for e in m],
-                                             "loss": [e["loss"] for e in m]}
+                curves[method][str(seed)] = {
+                    "epoch": [e["epoch"] for e in m],
+                    "score": [e["eval"]["score_mean"] for e in m],
+                    "distance_m": [e["eval"]["distance_m_mean"] for e in m],
+                    "infractions": [e["eval"]["red_light_infractions_mean"] for e in m],
+                    "loss": [e["loss"] for e in m],
+                }
             f = d / "final_eval.json"
             if f.exists():
                 ev = read_final_eval(f)
@@ -184,39 +209,74 @@ def collect_results(out, preset: Preset) -> dict:
 
 def preset_results(preset: Preset, complete: bool) -> dict:
     """The entries of ``results.json`` that describe the settings: the preset, the paper's, their differences."""
-    return {"preset": preset.to_dict(), "paper": PAPER.to_dict(),
-            "differences": {k: list(v) for k, v in differences(PAPER, preset).items()}, "complete": complete}
+    return {
+        "preset": preset.to_dict(),
+        "paper": PAPER.to_dict(),
+        "differences": {k: list(v) for k, v in differences(PAPER, preset).items()},
+        "complete": complete,
+    }
 
 
 # ---------------------------------------------------------------------- provenance
 def invocations_of(prov: dict) -> list[dict]:
     """The invocations recorded in a ``provenance.json`` dict (an older file's ``wall_seconds`` as one)."""
     inv = prov.get("invocations")
-    if isinstance(inv, list) and all(isinstance(i, dict) and isinstance(i.get("seconds"), (int, float)) for i in inv):
+    if isinstance(inv, list) and all(
+        isinstance(i, dict) and isinstance(i.get("seconds"), (int, float)) for i in inv
+    ):
         return [dict(i) for i in inv]
     if isinstance(prov.get("wall_seconds"), (int, float)):
-        return [{"started": prov.get("started"), "last_seen": prov.get("updated"), "seconds": prov["wall_seconds"]}]
+        return [
+            {
+                "started": prov.get("started"),
+                "last_seen": prov.get("updated"),
+                "seconds": prov["wall_seconds"],
+            }
+        ]
     return []
 
 
-def write_provenance(out, preset: Preset, started: str, invocations: list[dict], done: list[str], planned: list[str],
-                     command: str, complete: bool) -> None:
+def write_provenance(
+    out,
+    preset: Preset,
+    started: str,
+    invocations: list[dict],
+    done: list[str],
+    planned: list[str],
+    command: str,
+    complete: bool,
+) -> None:
     """``provenance.json`` and ``PROVENANCE.md``: how, where and when the results were made.
 
     ``invocations``: one ``{"started", "last_seen", "seconds"}`` per invocation of the command; the wall
     time is their sum."""
     out = Path(out)
     old = read_json_dict(out / PROVENANCE, "delete it and re-run") if (out / PROVENANCE).exists() else {}
-    notes = list(old.get("notes", [])) if isinstance(old.get("notes"), list) else []  # kept across invocations
+    notes = (
+        list(old.get("notes", [])) if isinstance(old.get("notes"), list) else []
+    )  # kept across invocations
     wall_s = sum(float(i["seconds"]) for i in invocations)
-    prov = {"command": command, "commit": git_commit(), "package_version": __version__, "started": started,
-            "finished": now() if complete else None, "updated": now(), "wall_seconds": round(wall_s, 1),
-            "invocations": invocations, "complete": complete, "runs_done": done, "runs_planned": planned,
-            "machine": machine(), "preset": preset.to_dict(), "notes": notes}
+    prov = {
+        "command": command,
+        "commit": git_commit(),
+        "package_version": __version__,
+        "started": started,
+        "finished": now() if complete else None,
+        "updated": now(),
+        "wall_seconds": round(wall_s, 1),
+        "invocations": invocations,
+        "complete": complete,
+        "runs_done": done,
+        "runs_planned": planned,
+        "machine": machine(),
+        "preset": preset.to_dict(),
+        "notes": notes,
+    }
     write_json(out / PROVENANCE, prov)
     m = prov["machine"]
     lines = [
-        f"# Provenance of the `{preset.name}` replication", "",
+        f"# Provenance of the `{preset.name}` replication",
+        "",
         f"- command: `{command}`",
         f"- commit: `{prov['commit']}` (ibc_tutorial {__version__})",
         f"- started: {started}; {'finished: ' + prov['finished'] if complete else 'NOT FINISHED (last update ' + prov['updated'] + ')'}",
@@ -225,8 +285,11 @@ def write_provenance(out, preset: Preset, started: str, invocations: list[dict],
         f"with {m['torch_threads']} thread(s)"
         + (f", kernels for {m['cpu_capability']}" if m.get("cpu_capability") else "")
         + ("".join(f", {k}={v}" for k, v in m.get("cpu_environment", {}).items())),
-        f"- runs finished: {len(done)} of {len(planned)}" + ("" if complete else f" (missing: {sorted(set(planned) - set(done))})"),
-        "", "Differences of this preset from the paper's settings (field: paper -> this preset):", "",
+        f"- runs finished: {len(done)} of {len(planned)}"
+        + ("" if complete else f" (missing: {sorted(set(planned) - set(done))})"),
+        "",
+        "Differences of this preset from the paper's settings (field: paper -> this preset):",
+        "",
     ]
     lines += [f"- `{k}`: {a} -> {b}" for k, (a, b) in differences(PAPER, preset).items()]
     if notes:
@@ -239,7 +302,9 @@ def check_only_entries(out, entries: tuple, what: str) -> None:
     may delete is a ``what``'s files (e.g. "replication"), never anything else."""
     out = Path(out)
     if out.is_dir() and any(p.name not in entries and not p.name.startswith(".") for p in out.iterdir()):
-        raise ValueError(f"{out} holds files that are not a {what}'s: --force deletes only a {what}; use another --out")
+        raise ValueError(
+            f"{out} holds files that are not a {what}'s: --force deletes only a {what}; use another --out"
+        )
 
 
 def delete_entries(out, entries: tuple) -> None:
@@ -269,8 +334,10 @@ def read_folder(out, results: str, arrays: dict[str, str], command: str) -> dict
     if not (out / results).is_file():
         raise ValueError(f"no {results} in {out}: run '{command} --out {out}' first")
     fix = f"delete it and re-run '{command}' with the same --preset and --out {out} to make it again"
-    res = {"results": read_json_dict(out / results, fix),
-           "provenance": read_json_dict(out / PROVENANCE, fix) if (out / PROVENANCE).exists() else {}}
+    res = {
+        "results": read_json_dict(out / results, fix),
+        "provenance": read_json_dict(out / PROVENANCE, fix) if (out / PROVENANCE).exists() else {},
+    }
     for key, name in arrays.items():
         res[key] = {}
         if (out / name).exists():
@@ -278,7 +345,9 @@ def read_folder(out, results: str, arrays: dict[str, str], command: str) -> dict
                 with np.load(out / name, allow_pickle=False) as z:
                     res[key] = {k: z[k] for k in z.files}
             except Exception as exc:  # zip, zlib, format errors of a truncated or altered file
-                raise ValueError(f"{out / name} is truncated or damaged ({type(exc).__name__}): {fix}") from None
+                raise ValueError(
+                    f"{out / name} is truncated or damaged ({type(exc).__name__}): {fix}"
+                ) from None
     return res
 
 
@@ -288,4 +357,6 @@ def load_results(out) -> dict:
     dicts, ``free_driving.npz`` and ``landscapes.npz`` as dicts of arrays (empty if absent).
 
     ValueError naming the file if one is missing or damaged."""
-    return read_folder(out, RESULTS, {"free_driving": FREE_DRIVING, "landscapes": LANDSCAPES}, "ibc-tutorial replicate")
+    return read_folder(
+        out, RESULTS, {"free_driving": FREE_DRIVING, "landscapes": LANDSCAPES}, "ibc-tutorial replicate"
+    )

@@ -107,16 +107,30 @@ def _identity(out: Path) -> tuple[dict, int, str]:
     fix = "delete it, or pass --force to start the run over"
     last, final = out / "last.pt", out / "final.pt"
     epoch, ident, source = 0, {}, ""
-    ck = load_checkpoint(last, resumable=True) if last.exists() else load_checkpoint(final) if final.exists() else None
+    ck = (
+        load_checkpoint(last, resumable=True)
+        if last.exists()
+        else load_checkpoint(final)
+        if final.exists()
+        else None
+    )
     if ck is not None:
         source = str(last if last.exists() else final)
-        ident = {"method": ck["method"], "preset": ck["preset"], "data_sha256": ck["data_sha256"],
-                 "seed": ck.get("seed", ck["metrics"][0].get("seed") if ck["metrics"] else None)}
+        ident = {
+            "method": ck["method"],
+            "preset": ck["preset"],
+            "data_sha256": ck["data_sha256"],
+            "seed": ck.get("seed", ck["metrics"][0].get("seed") if ck["metrics"] else None),
+        }
         epoch = ck["epoch"]
     if (out / "metrics.jsonl").exists():
         m = read_metrics(out / "metrics.jsonl")
         if m and ck is None:
-            ident, epoch, source = {"method": m[0]["method"], "seed": m[0]["seed"]}, m[-1]["epoch"], str(out / "metrics.jsonl")
+            ident, epoch, source = (
+                {"method": m[0]["method"], "seed": m[0]["seed"]},
+                m[-1]["epoch"],
+                str(out / "metrics.jsonl"),
+            )
     if (out / "final_eval.json").exists():
         ev = _read_json(out / "final_eval.json", fix)
         if not isinstance(ev, dict) or not isinstance(ev.get("episodes"), list) or "summary" not in ev:
@@ -131,7 +145,9 @@ def _identity(out: Path) -> tuple[dict, int, str]:
     return ident, epoch, source
 
 
-def inspect_run(out, method: str, preset: Preset, seed: int, data_sha256: str | None, data_file=None) -> RunState:
+def inspect_run(
+    out, method: str, preset: Preset, seed: int, data_sha256: str | None, data_file=None
+) -> RunState:
     """Compare what ``out`` holds with a request to train ``method`` / ``seed`` / ``preset`` on data of checksum
     ``data_sha256`` (``data_file``'s bytes' SHA-256 is accepted too: the identity of files of older versions;
     None: the data is not compared).
@@ -145,7 +161,9 @@ def inspect_run(out, method: str, preset: Preset, seed: int, data_sha256: str | 
     if not out.exists() or not any((out / f).exists() for f in RUN_FILES):
         return RunState("new")
     ident, epoch, source = _identity(out)
-    if not ident:  # only run.json's temporary predecessor or nothing readable: a run that never reached epoch 1
+    if (
+        not ident
+    ):  # only run.json's temporary predecessor or nothing readable: a run that never reached epoch 1
         return RunState("new")
     differs = []
     if ident.get("method") != method:
@@ -154,27 +172,43 @@ def inspect_run(out, method: str, preset: Preset, seed: int, data_sha256: str | 
         differs.append(f"seed {ident.get('seed')}, not {seed}")
     if "preset" in ident:
         mine = {k: v for k, v in preset.to_dict().items() if k != "epochs"}
-        theirs = {k: v for k, v in ident["preset"].items() if k != "epochs"} if isinstance(ident["preset"], dict) else {}
+        theirs = (
+            {k: v for k, v in ident["preset"].items() if k != "epochs"}
+            if isinstance(ident["preset"], dict)
+            else {}
+        )
         diff = sorted(k for k in set(mine) | set(theirs) if mine.get(k) != theirs.get(k))
         if diff:
-            differs.append(f"other settings (preset {theirs.get('name')!r}; differs in {', '.join(diff[:5])})")
-    if data_sha256 is not None and "data_sha256" in ident and ident["data_sha256"] != data_sha256 and (
-            data_file is None or ident["data_sha256"] != _file_sha256(data_file)):
+            differs.append(
+                f"other settings (preset {theirs.get('name')!r}; differs in {', '.join(diff[:5])})"
+            )
+    if (
+        data_sha256 is not None
+        and "data_sha256" in ident
+        and ident["data_sha256"] != data_sha256
+        and (data_file is None or ident["data_sha256"] != _file_sha256(data_file))
+    ):
         differs.append("other demonstrations (another data checksum)")
     if differs:
-        raise ValueError(f"{out} holds another run ({Path(source).name}: {'; '.join(differs)}): use another --out, "
-                         "or --force to start over")
+        raise ValueError(
+            f"{out} holds another run ({Path(source).name}: {'; '.join(differs)}): use another --out, "
+            "or --force to start over"
+        )
     finished = (out / "final.pt").exists() or (out / "final_eval.json").exists()
     if epoch > preset.epochs:
-        raise ValueError(f"{out} holds this run trained to epoch {epoch} already, beyond the {preset.epochs} epochs "
-                         "asked for: ask for at least as many, use another --out, or --force to start over")
+        raise ValueError(
+            f"{out} holds this run trained to epoch {epoch} already, beyond the {preset.epochs} epochs "
+            "asked for: ask for at least as many, use another --out, or --force to start over"
+        )
     if (out / "last.pt").exists():
         return RunState("done" if epoch == preset.epochs and (out / "final.pt").exists() else "resume", epoch)
     if finished and epoch == preset.epochs:
         return RunState("done", epoch)
     if epoch > 0 or finished:
-        raise ValueError(f"{out} holds this run trained to epoch {epoch} without its resume state (last.pt), so it "
-                         "cannot continue: use another --out, or --force to start over")
+        raise ValueError(
+            f"{out} holds this run trained to epoch {epoch} without its resume state (last.pt), so it "
+            "cannot continue: use another --out, or --force to start over"
+        )
     return RunState("new")
 
 
@@ -246,9 +280,21 @@ def steps_per_epoch(n_samples: int, batch_size: int) -> int:
     return max(1, math.ceil(n_samples / batch_size))
 
 
-def train_agent(method: str, data, preset: Preset, seed: int, out, *, dataset: DemoDataset | None = None,
-                sample_probs: torch.Tensor | None = None, eval_town: str = "town02", show_progress: bool | None = None,
-                log=print, force: bool = False, device: torch.device | str = "cpu") -> RunResult:
+def train_agent(
+    method: str,
+    data,
+    preset: Preset,
+    seed: int,
+    out,
+    *,
+    dataset: DemoDataset | None = None,
+    sample_probs: torch.Tensor | None = None,
+    eval_town: str = "town02",
+    show_progress: bool | None = None,
+    log=print,
+    force: bool = False,
+    device: torch.device | str = "cpu",
+) -> RunResult:
     """Train one agent (see the module docstring); resumes from ``out/last.pt`` if present.
 
     A folder holding another run, or this run trained beyond ``preset.epochs``, is refused with a
@@ -276,8 +322,10 @@ def train_agent(method: str, data, preset: Preset, seed: int, out, *, dataset: D
     out = Path(out)
     t0 = time.perf_counter()
     if dataset is not None and dataset.renderer.light_encoding != preset.light_encoding:
-        raise ValueError(f"dataset must draw the lights as {preset.light_encoding!r}, got "
-                         f"{dataset.renderer.light_encoding!r}")
+        raise ValueError(
+            f"dataset must draw the lights as {preset.light_encoding!r}, got "
+            f"{dataset.renderer.light_encoding!r}"
+        )
     if dataset is not None and dataset.bev_size != preset.bev_size:
         raise ValueError(f"dataset must be rendered at bev_size {preset.bev_size}, got {dataset.bev_size}")
     log_ = dataset.log if dataset is not None else data if isinstance(data, DemoLog) else DemoLog.load(data)
@@ -288,8 +336,10 @@ def train_agent(method: str, data, preset: Preset, seed: int, out, *, dataset: D
     state = inspect_run(out, method, preset, seed, data_hash, data_file)
     if state.status == "done":
         if not (out / "final.pt").exists():
-            raise ValueError(f"{out} holds this run finished, without its final.pt (not kept): nothing to load; "
-                             "--force to train it again")
+            raise ValueError(
+                f"{out} holds this run finished, without its final.pt (not kept): nothing to load; "
+                "--force to train it again"
+            )
         agent, ckpt = load_agent(out / "final.pt", method=method, preset=preset)
         agent.to(device)
         if log:
@@ -297,60 +347,130 @@ def train_agent(method: str, data, preset: Preset, seed: int, out, *, dataset: D
         return RunResult(out, list(ckpt["metrics"]), agent, 0.0, state.epoch, already_done=True)
     out.mkdir(parents=True, exist_ok=True)
     if not (out / RUN_INFO).exists():
-        atomic_write_bytes(out / RUN_INFO, json.dumps({"method": method, "seed": seed, "preset": preset.to_dict(),
-                                                       "data_sha256": data_hash}, indent=1).encode())
+        atomic_write_bytes(
+            out / RUN_INFO,
+            json.dumps(
+                {"method": method, "seed": seed, "preset": preset.to_dict(), "data_sha256": data_hash},
+                indent=1,
+            ).encode(),
+        )
     if dataset is None:
-        dataset = DemoDataset(log_, bev_size=preset.bev_size, cache=True, light_encoding=preset.light_encoding)
+        dataset = DemoDataset(
+            log_, bev_size=preset.bev_size, cache=True, light_encoding=preset.light_encoding
+        )
     actions = dataset.actions  # (M, 2)
     if sample_probs is None:
         sample_probs = inverse_density_weights(actions, preset.kde_bandwidth)  # (M,) eqs. 4-5, by sampling
 
     last = out / "last.pt"
-    ckpt = load_checkpoint(last, method=method, preset=preset, resumable=True) if state.status == "resume" else None
+    ckpt = (
+        load_checkpoint(last, method=method, preset=preset, resumable=True)
+        if state.status == "resume"
+        else None
+    )
     torch.manual_seed(seed)  # the network's initial weights (drawn on the CPU, whatever the device)
     network = build_network(method, preset).to(device)
     agent = Agent(method, network, preset, actions, init_weights=sample_probs if method == "da-ibc" else None)
     agent.to(device)
     n_steps = steps_per_epoch(len(dataset), preset.batch_size)
     epochs = preset.epochs  # inspect_run refused a run already beyond it
-    config = TrainConfig(steps=epochs * n_steps, batch_size=preset.batch_size, lr=preset.lr,
-                         lr_schedule=preset.lr_schedule, seed=seed,
-                         log_every=preset.eval_every * n_steps, progress=show_progress, desc=f"{method} seed {seed}")
-    trainer = Trainer(network, objective_for(method, network, preset), DemoBatches(dataset, device), config,
-                      sample_probs=sample_probs)  # minibatch indices drawn on the CPU, with sample_probs (M,)
+    config = TrainConfig(
+        steps=epochs * n_steps,
+        batch_size=preset.batch_size,
+        lr=preset.lr,
+        lr_schedule=preset.lr_schedule,
+        seed=seed,
+        log_every=preset.eval_every * n_steps,
+        progress=show_progress,
+        desc=f"{method} seed {seed}",
+    )
+    trainer = Trainer(
+        network,
+        objective_for(method, network, preset),
+        DemoBatches(dataset, device),
+        config,
+        sample_probs=sample_probs,
+    )  # minibatch indices drawn on the CPU, with sample_probs (M,)
     metrics: list = []
     if ckpt is not None:
-        trainer.load_state_dict({"model": ckpt["model"], "optimizer": ckpt["optimizer"], "generator": ckpt["generator"],
-                                 "step": ckpt["epoch"] * n_steps})
+        trainer.load_state_dict(
+            {
+                "model": ckpt["model"],
+                "optimizer": ckpt["optimizer"],
+                "generator": ckpt["generator"],
+                "step": ckpt["epoch"] * n_steps,
+            }
+        )
         metrics = list(ckpt["metrics"])
         if log:
             log(f"resuming {method} seed {seed} after epoch {ckpt['epoch']}")
 
     def evaluate_and_save(step: int, loss: float) -> None:
         te = time.perf_counter()
-        rows = episode_rows(evaluate_agent(agent, eval_town, preset.eval_episodes, preset.eval_steps, seed=EVAL_SEED,
-                                           policy_seed=seed, show_progress=False))
-        entry = {"method": method, "seed": seed, "epoch": step // n_steps, "step": step, "loss": round(loss, 5),
-                 "town": eval_town, "eval_steps": preset.eval_steps, "eval": summarize(rows), "episodes": rows,
-                 "eval_seconds": round(time.perf_counter() - te, 1)}
+        rows = episode_rows(
+            evaluate_agent(
+                agent,
+                eval_town,
+                preset.eval_episodes,
+                preset.eval_steps,
+                seed=EVAL_SEED,
+                policy_seed=seed,
+                show_progress=False,
+            )
+        )
+        entry = {
+            "method": method,
+            "seed": seed,
+            "epoch": step // n_steps,
+            "step": step,
+            "loss": round(loss, 5),
+            "town": eval_town,
+            "eval_steps": preset.eval_steps,
+            "eval": summarize(rows),
+            "episodes": rows,
+            "eval_seconds": round(time.perf_counter() - te, 1),
+        }
         metrics.append(entry)
         state = trainer.state_dict()
-        save_checkpoint(last, method=method, preset=preset, network=_cpu_network(network), data_sha256=data_hash,
-                        epoch=entry["epoch"], expert_actions=actions, init_weights=agent.init_weights,
-                        optimizer=_cpu(state["optimizer"]), generator=state["generator"], metrics=metrics, seed=seed)
+        save_checkpoint(
+            last,
+            method=method,
+            preset=preset,
+            network=_cpu_network(network),
+            data_sha256=data_hash,
+            epoch=entry["epoch"],
+            expert_actions=actions,
+            init_weights=agent.init_weights,
+            optimizer=_cpu(state["optimizer"]),
+            generator=state["generator"],
+            metrics=metrics,
+            seed=seed,
+        )
         atomic_write_bytes(out / "metrics.jsonl", "".join(json.dumps(m) + "\n" for m in metrics).encode())
         if log:
-            log(f"{method} seed {seed} epoch {entry['epoch']}: loss {entry['loss']:.4f}, town02 score "
-                f"{entry['eval']['score_mean']:.1f} ± {entry['eval']['score_std']:.1f}")
+            log(
+                f"{method} seed {seed} epoch {entry['epoch']}: loss {entry['loss']:.4f}, town02 score "
+                f"{entry['eval']['score_mean']:.1f} ± {entry['eval']['score_std']:.1f}"
+            )
 
     if trainer.step < config.steps:
         trainer.run(callback=evaluate_and_save)
     network.eval()
     round_to_half(network)  # the agent evaluated is the one final.pt ships (weights in float16)
     final_epoch = metrics[-1]["epoch"] if metrics else preset.epochs
-    save_checkpoint(out / "final.pt", method=method, preset=preset, network=_cpu_network(network),
-                    data_sha256=data_hash, epoch=final_epoch, expert_actions=actions, init_weights=agent.init_weights,
-                    metrics=metrics, seed=seed, half=True)
+    save_checkpoint(
+        out / "final.pt",
+        method=method,
+        preset=preset,
+        network=_cpu_network(network),
+        data_sha256=data_hash,
+        epoch=final_epoch,
+        expert_actions=actions,
+        init_weights=agent.init_weights,
+        metrics=metrics,
+        seed=seed,
+        half=True,
+    )
     return RunResult(out, metrics, agent, time.perf_counter() - t0, ckpt["epoch"] if ckpt else 0)
 
 
@@ -376,10 +496,19 @@ def read_metrics(path) -> list[dict]:
             m = json.loads(line)
         except json.JSONDecodeError:
             raise ValueError(f"{path} is damaged (line {i} is not JSON): {fix}") from None
-        if (not isinstance(m, dict) or any(k not in m for k in METRIC_KEYS) or not isinstance(m["eval"], dict)
-                or not isinstance(m["epoch"], int) or not all(isinstance(m["eval"].get(f"{k}_mean"), (int, float))
-                                                             for k in ("score", "distance_m", "red_light_infractions"))):
-            raise ValueError(f"{path} is damaged (line {i} is not a metrics entry with {', '.join(METRIC_KEYS)}): {fix}")
+        if (
+            not isinstance(m, dict)
+            or any(k not in m for k in METRIC_KEYS)
+            or not isinstance(m["eval"], dict)
+            or not isinstance(m["epoch"], int)
+            or not all(
+                isinstance(m["eval"].get(f"{k}_mean"), (int, float))
+                for k in ("score", "distance_m", "red_light_infractions")
+            )
+        ):
+            raise ValueError(
+                f"{path} is damaged (line {i} is not a metrics entry with {', '.join(METRIC_KEYS)}): {fix}"
+            )
         out.append(m)
     return out
 
@@ -399,16 +528,22 @@ def run(args: argparse.Namespace) -> int:
     if not force:
         state = inspect_run(out, args.method, preset, seed, demo.checksum(), args.data)
         if state.status == "done":
-            print(f"{out} holds this run trained to epoch {state.epoch} already: nothing to do "
-                  "(--epochs N to train on, --force to start over)")
+            print(
+                f"{out} holds this run trained to epoch {state.epoch} already: nothing to do "
+                "(--epochs N to train on, --force to start over)"
+            )
             return 0
     if threads:
         torch.set_num_threads(threads)
     result = train_agent(args.method, args.data, preset, seed, out, force=force, device=device)
     if not result.metrics or result.metrics[-1]["epoch"] != preset.epochs:
-        raise UserError(f"{out}: the run ended at epoch {result.metrics[-1]['epoch'] if result.metrics else 0}, "
-                        f"not {preset.epochs}")
+        raise UserError(
+            f"{out}: the run ended at epoch {result.metrics[-1]['epoch'] if result.metrics else 0}, "
+            f"not {preset.epochs}"
+        )
     again = f" (resumed after epoch {result.resumed_from})" if result.resumed_from else ""
-    print(f"trained {args.method} (seed {seed}) to epoch {preset.epochs}{again} in {result.seconds:.0f} s; "
-          f"checkpoints in {result.out}")
+    print(
+        f"trained {args.method} (seed {seed}) to epoch {preset.epochs}{again} in {result.seconds:.0f} s; "
+        f"checkpoints in {result.out}"
+    )
     return 0

@@ -93,7 +93,11 @@ def build_route(name: str) -> Route:
     town = get_town(EVAL_TOWN)
     a, b, s, turns = ROUTES[name]
     for lane in town.lanes:
-        if lane.kind == "road" and tuple(town.nodes[lane.from_node]) == a and tuple(town.nodes[lane.to_node]) == b:
+        if (
+            lane.kind == "road"
+            and tuple(town.nodes[lane.from_node]) == a
+            and tuple(town.nodes[lane.to_node]) == b
+        ):
             return Route(lane.id, s, turns)
     raise ValueError(f"route {name!r}: no road lane from {a} to {b} in {EVAL_TOWN}")
 
@@ -154,7 +158,7 @@ class Reference:
         return {f"{self.name}/{k}": getattr(self, k) for k in keys}
 
     @classmethod
-    def from_arrays(cls, name: str, arrays) -> "Reference":
+    def from_arrays(cls, name: str, arrays) -> Reference:
         keys = ("poses", "lanes", "speeds", "steer", "turns_done", "offsets", "path", "path_step", "sections")
         return cls(name, **{k: np.asarray(arrays[f"{name}/{k}"]) for k in keys})
 
@@ -195,7 +199,9 @@ def side_road_sections(ref: Reference) -> np.ndarray:
     return np.array(out, dtype=np.int64).reshape(-1, 4)
 
 
-def expert_reference(name: str, preset, keep_obs: tuple[int, int] | None = None) -> tuple[Reference, np.ndarray | None]:
+def expert_reference(
+    name: str, preset, keep_obs: tuple[int, int] | None = None
+) -> tuple[Reference, np.ndarray | None]:
     """The expert drives route ``name``; returns its ``Reference`` (and the observations of steps
     ``keep_obs`` = (first, end), as the models would see them, or None)."""
     env = make_env(preset)
@@ -223,11 +229,16 @@ def expert_reference(name: str, preset, keep_obs: tuple[int, int] | None = None)
         rows["turns_done"].append(done)
         obs, _, terminated, _, info = env.step(a)
         if terminated or len(rows["poses"]) > 20000:
-            raise RuntimeError(f"the expert did not complete route {name!r} ({info['termination'] or 'too long'})")
+            raise RuntimeError(
+                f"the expert did not complete route {name!r} ({info['termination'] or 'too long'})"
+            )
     ref = Reference(name, offsets=offsets, **{k: np.array(v) for k, v in rows.items()})
     if keep_obs is None:
         return ref, None
-    return ref, {"bev": np.concatenate([o["bev"] for o in kept]), "state": np.concatenate([o["state"] for o in kept])}
+    return ref, {
+        "bev": np.concatenate([o["bev"] for o in kept]),
+        "state": np.concatenate([o["state"] for o in kept]),
+    }
 
 
 def fig5_window(ref: Reference) -> tuple[int, int] | None:
@@ -235,7 +246,11 @@ def fig5_window(ref: Reference) -> tuple[int, int] | None:
     (speed > 3 m/s throughout), starting ``FIG5_BEFORE`` steps before it enters the junction; None if none."""
     for a, b, side, k in ref.sections:
         first = int(k) - FIG5_BEFORE
-        if first >= 0 and first + FIG5_STEPS <= len(ref.speeds) and (ref.speeds[first:first + FIG5_STEPS] > 3.0).all():
+        if (
+            first >= 0
+            and first + FIG5_STEPS <= len(ref.speeds)
+            and (ref.speeds[first : first + FIG5_STEPS] > 3.0).all()
+        ):
             return first, first + FIG5_STEPS
     return None
 
@@ -271,8 +286,13 @@ def drive_route(policy, ref: Reference, preset, *, max_steps: int | None = None)
     traces = [[] for _ in ref.sections]
     end = len(ref.path) - 2
     while j < end and t_total < budget:
-        steer = float(np.clip(policy(steering_observation({"bev": obs["bev"][None], "state": obs["state"][None]})),
-                              -1.0, 1.0))
+        steer = float(
+            np.clip(
+                policy(steering_observation({"bev": obs["bev"][None], "state": obs["state"][None]})),
+                -1.0,
+                1.0,
+            )
+        )
         acc = float(expert.act()[1])
         current.append(steer)
         obs, _, terminated, _, info = env.step(np.array([steer, acc], dtype=np.float32))
@@ -298,8 +318,10 @@ def drive_route(policy, ref: Reference, preset, *, max_steps: int | None = None)
         lane = int(ref.lanes[k])
         x, y, yaw = ref.poses[k]
         ln = town.lanes[lane]
-        s = float(np.clip(((np.array([x, y]) - ln.start) @ ((ln.end - ln.start) / ln.length)), 0.0, ln.length))
-        restart = Route(lane, s, tuple(route.turns[int(ref.turns_done[k]):]))
+        s = float(
+            np.clip(((np.array([x, y]) - ln.start) @ ((ln.end - ln.start) / ln.length)), 0.0, ln.length)
+        )
+        restart = Route(lane, s, tuple(route.turns[int(ref.turns_done[k]) :]))
         offsets = (ref.offsets + t_total) % env.sim.schedule.cycle
         obs, info = env.reset(options={"route": restart, "light_offsets": offsets.astype(np.int64)})
         j = int(np.searchsorted(ref.path_step, k, side="left"))
@@ -315,19 +337,26 @@ def drive_route(policy, ref: Reference, preset, *, max_steps: int | None = None)
     if seen:
         rel = _pad([[v - traces[p][0] for v in traces[p]] for p in seen])  # (P', T) NaN-padded
         scores[seen] = swerve_rate(rel, slight=SLIGHT_M, clear=CLEAR_M, per_pass=True)
-    return {"route": ref.name, "crashes": crashes, "distance_m": round(driven, 2),
-            "crashes_per_km": crashes_per_km(crashes, driven) if driven > 0 else float("nan"),
-            "w_cmd": round(w, 5), "steps": t_total, "timeout": bool(j < end), "crash_steps": crash_steps,
-            "swerve_peak_m": [None if np.isnan(p) else round(float(p), 4) for p in peaks],
-            "swerve_score": [None if np.isnan(v) else float(v) for v in scores],
-            "steer": np.concatenate([np.array(c) for c in segments if c]) if any(segments) else np.zeros(0)}
+    return {
+        "route": ref.name,
+        "crashes": crashes,
+        "distance_m": round(driven, 2),
+        "crashes_per_km": crashes_per_km(crashes, driven) if driven > 0 else float("nan"),
+        "w_cmd": round(w, 5),
+        "steps": t_total,
+        "timeout": bool(j < end),
+        "crash_steps": crash_steps,
+        "swerve_peak_m": [None if np.isnan(p) else round(float(p), 4) for p in peaks],
+        "swerve_score": [None if np.isnan(v) else float(v) for v in scores],
+        "steer": np.concatenate([np.array(c) for c in segments if c]) if any(segments) else np.zeros(0),
+    }
 
 
 def _pad(rows: list[list[float]]) -> np.ndarray:
     """Rows of unequal length as a (P, T) array padded with NaN."""
     out = np.full((len(rows), max(len(r) for r in rows)), np.nan)
     for i, r in enumerate(rows):
-        out[i, :len(r)] = r
+        out[i, : len(r)] = r
     return out
 
 

@@ -38,8 +38,14 @@ MODELS = ("ebm", "ebm-smooth", "ebm-soft", "regression", "classification", "mdn"
 """The six models, in the order of the paper's Table 1."""
 EBMS = ("ebm", "ebm-smooth", "ebm-soft")
 """The energy-based ones."""
-LABELS = {"ebm": "EBM", "ebm-smooth": "EBM Temp. Smoothing", "ebm-soft": "EBM Soft Targets",
-          "regression": "Regression (MAE)", "classification": "Classification", "mdn": "MDN"}
+LABELS = {
+    "ebm": "EBM",
+    "ebm-smooth": "EBM Temp. Smoothing",
+    "ebm-soft": "EBM Soft Targets",
+    "regression": "Regression (MAE)",
+    "classification": "Classification",
+    "mdn": "MDN",
+}
 """The paper's names of the models."""
 
 
@@ -88,7 +94,11 @@ def to_torch(obs) -> dict:
     """A numpy or torch ``{"bev", "state"}`` batch as torch tensors (the BEV's dtype kept)."""
     bev, state = obs["bev"], obs["state"]
     bev = torch.from_numpy(np.ascontiguousarray(bev)) if isinstance(bev, np.ndarray) else bev
-    state = torch.from_numpy(np.asarray(state, dtype=np.float32)) if isinstance(state, np.ndarray) else state.float()
+    state = (
+        torch.from_numpy(np.asarray(state, dtype=np.float32))
+        if isinstance(state, np.ndarray)
+        else state.float()
+    )
     return {"bev": bev, "state": state}
 
 

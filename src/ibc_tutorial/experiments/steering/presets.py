@@ -18,7 +18,9 @@ PAPER_STEER_RANGE_DEG = 250.0
 """Half the range of the paper's steering-wheel angles (its Fig. 4: "from ~-250 to ~250 degrees")."""
 
 
-def book_temperature(t_rad2: float = PAPER_TEMPERATURE_RAD2, steer_range_deg: float = PAPER_STEER_RANGE_DEG) -> float:
+def book_temperature(
+    t_rad2: float = PAPER_TEMPERATURE_RAD2, steer_range_deg: float = PAPER_STEER_RANGE_DEG
+) -> float:
     """T of eq. 5 in the book's steering units ([-1, 1]), mapping the paper's range onto ours.
 
     A steering-wheel angle a (rad) is steer = a / A with A = 250° in radians; (a - a_GT)² / T is
@@ -92,8 +94,16 @@ class SteeringPreset:
     """Seeds the light phases of the evaluation routes."""
 
     def __post_init__(self):
-        for f in ("routes", "bev_size", "embed_dim", "head_hidden", "head_layers", "mdn_components", "steps",
-                  "batch_size"):
+        for f in (
+            "routes",
+            "bev_size",
+            "embed_dim",
+            "head_hidden",
+            "head_layers",
+            "mdn_components",
+            "steps",
+            "batch_size",
+        ):
             check_int(f, getattr(self, f), minimum=1)
         check_int("n_bins", self.n_bins, minimum=2)
         for f in ("route_minutes", "speed", "lr", "soft_temperature"):
@@ -113,11 +123,13 @@ class SteeringPreset:
         return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
 
     @classmethod
-    def from_dict(cls, d: dict) -> "SteeringPreset":
+    def from_dict(cls, d: dict) -> SteeringPreset:
         """Inverse of ``to_dict``; unknown keys are refused."""
         names = {f.name for f in fields(cls)}
         if not isinstance(d, dict) or set(d) - names:
-            raise ValueError(f"unknown preset fields {sorted(set(d) - names) if isinstance(d, dict) else d!r}")
+            raise ValueError(
+                f"unknown preset fields {sorted(set(d) - names) if isinstance(d, dict) else d!r}"
+            )
         return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
 
 
@@ -125,8 +137,20 @@ LAPTOP = SteeringPreset(name="laptop")
 """The chapter's study: 18 models trained and driven in about half an hour on 2 cores."""
 
 TINY = SteeringPreset(
-    name="tiny", routes=1, route_minutes=0.4, bev_size=32, cnn_channels=(4, 8), embed_dim=16, head_hidden=16,
-    n_bins=32, mdn_components=2, steps=6, batch_size=8, seeds=(0,), eval_routes=("y82-west",), route_cap_m=70.0,
+    name="tiny",
+    routes=1,
+    route_minutes=0.4,
+    bev_size=32,
+    cnn_channels=(4, 8),
+    embed_dim=16,
+    head_hidden=16,
+    n_bins=32,
+    mdn_components=2,
+    steps=6,
+    batch_size=8,
+    seeds=(0,),
+    eval_routes=("y82-west",),
+    route_cap_m=70.0,
 )
 """A seconds-long preset for the tests."""
 

@@ -38,7 +38,17 @@ from ibc_tutorial.cli import check_output_dir
 from ibc_tutorial.driving.dataset import DemoDataset, DemoLog
 from ibc_tutorial.experiments.agents.replicate import _init_worker
 from ibc_tutorial.experiments.agents.results import (
-    begin_invocation, check_only_entries, delete_entries, git_commit, machine, now, read_folder, read_json_dict, write_json, write_npz)
+    begin_invocation,
+    check_only_entries,
+    delete_entries,
+    git_commit,
+    machine,
+    now,
+    read_folder,
+    read_json_dict,
+    write_json,
+    write_npz,
+)
 from ibc_tutorial.experiments.steering import evaluate as ev
 from ibc_tutorial.experiments.steering.models import LABELS, MODELS
 from ibc_tutorial.experiments.steering.presets import LAPTOP, PRESETS, SteeringPreset, differences, get_preset
@@ -64,16 +74,29 @@ HEARTBEAT_S = 30.0
 PAPER = {
     "table1": {  # per run: real-world interventions, W_eff, W_cmd (°/s); VISTA crashes, W_cmd (°/s)
         "ebm": [[4, 35.25, 176.93, 2, 114.33], [1, 32.34, 96.94, 1, 121.57], [2, 28.57, 223.59, 2, 121.67]],
-        "ebm-smooth": [[5, 49.92, 119.39, 3, 58.70], [2, 38.96, 137.22, 2, 60.37], [3, 34.21, 77.28, 2, 48.86]],
+        "ebm-smooth": [
+            [5, 49.92, 119.39, 3, 58.70],
+            [2, 38.96, 137.22, 2, 60.37],
+            [3, 34.21, 77.28, 2, 48.86],
+        ],
         "ebm-soft": [[5, 27.80, 56.33, 3, 85.72], [5, 46.83, 57.15, 3, 74.97], [4, 33.72, 56.86, 3, 81.87]],
         "regression": [[2, 26.69, 37.84, 0, 24.39], [2, 29.65, 75.34, 0, 24.75], [1, 26.28, 33.10, 0, 24.25]],
-        "classification": [[1, 41.05, 182.39, 1, 123.69], [7, 62.17, 287.14, 1, 105.13],
-                           [1, 34.11, 162.27, 1, 104.31]],
+        "classification": [
+            [1, 41.05, 182.39, 1, 123.69],
+            [7, 62.17, 287.14, 1, 105.13],
+            [1, 34.11, 162.27, 1, 104.31],
+        ],
         "mdn": [[1, 25.32, 33.62, 3, 37.22], [5, 24.82, 35.46, 3, 35.74], [5, 26.66, 37.39, 3, 35.84]],
     },
     "table1_columns": ["interventions", "w_eff_deg_s", "w_cmd_deg_s", "vista_crashes", "vista_w_cmd_deg_s"],
-    "table2_swerve_rate": {"ebm": 0.44, "ebm-smooth": 0.66, "ebm-soft": 0.39, "regression": 0.89,
-                           "classification": 0.44, "mdn": 0.33},
+    "table2_swerve_rate": {
+        "ebm": 0.44,
+        "ebm-smooth": 0.66,
+        "ebm-soft": 0.39,
+        "regression": 0.89,
+        "classification": 0.44,
+        "mdn": 0.33,
+    },
 }
 """The steering-EBM paper's Tables 1 (the three runs of each model; its means follow from them)
 and 2, as printed."""
@@ -88,18 +111,24 @@ def check_folder(out, preset: SteeringPreset) -> None:
         raise ValueError(f"{out} is a file, expected a folder")
     names = {p.name for p in out.iterdir() if not p.name.startswith(".")}
     if names - set(ENTRIES):
-        raise ValueError(f"{out} holds other files ({', '.join(sorted(names - set(ENTRIES))[:3])}), not a "
-                         "road-following study: use another --out")
+        raise ValueError(
+            f"{out} holds other files ({', '.join(sorted(names - set(ENTRIES))[:3])}), not a "
+            "road-following study: use another --out"
+        )
     for name in (PROVENANCE, RESULTS):
         if (out / name).exists():
             stored = read_json_dict(out / name, "delete it and re-run the same command").get("preset")
             if stored != preset.to_dict():
                 try:
-                    diff = ", ".join(sorted(differences(SteeringPreset.from_dict(stored), preset))[:5]) or "name"
+                    diff = (
+                        ", ".join(sorted(differences(SteeringPreset.from_dict(stored), preset))[:5]) or "name"
+                    )
                 except (TypeError, ValueError):
                     diff = "a damaged preset"
-                raise ValueError(f"{out} holds a study of another preset (differs in {diff}): use another --out, "
-                                 "or --force to start over")
+                raise ValueError(
+                    f"{out} holds a study of another preset (differs in {diff}): use another --out, "
+                    "or --force to start over"
+                )
     if (out / DATA).exists() and DemoLog.load(out / DATA).meta.get("config") != _data_config(preset):
         raise ValueError(f"{out / DATA} was collected with other settings: use another --out, or --force")
     for model in MODELS:
@@ -109,8 +138,15 @@ def check_folder(out, preset: SteeringPreset) -> None:
 
 
 def _data_config(p: SteeringPreset) -> dict:
-    return {"town": "town01", "routes": p.routes, "minutes": p.route_minutes, "side_road_share": p.side_road_share,
-            "speed": p.speed, "steer_noise": p.steer_noise, "seed": p.collect_seed}
+    return {
+        "town": "town01",
+        "routes": p.routes,
+        "minutes": p.route_minutes,
+        "side_road_share": p.side_road_share,
+        "speed": p.speed,
+        "steer_noise": p.steer_noise,
+        "seed": p.collect_seed,
+    }
 
 
 def make_references(out: Path, preset: SteeringPreset) -> None:
@@ -129,8 +165,15 @@ def make_references(out: Path, preset: SteeringPreset) -> None:
         _, obs = ev.expert_reference(name, preset, keep_obs=w)
         window = (name, w, obs)
     name, (a, b), obs = window
-    arrays.update({"fig5/route": np.array(name), "fig5/steps": np.array([a, b]), "fig5/bev": obs["bev"],
-                   "fig5/state": obs["state"], "fig5/expert_steer": arrays[f"{name}/steer"][a:b]})
+    arrays.update(
+        {
+            "fig5/route": np.array(name),
+            "fig5/steps": np.array([a, b]),
+            "fig5/bev": obs["bev"],
+            "fig5/state": obs["state"],
+            "fig5/expert_steer": arrays[f"{name}/steer"][a:b],
+        }
+    )
     write_npz(out / REFERENCES, arrays)
 
 
@@ -141,7 +184,9 @@ def read_references(out: Path, preset: SteeringPreset) -> tuple[list[ev.Referenc
             arrays = {k: z[k] for k in z.files}
         refs = [ev.Reference.from_arrays(name, arrays) for name in preset.eval_routes]
     except Exception as exc:
-        raise ValueError(f"{Path(out) / REFERENCES} is damaged ({type(exc).__name__}): delete it and re-run") from None
+        raise ValueError(
+            f"{Path(out) / REFERENCES} is damaged ({type(exc).__name__}): delete it and re-run"
+        ) from None
     return refs, {"bev": arrays["fig5/bev"], "state": arrays["fig5/state"]}
 
 
@@ -166,8 +211,11 @@ def _stats(values: list) -> dict:
     v = np.array([x for x in values if x is not None], dtype=float)
     if not len(v):
         return {"mean": None, "std": None, "n": 0}
-    return {"mean": round(float(v.mean()), 4), "std": round(float(v.std(ddof=1)) if len(v) > 1 else 0.0, 4),
-            "n": int(len(v))}
+    return {
+        "mean": round(float(v.mean()), 4),
+        "std": round(float(v.std(ddof=1)) if len(v) > 1 else 0.0, 4),
+        "n": int(len(v)),
+    }
 
 
 def collect_results(out: Path, preset: SteeringPreset) -> dict:
@@ -183,8 +231,12 @@ def collect_results(out: Path, preset: SteeringPreset) -> dict:
                     traces.update({f"{model}/seed{seed}/{k}": z[k] for k in z.files})
         per_seed = [r["summary"] for r in runs[model].values()]
         if per_seed:
-            table[model] = {k: _stats([s[k] for s in per_seed]) for k in ("crashes_per_km", "w_cmd", "swerve_rate")}
-            table[model]["w_cmd_paper_deg_s"] = _stats([s["w_cmd"] * ev.PAPER_DEG_PER_STEER for s in per_seed])
+            table[model] = {
+                k: _stats([s[k] for s in per_seed]) for k in ("crashes_per_km", "w_cmd", "swerve_rate")
+            }
+            table[model]["w_cmd_paper_deg_s"] = _stats(
+                [s["w_cmd"] * ev.PAPER_DEG_PER_STEER for s in per_seed]
+            )
             table[model]["crashes"] = int(sum(s["crashes"] for s in per_seed))
             table[model]["distance_km"] = round(sum(s["distance_m"] for s in per_seed) / 1000, 3)
             table[model]["passes"] = int(sum(s["passes"] for s in per_seed))
@@ -192,30 +244,58 @@ def collect_results(out: Path, preset: SteeringPreset) -> dict:
     return {"runs": runs, "table": table, "traces": traces}
 
 
-def _provenance(out: Path, preset: SteeringPreset, started: str, invocations: list, done: list, planned: list,
-                command: str, complete: bool) -> None:
+def _provenance(
+    out: Path,
+    preset: SteeringPreset,
+    started: str,
+    invocations: list,
+    done: list,
+    planned: list,
+    command: str,
+    complete: bool,
+) -> None:
     wall = sum(float(i["seconds"]) for i in invocations)
-    prov = {"command": command, "commit": git_commit(), "package_version": __version__, "started": started,
-            "finished": now() if complete else None, "updated": now(), "wall_seconds": round(wall, 1),
-            "invocations": invocations, "resumed": len(invocations) > 1, "complete": complete, "runs_done": done,
-            "runs_planned": planned, "machine": machine(), "preset": preset.to_dict()}
+    prov = {
+        "command": command,
+        "commit": git_commit(),
+        "package_version": __version__,
+        "started": started,
+        "finished": now() if complete else None,
+        "updated": now(),
+        "wall_seconds": round(wall, 1),
+        "invocations": invocations,
+        "resumed": len(invocations) > 1,
+        "complete": complete,
+        "runs_done": done,
+        "runs_planned": planned,
+        "machine": machine(),
+        "preset": preset.to_dict(),
+    }
     write_json(out / PROVENANCE, prov)
     m = prov["machine"]
-    lines = [f"# Provenance of the `{preset.name}` road-following study", "", f"- command: `{command}`",
-             f"- commit: `{prov['commit']}` (ibc_tutorial {__version__})",
-             f"- started: {started}; " + (f"finished: {prov['finished']}" if complete
-                                          else f"NOT FINISHED (last update {prov['updated']})"),
-             f"- wall time: {wall / 60:.1f} min over {len(invocations)} invocation(s)"
-             + (" (resumed)" if len(invocations) > 1 else ""),
-             f"- machine: {m['nproc']} CPUs ({m['cpu']}), {m['os']}, Python {m['python']}, torch {m['torch']} with "
-             f"{m['torch_threads']} thread(s)", f"- runs finished: {len(done)} of {len(planned)}", "",
-             "Differences of this preset from the `laptop` preset (field: laptop -> this preset):", ""]
+    lines = [
+        f"# Provenance of the `{preset.name}` road-following study",
+        "",
+        f"- command: `{command}`",
+        f"- commit: `{prov['commit']}` (ibc_tutorial {__version__})",
+        f"- started: {started}; "
+        + (f"finished: {prov['finished']}" if complete else f"NOT FINISHED (last update {prov['updated']})"),
+        f"- wall time: {wall / 60:.1f} min over {len(invocations)} invocation(s)"
+        + (" (resumed)" if len(invocations) > 1 else ""),
+        f"- machine: {m['nproc']} CPUs ({m['cpu']}), {m['os']}, Python {m['python']}, torch {m['torch']} with "
+        f"{m['torch_threads']} thread(s)",
+        f"- runs finished: {len(done)} of {len(planned)}",
+        "",
+        "Differences of this preset from the `laptop` preset (field: laptop -> this preset):",
+        "",
+    ]
     lines += [f"- `{k}`: {a} -> {b}" for k, (a, b) in differences(LAPTOP, preset).items()] or ["- none"]
     atomic_write_bytes(out / "PROVENANCE.md", ("\n".join(lines) + "\n").encode())
 
 
-def replicate(preset: SteeringPreset, out, *, command: str = "", workers: int = 1, force: bool = False,
-              log=print) -> dict:
+def replicate(
+    preset: SteeringPreset, out, *, command: str = "", workers: int = 1, force: bool = False, log=print
+) -> dict:
     """Run the whole study (module docstring) into ``out``; returns the contents of ``results.json``."""
     out = Path(out)
     if force and out.exists():
@@ -247,6 +327,7 @@ def replicate(preset: SteeringPreset, out, *, command: str = "", workers: int = 
 
     stop = threading.Event()
     heartbeat()
+
     def beat() -> None:
         while not stop.wait(HEARTBEAT_S):
             heartbeat()
@@ -266,28 +347,57 @@ def replicate(preset: SteeringPreset, out, *, command: str = "", workers: int = 
 
 def _work(out: Path, preset: SteeringPreset, results: dict, save, workers: int, log) -> None:
     if not (out / DATA).exists():
-        demo = collect_demonstrations(preset.routes, preset.route_minutes, preset.side_road_share, speed=preset.speed,
-                                      steer_noise=preset.steer_noise, seed=preset.collect_seed)
+        demo = collect_demonstrations(
+            preset.routes,
+            preset.route_minutes,
+            preset.side_road_share,
+            speed=preset.speed,
+            steer_noise=preset.steer_noise,
+            seed=preset.collect_seed,
+        )
         demo.save(out / DATA)
     demo = DemoLog.load(out / DATA)
     counts = side_road_counts(demo)
     results.update(
-        preset=preset.to_dict(), paper=PAPER, labels=LABELS, models=list(MODELS),
-        data={"file": DATA, "samples": len(demo), "routes": preset.routes,
-              "km": round(sum(e["distance_m"] for e in demo.meta["episodes"]) / 1000, 3), "side_roads": counts},
-        protocol={"crash_distance_m": ev.CRASH_DISTANCE_M, "restart_s": ev.RESTART_S, "slight_m": ev.SLIGHT_M,
-                  "clear_m": ev.CLEAR_M, "section_before_m": ev.SECTION_BEFORE_M, "dt": ev.DT,
-                  "paper_deg_per_steer": ev.PAPER_DEG_PER_STEER,
-                  "front_wheel_deg_per_steer": round(ev.FRONT_WHEEL_DEG_PER_STEER, 3)})
+        preset=preset.to_dict(),
+        paper=PAPER,
+        labels=LABELS,
+        models=list(MODELS),
+        data={
+            "file": DATA,
+            "samples": len(demo),
+            "routes": preset.routes,
+            "km": round(sum(e["distance_m"] for e in demo.meta["episodes"]) / 1000, 3),
+            "side_roads": counts,
+        },
+        protocol={
+            "crash_distance_m": ev.CRASH_DISTANCE_M,
+            "restart_s": ev.RESTART_S,
+            "slight_m": ev.SLIGHT_M,
+            "clear_m": ev.CLEAR_M,
+            "section_before_m": ev.SECTION_BEFORE_M,
+            "dt": ev.DT,
+            "paper_deg_per_steer": ev.PAPER_DEG_PER_STEER,
+            "front_wheel_deg_per_steer": round(ev.FRONT_WHEEL_DEG_PER_STEER, 3),
+        },
+    )
     if log:
-        log(f"demonstrations: {len(demo)} samples; side roads taken {counts['side_road']} of "
-            f"{counts['straight'] + counts['side_road']} passes")
+        log(
+            f"demonstrations: {len(demo)} samples; side roads taken {counts['side_road']} of "
+            f"{counts['straight'] + counts['side_road']} passes"
+        )
     if not (out / REFERENCES).exists():
         make_references(out, preset)
     refs, _ = read_references(out, preset)
-    results["references"] = {r.name: {"steps": int(len(r.poses)), "length_m": round(float(len(r.path)) *
-                                      ev.PATH_SPACING_M, 1), "side_road_passes": int(len(r.sections)),
-                                      "expert_w_cmd": round(ev.expert_whiteness(r), 5)} for r in refs}
+    results["references"] = {
+        r.name: {
+            "steps": int(len(r.poses)),
+            "length_m": round(float(len(r.path)) * ev.PATH_SPACING_M, 1),
+            "side_road_passes": int(len(r.sections)),
+            "expert_w_cmd": round(ev.expert_whiteness(r), 5),
+        }
+        for r in refs
+    }
     with np.load(out / REFERENCES, allow_pickle=False) as z:
         results["fig5"] = {"route": str(z["fig5/route"]), "steps": z["fig5/steps"].tolist()}
     save(False)
@@ -296,9 +406,11 @@ def _work(out: Path, preset: SteeringPreset, results: dict, save, workers: int, 
     def after(r: dict) -> None:
         if log:
             s = r["summary"]
-            log(f"{r['model']} seed {r['seed']}: {s['crashes']} crashes in {s['distance_m'] / 1000:.2f} km, "
+            log(
+                f"{r['model']} seed {r['seed']}: {s['crashes']} crashes in {s['distance_m'] / 1000:.2f} km, "
                 f"W_cmd {s['w_cmd']:.3f}/s, swerve rate {s['swerve_rate']} ({r['train_seconds']:.0f} s training, "
-                f"{r['eval_seconds']:.0f} s driving)")
+                f"{r['eval_seconds']:.0f} s driving)"
+            )
         save(False)
 
     if workers <= 1:
@@ -306,8 +418,9 @@ def _work(out: Path, preset: SteeringPreset, results: dict, save, workers: int, 
             after(_work_one(m, s, str(out), preset.to_dict()))
         return
     ctx = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_worker,
-                             initargs=(torch.get_num_threads(),)) as pool:
+    with ProcessPoolExecutor(
+        max_workers=workers, mp_context=ctx, initializer=_init_worker, initargs=(torch.get_num_threads(),)
+    ) as pool:
         try:
             futures = [pool.submit(_work_one, m, s, str(out), preset.to_dict()) for m, s in todo]
             for fut in as_completed(futures):
@@ -324,21 +437,35 @@ def load_results(out) -> dict:
     arrays. ValueError naming the file if one is missing or damaged."""
     res = read_folder(out, RESULTS, {"traces": TRACES}, "ibc-tutorial replicate-steering")
     if not res["traces"]:
-        raise ValueError(f"{Path(out) / TRACES} is missing: delete {out} and re-run 'ibc-tutorial replicate-steering'")
+        raise ValueError(
+            f"{Path(out) / TRACES} is missing: delete {out} and re-run 'ibc-tutorial replicate-steering'"
+        )
     return res
 
 
 # ---------------------------------------------------------------------- command line
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """The arguments of ``ibc-tutorial replicate-steering``."""
-    p.add_argument("--preset", default="laptop", choices=tuple(PRESETS), help="settings (default: %(default)s)")
-    p.add_argument("--out", required=True, help="folder for the data, runs, results and provenance; an interrupted "
-                   "study of the same preset there is resumed")
+    p.add_argument(
+        "--preset", default="laptop", choices=tuple(PRESETS), help="settings (default: %(default)s)"
+    )
+    p.add_argument(
+        "--out",
+        required=True,
+        help="folder for the data, runs, results and provenance; an interrupted "
+        "study of the same preset there is resumed",
+    )
     p.add_argument("--force", action="store_true", help="start over: delete the study already in --out")
-    p.add_argument("--threads", type=int, default=0, help="torch CPU threads per process (default 0: torch's choice; "
-                   "1 is fastest on a busy machine)")
+    p.add_argument(
+        "--threads",
+        type=int,
+        default=0,
+        help="torch CPU threads per process (default 0: torch's choice; 1 is fastest on a busy machine)",
+    )
     p.add_argument("--workers", type=int, default=1, help="runs in parallel processes (default: %(default)s)")
-    p.add_argument("--device", default="cpu", choices=("cpu",), help="where to train (the study is sized for a CPU)")
+    p.add_argument(
+        "--device", default="cpu", choices=("cpu",), help="where to train (the study is sized for a CPU)"
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -355,6 +482,8 @@ def run(args: argparse.Namespace) -> int:
         check_only_entries(out, ENTRIES, "study")
     if threads:
         torch.set_num_threads(threads)
-    command = "ibc-tutorial " + " ".join(sys.argv[1:]) if sys.argv and "replicate-steering" in sys.argv else ""
+    command = (
+        "ibc-tutorial " + " ".join(sys.argv[1:]) if sys.argv and "replicate-steering" in sys.argv else ""
+    )
     replicate(preset, out, command=command, workers=workers, force=force)
     return 0

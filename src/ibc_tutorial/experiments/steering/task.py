@@ -45,8 +45,13 @@ DEMO_TOWN = "town01"
 def longitudinal_config(speed: float = 6.0, steer_noise: float = 0.0) -> ExpertConfig:
     """The expert's settings with one target speed everywhere and an unscaled throttle (see the module docstring)."""
     speed = check_positive("speed", speed)
-    return replace(ExpertConfig(), cruise_speed=speed, turn_speed=speed, min_throttle_scale=1.0,
-                   steer_noise=check_positive("steer_noise", steer_noise, allow_zero=True))
+    return replace(
+        ExpertConfig(),
+        cruise_speed=speed,
+        turn_speed=speed,
+        min_throttle_scale=1.0,
+        steer_noise=check_positive("steer_noise", steer_noise, allow_zero=True),
+    )
 
 
 def steering_observation(obs: dict) -> dict:
@@ -63,8 +68,13 @@ def steering_observation(obs: dict) -> dict:
     return {"bev": obs["bev"], "state": out}
 
 
-def demo_route(town: Town, rng: np.random.Generator, side_road_share: float, n_turns: int = 64,
-               start: tuple[int, float] | None = None) -> Route:
+def demo_route(
+    town: Town,
+    rng: np.random.Generator,
+    side_road_share: float,
+    n_turns: int = 64,
+    start: tuple[int, float] | None = None,
+) -> Route:
     """A route whose turns keep straight past side roads except with probability ``side_road_share``.
 
     At an approach with a straight exit the turn is "straight", or, with probability
@@ -81,8 +91,15 @@ def demo_route(town: Town, rng: np.random.Generator, side_road_share: float, n_t
     return random_route(town, rng, n_turns, start, choose=keep_straight_mostly)
 
 
-def collect_demonstrations(routes: int, minutes: float, side_road_share: float, *, speed: float = 6.0,
-                           steer_noise: float = 0.3, seed: int = 0) -> DemoLog:
+def collect_demonstrations(
+    routes: int,
+    minutes: float,
+    side_road_share: float,
+    *,
+    speed: float = 6.0,
+    steer_noise: float = 0.3,
+    seed: int = 0,
+) -> DemoLog:
     """Drive ``routes`` town01 routes of ``minutes`` each (``demo_route``) and log states and actions.
 
     The label is the expert's action (its steering is what the models learn); the executed action
@@ -99,7 +116,9 @@ def collect_demonstrations(routes: int, minutes: float, side_road_share: float, 
         rng = np.random.default_rng([seed, k])
         route = demo_route(sim.town, rng, side_road_share)
         sim.reset(rng, route=route)
-        meta_routes.append({"start_lane": route.start_lane, "start_s": route.start_s, "turns": list(route.turns)})
+        meta_routes.append(
+            {"start_lane": route.start_lane, "start_s": route.start_s, "turns": list(route.turns)}
+        )
         reason = "completed"
         for _ in range(steps):
             action = expert.act()
@@ -110,9 +129,18 @@ def collect_demonstrations(routes: int, minutes: float, side_road_share: float, 
                 reason = sim.termination_reason
                 break
         ended.append({"steps": int(sim.t), "distance_m": round(sim.distance, 1), "end": reason})
-    config = {"town": DEMO_TOWN, "routes": routes, "minutes": minutes, "side_road_share": side_road_share,
-              "speed": speed, "steer_noise": steer_noise, "seed": seed}
-    return rec.log({"config": config, "routes": meta_routes, "episodes": ended, "expert": "longitudinal_config"})
+    config = {
+        "town": DEMO_TOWN,
+        "routes": routes,
+        "minutes": minutes,
+        "side_road_share": side_road_share,
+        "speed": speed,
+        "steer_noise": steer_noise,
+        "seed": seed,
+    }
+    return rec.log(
+        {"config": config, "routes": meta_routes, "episodes": ended, "expert": "longitudinal_config"}
+    )
 
 
 def side_road_counts(log: DemoLog) -> dict:
@@ -129,9 +157,12 @@ def side_road_counts(log: DemoLog) -> dict:
         else:
             stem.update(counts)
     n = through["straight"] + through["side_road"]
-    return {"straight": through["straight"], "side_road": through["side_road"],
-            "share": through["side_road"] / n if n else float("nan"),
-            "stem": {"left": stem.get("left", 0), "right": stem.get("right", 0)}}
+    return {
+        "straight": through["straight"],
+        "side_road": through["side_road"],
+        "share": through["side_road"] / n if n else float("nan"),
+        "stem": {"left": stem.get("left", 0), "right": stem.get("right", 0)},
+    }
 
 
 class SteeringBatches:

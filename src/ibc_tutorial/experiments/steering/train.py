@@ -23,7 +23,12 @@ from ibc_tutorial.driving.dataset import DemoDataset
 from ibc_tutorial.experiments.agents.results import write_npz
 from ibc_tutorial.experiments.steering.evaluate import Reference, drive_route, expert_whiteness
 from ibc_tutorial.experiments.steering.models import (
-    MODELS, SteeringModel, build_network, objective_for, uses_pairs)
+    MODELS,
+    SteeringModel,
+    build_network,
+    objective_for,
+    uses_pairs,
+)
 from ibc_tutorial.experiments.steering.presets import SteeringPreset
 from ibc_tutorial.experiments.steering.task import SteeringBatches
 from ibc_tutorial.metrics import crashes_per_km
@@ -45,16 +50,35 @@ def run_dir(out, model: str, seed: int) -> Path:
     return Path(out) / "runs" / model / f"seed{seed}"
 
 
-def save_checkpoint(path, *, model: str, preset: SteeringPreset, data_sha256: str, trainer: Trainer | None,
-                    network: torch.nn.Module, losses: list) -> Path:
+def save_checkpoint(
+    path,
+    *,
+    model: str,
+    preset: SteeringPreset,
+    data_sha256: str,
+    trainer: Trainer | None,
+    network: torch.nn.Module,
+    losses: list,
+) -> Path:
     """Write a checkpoint (``trainer``'s states for resuming, or None for the final weights) atomically."""
-    ckpt = {"format": FORMAT, "package_version": __version__, "model": model, "preset": preset.to_dict(),
-            "data_sha256": data_sha256, "losses": [list(map(float, x)) for x in losses],
-            "weights": {k: v.detach().clone() for k, v in network.state_dict().items()}}
+    ckpt = {
+        "format": FORMAT,
+        "package_version": __version__,
+        "model": model,
+        "preset": preset.to_dict(),
+        "data_sha256": data_sha256,
+        "losses": [list(map(float, x)) for x in losses],
+        "weights": {k: v.detach().clone() for k, v in network.state_dict().items()},
+    }
     if trainer is not None:
         state = trainer.state_dict()
-        ckpt.update(step=state["step"], optimizer=state["optimizer"], generator=state["generator"],
-                    running_loss=state["running_loss"], running_count=state["running_count"])
+        ckpt.update(
+            step=state["step"],
+            optimizer=state["optimizer"],
+            generator=state["generator"],
+            running_loss=state["running_loss"],
+            running_count=state["running_count"],
+        )
     return atomic_torch_save(ckpt, path)
 
 
@@ -64,12 +88,16 @@ def load_checkpoint(path, *, model: str, preset: SteeringPreset, data_sha256: st
     try:
         ckpt = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:
-        raise ValueError(f"{path} is not a readable checkpoint ({type(exc).__name__}): delete it and re-run") from None
+        raise ValueError(
+            f"{path} is not a readable checkpoint ({type(exc).__name__}): delete it and re-run"
+        ) from None
     if not isinstance(ckpt, dict) or ckpt.get("format") != FORMAT:
         raise ValueError(f"{path} is not a checkpoint of the road-following study: delete it and re-run")
     if ckpt.get("model") != model or ckpt.get("preset") != preset.to_dict():
-        raise ValueError(f"{path} holds model {ckpt.get('model')!r} of other settings, not {model!r} of preset "
-                         f"{preset.name!r}: delete it and re-run")
+        raise ValueError(
+            f"{path} holds model {ckpt.get('model')!r} of other settings, not {model!r} of preset "
+            f"{preset.name!r}: delete it and re-run"
+        )
     if data_sha256 is not None and ckpt.get("data_sha256") != data_sha256:
         raise ValueError(f"{path} was trained on other demonstrations: delete it and re-run")
     if not isinstance(ckpt.get("weights"), dict):
@@ -84,12 +112,15 @@ def load_model(path, model: str, preset: SteeringPreset) -> SteeringModel:
     try:
         net.load_state_dict(ckpt["weights"], strict=True)
     except RuntimeError as exc:
-        raise ValueError(f"{path}: its weights do not fit model {model!r} ({str(exc).splitlines()[0]})") from None
+        raise ValueError(
+            f"{path}: its weights do not fit model {model!r} ({str(exc).splitlines()[0]})"
+        ) from None
     return SteeringModel(model, net, preset)
 
 
-def train_model(model: str, seed: int, dataset: DemoDataset, preset: SteeringPreset, out, *,
-                data_sha256: str) -> tuple[SteeringModel, list, float, int]:
+def train_model(
+    model: str, seed: int, dataset: DemoDataset, preset: SteeringPreset, out, *, data_sha256: str
+) -> tuple[SteeringModel, list, float, int]:
     """Train (or resume) one model in ``out``; returns (model, loss curve [[step, loss]], seconds, resumed step)."""
     check_choice("model", model, MODELS)
     seed = check_int("seed", seed, minimum=0)
@@ -99,23 +130,44 @@ def train_model(model: str, seed: int, dataset: DemoDataset, preset: SteeringPre
     torch.manual_seed(seed)  # the network's initial weights
     network = build_network(model, preset)
     data = SteeringBatches(dataset, pairs=uses_pairs(model))
-    config = TrainConfig(steps=preset.steps, batch_size=preset.batch_size, lr=preset.lr, seed=seed,
-                         log_every=CHECKPOINT_EVERY, progress=False, desc=f"{model} seed {seed}")
+    config = TrainConfig(
+        steps=preset.steps,
+        batch_size=preset.batch_size,
+        lr=preset.lr,
+        seed=seed,
+        log_every=CHECKPOINT_EVERY,
+        progress=False,
+        desc=f"{model} seed {seed}",
+    )
     trainer = Trainer(network, objective_for(model, network, preset), data, config)
     losses: list = []
     resumed = 0
     last = out / "last.pt"
     if last.exists():
         ck = load_checkpoint(last, model=model, preset=preset, data_sha256=data_sha256)
-        trainer.load_state_dict({"model": ck["weights"], "optimizer": ck["optimizer"], "generator": ck["generator"],
-                                 "step": ck["step"], "running_loss": ck["running_loss"],
-                                 "running_count": ck["running_count"]})
+        trainer.load_state_dict(
+            {
+                "model": ck["weights"],
+                "optimizer": ck["optimizer"],
+                "generator": ck["generator"],
+                "step": ck["step"],
+                "running_loss": ck["running_loss"],
+                "running_count": ck["running_count"],
+            }
+        )
         losses, resumed = ck["losses"], int(ck["step"])
 
     def checkpoint(step: int, loss: float) -> None:
         losses.append([step, round(loss, 6)])
-        save_checkpoint(last, model=model, preset=preset, data_sha256=data_sha256, trainer=trainer,
-                        network=network, losses=losses)
+        save_checkpoint(
+            last,
+            model=model,
+            preset=preset,
+            data_sha256=data_sha256,
+            trainer=trainer,
+            network=network,
+            losses=losses,
+        )
 
     if trainer.step < config.steps:
         trainer.run(callback=checkpoint)
@@ -146,14 +198,28 @@ def summarize(routes: list[dict]) -> dict:
     n = sum(r["steps"] - 1 for r in routes)
     w = float(np.sqrt(sum((r["steps"] - 1) * r["w_cmd"] ** 2 for r in routes) / n)) if n else float("nan")
     scores = [s for r in routes for s in r["swerve_score"] if s is not None]
-    return {"crashes": crashes, "distance_m": round(dist, 2),
-            "crashes_per_km": round(crashes_per_km(crashes, dist), 4) if dist > 0 else None,
-            "w_cmd": round(w, 5), "swerve_rate": round(float(np.mean(scores)), 4) if scores else None,
-            "passes": len(scores), "timeouts": sum(bool(r["timeout"]) for r in routes)}
+    return {
+        "crashes": crashes,
+        "distance_m": round(dist, 2),
+        "crashes_per_km": round(crashes_per_km(crashes, dist), 4) if dist > 0 else None,
+        "w_cmd": round(w, 5),
+        "swerve_rate": round(float(np.mean(scores)), 4) if scores else None,
+        "passes": len(scores),
+        "timeouts": sum(bool(r["timeout"]) for r in routes),
+    }
 
 
-def run_one(model: str, seed: int, out, preset: SteeringPreset, dataset: DemoDataset, references: list[Reference],
-            window_obs: dict | None, data_sha256: str, keep_final: bool) -> dict:
+def run_one(
+    model: str,
+    seed: int,
+    out,
+    preset: SteeringPreset,
+    dataset: DemoDataset,
+    references: list[Reference],
+    window_obs: dict | None,
+    data_sha256: str,
+    keep_final: bool,
+) -> dict:
     """Train, evaluate, trace; write the run's files (``eval.json`` last) and return its ``eval.json``."""
     d = run_dir(out, model, seed)
     steering, losses, seconds, resumed = train_model(model, seed, dataset, preset, d, data_sha256=data_sha256)
@@ -167,10 +233,23 @@ def run_one(model: str, seed: int, out, preset: SteeringPreset, dataset: DemoDat
             arrays["scores"] = scores.numpy().astype(np.float32)  # (T, G)
     write_npz(d / TRACE, arrays)
     if keep_final:
-        save_checkpoint(d / "final.pt", model=model, preset=preset, data_sha256=data_sha256, trainer=None,
-                        network=steering.network, losses=losses)
-    ev.update(model=model, seed=seed, losses=losses, train_seconds=round(seconds, 1), resumed_from_step=resumed,
-              eval_seconds=round(time.perf_counter() - te, 1))
+        save_checkpoint(
+            d / "final.pt",
+            model=model,
+            preset=preset,
+            data_sha256=data_sha256,
+            trainer=None,
+            network=steering.network,
+            losses=losses,
+        )
+    ev.update(
+        model=model,
+        seed=seed,
+        losses=losses,
+        train_seconds=round(seconds, 1),
+        resumed_from_step=resumed,
+        eval_seconds=round(time.perf_counter() - te, 1),
+    )
     atomic_write_bytes(d / EVAL, json.dumps(ev, indent=1).encode())  # last: with it the run is finished
     (d / "last.pt").unlink(missing_ok=True)
     return ev
@@ -184,8 +263,14 @@ def read_eval(path) -> dict:
         ev = json.loads(path.read_text())
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise ValueError(f"{path} is damaged ({type(exc).__name__}): {fix}") from None
-    if (not isinstance(ev, dict) or not isinstance(ev.get("routes"), list) or not isinstance(ev.get("summary"), dict)
-            or not all(isinstance(r, dict) and {"route", "crashes", "distance_m", "w_cmd", "swerve_score"} <= set(r)
-                       for r in ev["routes"])):
+    if (
+        not isinstance(ev, dict)
+        or not isinstance(ev.get("routes"), list)
+        or not isinstance(ev.get("summary"), dict)
+        or not all(
+            isinstance(r, dict) and {"route", "crashes", "distance_m", "w_cmd", "swerve_score"} <= set(r)
+            for r in ev["routes"]
+        )
+    ):
         raise ValueError(f"{path} is damaged (not a run's evaluation): {fix}")
     return ev
