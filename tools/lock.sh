@@ -6,6 +6,8 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 tmp=$(mktemp)
+# start from the current pins: pip-compile keeps every pin that still satisfies pyproject.toml
+cp environment.lock "$tmp"
 pip-compile --quiet --extra dev --strip-extras --allow-unsafe \
   --no-emit-index-url --no-emit-find-links --no-emit-trusted-host \
   --output-file "$tmp" pyproject.toml
