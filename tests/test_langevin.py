@@ -4,11 +4,9 @@ import pytest
 import torch
 
 import ibc_tutorial.optimizers.langevin
-from ibc_tutorial.optimizers import ActionOptimizer
 from ibc_tutorial.optimizers.common import bounds
 from ibc_tutorial.optimizers.langevin import (
     LangevinConfig,
-    LangevinOptimizer,
     langevin,
     langevin_trace,
     polynomial_schedule,
@@ -117,12 +115,17 @@ def test_single_form_is_batched_with_b_equal_1_and_the_optimizer_protocol():
         def energy_from_embedding(self, z, actions):
             return 20 * ((actions - z[:, None, :]) ** 2).sum(-1)  # (B, N)
 
-    opt = LangevinOptimizer(torch.zeros(2, 1), LangevinConfig(n_samples=128, n_iters=60))
-    assert isinstance(opt, ActionOptimizer)
-    obs = torch.tensor([[-0.5], [0.6]])
-    torch.testing.assert_close(
-        opt.infer(Model(), obs, generator=torch.Generator().manual_seed(2)), obs, atol=0.05, rtol=0
-    )
+    # on a model: the observations embedded once, every chain scored against its own embedding
+    model, obs = Model(), torch.tensor([[-0.5], [0.6]])
+    z = model.embed(obs)  # (B, E)
+    found = langevin(
+        lambda y: model.energy_from_embedding(z, y),
+        torch.zeros(2, 1),
+        LangevinConfig(n_samples=128, n_iters=60),
+        n_obs=len(z),
+        generator=torch.Generator().manual_seed(2),
+    )  # (B, 1)
+    torch.testing.assert_close(found, obs, atol=0.05, rtol=0)
 
 
 def test_ula_noise_samples_the_boltzmann_distribution_and_ibc_noise_does_not():

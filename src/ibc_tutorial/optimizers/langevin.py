@@ -4,7 +4,6 @@
 - ``langevin``: one call for one observation (``n_obs=None``) or B observations (``n_obs=B``).
 - ``langevin_trace``: the same draws for one observation, keeping the population after every step.
 - ``polynomial_schedule``: the step size ε_k of each step.
-- ``LangevinOptimizer``: ``langevin`` on an energy model, an ``ActionOptimizer``.
 
 **What it is.** The IBC reference's update is annealed noisy gradient descent,
 
@@ -27,14 +26,15 @@ import torch
 
 from ibc_tutorial.kde import DEFAULT_BANDWIDTH
 from ibc_tutorial.optimizers.common import (
+    INITS,
     SELECTIONS,
     check_box,
     check_call,
     energies,
+    initial_samples,
     select_action,
     single_observation,
 )
-from ibc_tutorial.optimizers.dfo import INITS, initial_samples, initial_weights
 from ibc_tutorial.utils import check_choice, check_int, check_positive, draw_device
 
 NOISES = ("ibc", "ula")
@@ -224,30 +224,3 @@ def langevin_trace(
         config=config,
     )
 
-
-class LangevinOptimizer:
-    """``langevin`` on an energy model, an ``ActionOptimizer``: expert actions and weights fixed once."""
-
-    def __init__(
-        self,
-        expert_actions: torch.Tensor,
-        config: LangevinConfig = LangevinConfig(),
-        *,
-        init_weights: torch.Tensor | None = None,
-    ):
-        check_call(expert_actions, config, LangevinConfig)
-        self.expert_actions, self.config = expert_actions, config
-        self.init_weights = initial_weights(expert_actions, config) if init_weights is None else init_weights
-
-    def infer(self, model, obs, *, generator: torch.Generator | None = None) -> torch.Tensor:
-        """(B, D) actions for a batch of B observations; the observations are embedded once."""
-        with torch.no_grad():
-            z = model.embed(obs)  # (B, E)
-        return langevin(
-            lambda a: model.energy_from_embedding(z, a),
-            self.expert_actions,
-            self.config,
-            n_obs=len(z),
-            init_weights=self.init_weights,
-            generator=generator,
-        )  # (B, D)

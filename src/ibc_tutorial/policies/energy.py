@@ -27,7 +27,8 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-from ibc_tutorial.optimizers.grid import grid_argmin, grid_energies
+from ibc_tutorial.optimizers import EnergyPolicy
+from ibc_tutorial.optimizers.grid import GridOptimizer, grid_energies
 from ibc_tutorial.policies.encoders import ObservationEncoder
 from ibc_tutorial.utils import check_int, check_tensor, draw_device
 
@@ -129,26 +130,20 @@ class EnergyModel(nn.Module):
         return actions
 
 
-class GridArgminPolicy:
+class GridArgminPolicy(EnergyPolicy):
     """An implicit policy for rollouts: obs (B, obs_dim) -> argmin over ``grid`` of E(obs, ·), (B, D).
 
     A plain callable (the toy worlds' policy interface), evaluated without gradients, with the
-    model in eval mode. ``grid`` is (G, D), e.g. ``optimizers.grid.action_grid(201)`` for steering.
+    model in eval mode: ``optimizers.EnergyPolicy`` with a ``GridOptimizer``. ``grid`` is (G, D),
+    e.g. ``optimizers.grid.action_grid(201)`` for steering.
     """
 
     def __init__(self, model: EnergyModel, grid: torch.Tensor):
         check_tensor("grid", grid, ndim=2)
         if grid.shape[1] != model.action_dim:
             raise ValueError(f"grid must have shape (G, {model.action_dim}), got {tuple(grid.shape)}")
-        self.model, self.grid = model, grid
-
-    def __call__(self, obs) -> torch.Tensor:
-        was_training = self.model.training
-        self.model.eval()
-        try:
-            return grid_argmin(self.model, obs, self.grid)  # (B, D)
-        finally:
-            self.model.train(was_training)
+        super().__init__(model, GridOptimizer(grid))
+        self.grid = grid
 
 
 class GridSamplePolicy:

@@ -29,7 +29,7 @@ from torch import nn
 from ibc_tutorial.driving.rollout import Policy
 from ibc_tutorial.experiments.agents.presets import METHODS, Preset
 from ibc_tutorial.kde import inverse_density_weights
-from ibc_tutorial.optimizers.dfo import DFOConfig, dfo
+from ibc_tutorial.optimizers.dfo import DFOConfig, DFOOptimizer
 from ibc_tutorial.policies.encoders import BEVStateEncoder
 from ibc_tutorial.policies.energy import EnergyModel
 from ibc_tutorial.policies.explicit import BetaPolicy
@@ -182,16 +182,9 @@ class Agent:
         self.network.eval()
         if self.method == "bc":
             return self.network.act(obs, mode="mean").cpu()  # (B, 2)
-        z = self.network.embed(obs)  # (B, E), once per observation
         weights = self.init_weights if self.method == "da-ibc" else None
-        return dfo(
-            lambda a: self.network.energy_from_embedding(z, a),
-            self.expert_actions,
-            self.dfo_config,
-            n_obs=len(z),
-            init_weights=weights,
-            generator=generator,
-        ).cpu()  # (B, 2)
+        optimizer = DFOOptimizer(self.expert_actions, self.dfo_config, init_weights=weights)
+        return optimizer.infer(self.network, obs, generator=generator).cpu()  # (B, 2)
 
     def policy(self, seed: int = 0) -> Policy:
         """The seeded ``driving.rollout.Policy`` of this agent: numpy obs batch -> numpy actions (B, 2).
