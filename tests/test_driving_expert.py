@@ -172,9 +172,10 @@ def test_replanning_mid_route_goes_on_with_the_next_turn():
 
 
 def test_batched_rollout_matches_single_episodes():
+    from ibc_tutorial.driving.env import EnvConfig
     from ibc_tutorial.driving.rollout import rollout
 
-    results = rollout("expert", town="town02", episodes=3, steps=400, bev_size=32, seed=5)
+    results = rollout("expert", EnvConfig("town02", bev_size=32, max_steps=400), episodes=3, seed=5)
     for r in results:
         env = make_env("town02", bev_size=32, max_steps=400)
         distance, infractions, terminated = drive_expert(env, r.seed, 400)
@@ -187,12 +188,12 @@ def test_batched_rollout_matches_single_episodes():
         assert obs["bev"].dtype == np.float32 and obs["state"].shape == (obs["bev"].shape[0], 3)
         return np.tile([0.4, 2.0], (len(obs["state"]), 1))  # clipped to [-1, 1]
 
-    results = rollout(straight, town="town02", episodes=4, steps=300, bev_size=32)
+    results = rollout(straight, EnvConfig("town02", bev_size=32, max_steps=300), episodes=4)
     assert all(r.terminated and r.termination in ("off_road", "building") for r in results)
     assert seen[0] == 4 and seen[-1] < 4  # finished episodes leave the batch
     assert all(r.score == pytest.approx(r.distance_m * 0.7**r.red_light_infractions) for r in results)
     with pytest.raises(ValueError, match="policy"):
-        rollout("random")
+        rollout("random", EnvConfig("town02"))
 
 
 def test_pid_derivative_on_measurement_has_no_set_point_kick():

@@ -20,7 +20,6 @@ import hashlib
 import io
 import json
 import zipfile
-from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -249,28 +248,6 @@ class DemoLog:
 
 class _Refused(Exception):
     """Internal: a readable file that is not a valid demonstration log."""
-
-
-def exit_counts(log: DemoLog) -> dict[int, Counter]:
-    """For every junction approach the log drives through: how often it left by each exit.
-
-    Returns ``{approach id: Counter({"left": n, "straight": n, "right": n})}`` counted from the
-    lanes the expert followed (a road lane into a junction, then the connector it took).
-    """
-    town = get_town(log.town)
-    out: dict[int, Counter] = {}
-    for sl in log.episodes():
-        lanes = log.lane[sl]
-        change = np.flatnonzero(lanes[1:] != lanes[:-1])
-        for k in change:
-            a, b = int(lanes[k]), int(lanes[k + 1])
-            ap = town.approach_of_lane.get(a)
-            if ap is None or not town.approaches[ap].is_junction:
-                continue
-            turn = town.lanes[b].turn
-            if town.approaches[ap].exits.get(turn) == b:
-                out.setdefault(ap, Counter())[turn] += 1
-    return out
 
 
 class DemoDataset(torch.utils.data.Dataset):

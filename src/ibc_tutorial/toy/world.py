@@ -32,8 +32,10 @@ import torch
 from ibc_tutorial.toy import car
 from ibc_tutorial.utils import check_int, check_positive, check_positive_fields, check_tensor
 
-Policy = Callable[[torch.Tensor], torch.Tensor]
-"""policy(obs (B, obs_dim)) -> actions (B, 1) in [-1, 1], +1 = full right."""
+ToyPolicy = Callable[[torch.Tensor], torch.Tensor]
+"""A closed-loop policy in a toy world: ``policy(obs (B, obs_dim)) -> actions (B, 1)`` in [-1, 1],
++1 = full right, on tensor batches (an explicit policy's controller, a ``GridArgminPolicy``, a
+``dfo_policy``). The town's is ``driving.rollout.DrivingPolicy``, on numpy dict batches."""
 
 
 @dataclass
@@ -365,7 +367,7 @@ class ToyWorld:
         )
 
     def rollout(
-        self, policy: Policy, n_episodes: int, seed: int, *, initial_states: torch.Tensor | None = None
+        self, policy: ToyPolicy, n_episodes: int, seed: int, *, initial_states: torch.Tensor | None = None
     ) -> Rollouts:
         """Run ``policy`` in closed loop on ``n_episodes`` episodes at once, started from the
         start distribution drawn with ``seed`` (or from ``initial_states`` (E, 3) when given).
