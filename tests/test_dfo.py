@@ -333,3 +333,28 @@ def test_dfo_stepper_titles_the_last_iteration_by_the_choice_made(select):
     assert ("argmax" in ax.get_title()) == (select == "argmax")
     assert energy_ax.get_ylabel() == "energy E(x, y) (nats, red)" and ax.get_xlabel() and ax.get_ylabel()
     plt.close(fig)
+
+
+def test_energy_policy_acts_in_eval_mode_and_restores_training():
+    from ibc_tutorial.optimizers import EnergyPolicy
+    from ibc_tutorial.optimizers.grid import GridOptimizer, action_grid
+
+    class Model(torch.nn.Module):  # E(x, y) = (y − x)², and it records its mode when scored
+        def __init__(self):
+            super().__init__()
+            self.modes = []
+
+        def embed(self, obs):
+            return obs
+
+        def energy_from_embedding(self, z, actions):
+            self.modes.append(self.training)
+            return ((actions[None] - z[:, None, :]) ** 2).sum(-1)  # (B, G)
+
+    model = Model().train()
+    policy = EnergyPolicy(model, GridOptimizer(action_grid(21)))
+    a = policy(torch.tensor([[0.3], [-0.7]]))
+    torch.testing.assert_close(a, torch.tensor([[0.3], [-0.7]]))
+    assert model.modes == [False] and model.training  # scored in eval mode, then restored
+    with pytest.raises(ValueError, match="ActionOptimizer"):
+        EnergyPolicy(model, "dfo")

@@ -157,7 +157,8 @@ def _check_kde_args(
     check_tensor("data", data, ndim=2)
     if query.shape[1] != data.shape[1]:
         raise ValueError(
-            f"{name} and data must have the same number of dimensions D, got {name} {tuple(query.shape)} and data {tuple(data.shape)}"
+            f"{name} and data must have the same number of dimensions D, got {name} {tuple(query.shape)} and "
+            f"data {tuple(data.shape)}"
         )
     if len(query) == 0:
         raise ValueError(f"{name} must hold at least one point, got shape {tuple(query.shape)}")
@@ -222,7 +223,8 @@ def kde_density(
     out = dens.to(dtype)
     if not torch.isfinite(out).all():
         raise ValueError(
-            f"bandwidth h = {h:g} is too small for D = {data.shape[1]}: densities reach {float(dens.max()):.3g}, "
+            f"bandwidth h = {h:g} is too small for D = {data.shape[1]}: densities reach "
+            f"{float(dens.max()):.3g}, "
             f"beyond {dtype}; use a larger bandwidth, or float64 inputs"
         )
     return out

@@ -50,8 +50,8 @@ def uniform_negatives(
         n_neg: N, counter-examples per sample.
         low, high: the action bounds y_min, y_max, each of length D.
         generator: a seeded ``torch.Generator`` (None = torch's global one).
-        device: where the result goes (default: the generator's, the CPU). The draws are made on the generator's
-            device (``utils.draw_device``) and moved: the same numbers on every device.
+        device: where the result goes (default: the generator's, the CPU). The draws are made on
+            the generator's device (``utils.draw_device``) and moved: the same numbers on every device.
     Returns:
         (B, N, D) in torch's default dtype, on ``device``.
     """
@@ -146,7 +146,8 @@ class UniformSampler:
             low, high = low.expand(actions.shape[1]), high.expand(actions.shape[1])
         if len(low) != actions.shape[1]:
             raise ValueError(
-                f"actions must have D = {len(low)} columns to match the bounds, got shape {tuple(actions.shape)}"
+                f"actions must have D = {len(low)} columns to match the bounds, got shape "
+                f"{tuple(actions.shape)}"
             )
         return uniform_negatives(len(actions), n_neg, low, high, generator, device=actions.device)
 

@@ -1,4 +1,5 @@
-"""Training objectives: the losses of the book as ``objective(batch, generator) -> scalar`` for ``training.train``.
+"""Training objectives: the losses of the book as ``objective(batch, generator) -> scalar`` for
+``training.train``.
 
 Each builder closes over a model (and, for energy models, the way its counter-examples are
 chosen), so one loop trains every variant of the book:

@@ -45,6 +45,7 @@ __all__ = [
     "PID",
     "Expert",
     "ExpertConfig",
+    "stops_for_light",
     "GREEN",
     "YELLOW",
     "RED",

@@ -45,7 +45,9 @@ def junction_visits(town, lanes: np.ndarray, *, ended_inside: bool = False) -> l
         if lane not in road:
             continue
         if prev is not None and lane != prev:
-            visits += _junction_pass(tw, prev, prev_step, lambda conn, lane=lane: lane in tw.lanes[conn].successors)
+            visits += _junction_pass(
+                tw, prev, prev_step, lambda conn, lane=lane: lane in tw.lanes[conn].successors
+            )
         prev, prev_step = lane, k
     if ended_inside and prev is not None and len(lanes) and int(lanes[-1]) not in road:
         entered = lanes[prev_step + 1 :].tolist()  # the lanes after the last road lane
@@ -150,7 +152,8 @@ def junction_crossings(town, lanes: np.ndarray, steer: np.ndarray) -> list[dict]
 
 
 def exits_per_approach(visits: list[dict]) -> dict[int, dict]:
-    """Per junction approach: visits and the different exits taken, ``{approach: {"node", "visits", "turns"}}``.
+    """Per junction approach: visits and the different exits taken, ``{approach: {"node", "visits",
+    "turns"}}``.
 
     The summary the replication's free-driving record stores; the counts are ``exit_counts``'s,
     ``turns`` lists the exits taken in the order first taken.
@@ -158,7 +161,10 @@ def exits_per_approach(visits: list[dict]) -> dict[int, dict]:
     counts = exit_counts(visits)
     out: dict[int, dict] = {}
     for v in visits:
-        d = out.setdefault(v["approach"], {"node": v["node"], "visits": sum(counts[int(v["approach"])].values()), "turns": []})
+        d = out.setdefault(
+            v["approach"],
+            {"node": v["node"], "visits": sum(counts[int(v["approach"])].values()), "turns": []},
+        )
         if v["turn"] not in d["turns"]:
             d["turns"].append(v["turn"])
     return out
@@ -321,7 +327,7 @@ def speed_control_report(town: str = "town02", seeds=range(5), steps: int = 3000
         switch = [k for k in range(1, len(target)) if {target[k - 1], target[k]} == speeds]
         jumps.append(max((abs(acc[k] - acc[k - 1]) for k in switch), default=0.0))
         edges = np.flatnonzero(np.diff(np.r_[0, np.array(stopping, dtype=int), 0]))
-        for a0, a1 in zip(edges[::2], edges[1::2]):
+        for a0, a1 in zip(edges[::2], edges[1::2], strict=True):
             sign = np.sign(acc[a0:a1])
             sign = sign[sign != 0]
             flips.append(int((np.diff(sign) != 0).sum()))

@@ -110,7 +110,8 @@ class DemoLog:
         )
 
     def history_rows(self, index: np.ndarray) -> np.ndarray:
-        """(B, 3) rows holding the light states 15, 8 and 0 steps before each sample (clamped at its episode's start)."""
+        """(B, 3) rows holding the light states 15, 8 and 0 steps before each sample (clamped at its episode's
+        start)."""
         index = np.asarray(index, dtype=np.int64)
         back = np.minimum(np.array(HISTORY_LAGS)[None, :], self.step[index][:, None])  # (B, 3)
         return index[:, None] - back
@@ -123,7 +124,7 @@ class DemoLog:
         """The rows of each episode, in order."""
         starts = np.flatnonzero(self.step == 0)
         ends = np.append(starts[1:], len(self))
-        return [slice(int(a), int(b)) for a, b in zip(starts, ends)]
+        return [slice(int(a), int(b)) for a, b in zip(starts, ends, strict=True)]
 
     # ------------------------------------------------------------------ files
     def checksum(self) -> str:
@@ -156,7 +157,8 @@ class DemoLog:
 
     @classmethod
     def load(cls, path) -> DemoLog:
-        """Read a log written by ``save``; ValueError if the file is damaged, foreign or of another version."""
+        """Read a log written by ``save``; ValueError if the file is damaged, foreign or of
+        another version."""
         path = Path(path)
         if not path.is_file():
             raise ValueError(f"no demonstration file at {path}")

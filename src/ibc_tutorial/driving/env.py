@@ -195,7 +195,8 @@ class DrivingEnv(gymnasium.Env):
             ) from None
         if lane not in self.town.road_lanes or not 0 <= s <= self.town.lanes[lane].length:
             raise ValueError(
-                f"options['start'] must name a road lane of {self.town.name} and a position on it, got {start!r}"
+                f"options['start'] must name a road lane of {self.town.name} and a position on it, got "
+                f"{start!r}"
             )
         return lane, s
 

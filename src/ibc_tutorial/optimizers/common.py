@@ -55,7 +55,8 @@ def check_box(low, high) -> tuple[float | tuple[float, ...], float | tuple[float
 
 
 def bounds(low, high, d: int) -> tuple[torch.Tensor, torch.Tensor]:
-    """``low``/``high`` (numbers, or sequences of length D) as (D,) tensors with low < high (``utils.check_box``).
+    """``low``/``high`` (numbers, or sequences of length D) as (D,) tensors with low < high
+    (``utils.check_box``).
 
     In torch's default dtype (float32 unless a chapter sets float64), like the populations.
     """
@@ -63,7 +64,8 @@ def bounds(low, high, d: int) -> tuple[torch.Tensor, torch.Tensor]:
 
 
 def check_expert_actions(expert_actions: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor) -> torch.Tensor:
-    """(M, D) expert actions inside [lo, hi], M >= 1, in the default dtype, without gradient (on their device)."""
+    """(M, D) expert actions inside [lo, hi], M >= 1, in the default dtype, without gradient (on their
+    device)."""
     if len(expert_actions) == 0:
         raise ValueError("expert_actions must hold at least one action (M >= 1)")
     lo, hi = lo.to(expert_actions.device), hi.to(expert_actions.device)  # (D,), (D,)
@@ -121,7 +123,8 @@ def single_observation(energy_fn):
 
 
 def check_call(expert_actions: torch.Tensor, config, config_type: type) -> tuple[torch.Tensor, torch.Tensor]:
-    """Check the arguments every optimizer call shares; return the action box ``bounds`` (lo, hi), each (D,)."""
+    """Check the arguments every optimizer call shares; return the action box ``bounds`` (lo,
+    hi), each (D,)."""
     check_tensor("expert_actions", expert_actions, ndim=2)
     if not isinstance(config, config_type):
         raise ValueError(f"config must be a {config_type.__name__}, got {type(config).__name__}")
@@ -129,14 +132,12 @@ def check_call(expert_actions: torch.Tensor, config, config_type: type) -> tuple
 
 
 # --------------------------------------------------------------------------- line 2: the initial population
-def initial_weights(
-    expert_actions: torch.Tensor, config
-) -> torch.Tensor | None:
+def initial_weights(expert_actions: torch.Tensor, config) -> torch.Tensor | None:
     """The Categorical weights over expert actions of Algorithm 1 line 2; None for ``init="uniform"``.
 
     "kde": w_i ∝ ĝ(y_i) (the algorithm as printed), from ``kde.kde_density``; "inverse-kde":
-    w_i ∝ 1 / ĝ(y_i) (the text), ``kde.inverse_density_weights``; "expert": w_i = 1 / M. Computing them costs a KDE over
-    the M expert actions (M² kernel evaluations): closed-loop code computes them once and passes
+    w_i ∝ 1 / ĝ(y_i) (the text), ``kde.inverse_density_weights``; "expert": w_i = 1 / M. Computing them costs
+    a KDE over the M expert actions (M² kernel evaluations): closed-loop code computes them once and passes
     them to ``dfo`` as ``init_weights``.
 
     Args:
@@ -202,3 +203,23 @@ def initial_samples(
             raise ValueError("init_weights must be non-negative with a positive sum")
     idx = multinomial(init_weights, n_obs * n, generator, replacement=True)  # (B·N,)
     return experts[idx.to(experts.device)].reshape(n_obs, n, d)  # (B, N, D)
+
+
+def prepare_call(
+    energy_fn, expert_actions: torch.Tensor, config, config_type: type, n_obs, init_weights, generator
+):
+    """What every DFO and Langevin call begins with: the checks, the batched energy function and
+    the initial population of Algorithm 1 line 2.
+
+    ``n_obs`` None (one observation: ``energy_fn`` maps (N, D) to (N,)) or B. Returns
+    ``(fn, y, lo, hi)``: the batched energy function ((B, N, D) -> (B, N)), the population
+    y (B, N, D) and the action box (D,), (D,).
+    """
+    lo, hi = check_call(expert_actions, config, config_type)
+    if n_obs is None:
+        b, fn = 1, single_observation(energy_fn)
+    else:
+        b, fn = check_int("n_obs", n_obs, minimum=1), energy_fn
+    with torch.no_grad():
+        y = initial_samples(expert_actions, b, config, init_weights=init_weights, generator=generator)
+    return fn, y, lo, hi  # y: (B, N, D)

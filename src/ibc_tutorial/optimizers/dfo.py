@@ -15,7 +15,7 @@ import torch
 
 from ibc_tutorial.kde import DEFAULT_BANDWIDTH
 from ibc_tutorial.optimizers import EnergyPolicy
-from ibc_tutorial.optimizers.common import (  # noqa: F401 (INITS, initial_samples: the initialisation, here too)
+from ibc_tutorial.optimizers.common import (  # INITS and the initialisation: importable from here too
     INITS,
     SELECTIONS,
     check_box,
@@ -25,10 +25,22 @@ from ibc_tutorial.optimizers.common import (  # noqa: F401 (INITS, initial_sampl
     initial_samples,
     initial_weights,
     multinomial,
+    prepare_call,
     select_action,
-    single_observation,
 )
 from ibc_tutorial.utils import check_choice, check_int, check_positive, draw_device
+
+__all__ = [
+    "INITS",
+    "DFOConfig",
+    "DFOTrace",
+    "DFOOptimizer",
+    "dfo",
+    "dfo_policy",
+    "dfo_trace",
+    "initial_samples",
+    "initial_weights",
+]
 
 
 @dataclass(frozen=True)
@@ -44,7 +56,8 @@ class DFOConfig:
     n_iters: int = 5
     """N_iters, the number of energy evaluations of the population (the paper: 5)."""
     sigma_init: float = 0.5
-    """σ_init, the standard deviation of the first noise, added after the first resampling (the paper: 0.5)."""
+    """σ_init, the standard deviation of the first noise, added after the first resampling (the paper: 0.5).
+    """
     shrink: float = 0.5
     """K, the factor shrinking σ after each iteration, σ ← K σ (the paper: 0.5)."""
     low: float | tuple[float, ...] = -1.0
@@ -177,15 +190,8 @@ def dfo(
     Returns:
         (D,) the action ŷ, or (B, D) one per observation.
     """
-    lo, hi = check_call(expert_actions, config, DFOConfig)
-    if n_obs is None:
-        b, fn = 1, single_observation(energy_fn)
-    else:
-        b, fn = check_int("n_obs", n_obs, minimum=1), energy_fn
+    fn, y, lo, hi = prepare_call(energy_fn, expert_actions, config, DFOConfig, n_obs, init_weights, generator)
     with torch.no_grad():
-        y = initial_samples(
-            expert_actions, b, config, init_weights=init_weights, generator=generator
-        )  # (B, N, D)
         action, _ = _dfo_core(fn, y, config, lo, hi, generator, record=False)  # (B, D)
     return action[0] if n_obs is None else action
 
@@ -198,17 +204,15 @@ def dfo_trace(
     init_weights: torch.Tensor | None = None,
     generator: torch.Generator | None = None,
 ) -> DFOTrace:
-    """``dfo`` for one observation (``energy_fn``: (N, D) -> (N,)), also returning every iteration's population.
+    """``dfo`` for one observation (``energy_fn``: (N, D) -> (N,)), also returning every iteration's
+    population.
 
     Same arguments and the same draws as ``dfo``: with equally seeded generators,
     ``dfo_trace(...).action`` equals ``dfo(...)``. For figures and widgets.
     """
-    lo, hi = check_call(expert_actions, config, DFOConfig)
+    fn, y, lo, hi = prepare_call(energy_fn, expert_actions, config, DFOConfig, None, init_weights, generator)
     with torch.no_grad():
-        y = initial_samples(
-            expert_actions, 1, config, init_weights=init_weights, generator=generator
-        )  # (1, N, D)
-        action, rec = _dfo_core(single_observation(energy_fn), y, config, lo, hi, generator, record=True)
+        action, rec = _dfo_core(fn, y, config, lo, hi, generator, record=True)  # y, action: (1, N, D), (1, D)
     return DFOTrace(
         samples=[s[0] for s in rec["samples"]],
         energies=[e[0] for e in rec["energies"]],

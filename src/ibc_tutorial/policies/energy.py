@@ -50,7 +50,8 @@ class EnergyModel(nn.Module):
         super().__init__()
         if not isinstance(encoder, nn.Module) or not hasattr(encoder, "embed_dim"):
             raise ValueError(
-                f"encoder must be an ObservationEncoder (an nn.Module with embed_dim), got {type(encoder).__name__}"
+                f"encoder must be an ObservationEncoder (an nn.Module with embed_dim), got "
+                f"{type(encoder).__name__}"
             )
         self.encoder = encoder
         self.action_dim = check_int("action_dim", action_dim, minimum=1)
@@ -125,7 +126,8 @@ class EnergyModel(nn.Module):
         if not ok:
             got = tuple(actions.shape) if isinstance(actions, torch.Tensor) else type(actions).__name__
             raise ValueError(
-                f"actions must be a tensor of shape ({batch}, N, {self.action_dim}) or (N, {self.action_dim}), got {got}"
+                f"actions must be a tensor of shape ({batch}, N, {self.action_dim}) or (N, "
+                f"{self.action_dim}), got {got}"
             )
         return actions
 

@@ -137,7 +137,8 @@ class Rollouts:
 
 
 def check_policy_actions(actions, batch: int) -> torch.Tensor:
-    """Return ``actions`` in the default dtype (B, 1), or raise ValueError saying what a policy must return."""
+    """Return ``actions`` in the default dtype (B, 1), or raise ValueError saying what a policy
+    must return."""
     if not isinstance(actions, torch.Tensor):
         raise ValueError(
             f"policy must return a torch.Tensor of shape ({batch}, 1), got {type(actions).__name__}"
@@ -225,7 +226,8 @@ class ToyWorld:
         raise NotImplementedError
 
     def contact_fraction(self, p0: torch.Tensor, p1: torch.Tensor) -> torch.Tensor:
-        """Fraction in [0, 1] of the move ``p0 -> p1`` (B, 2) at which the car collides; inf if it does not."""
+        """Fraction in [0, 1] of the move ``p0 -> p1`` (B, 2) at which the car collides; inf if
+        it does not."""
         raise NotImplementedError
 
     def sample_plans(self, start: torch.Tensor, generator: torch.Generator) -> torch.Tensor:
