@@ -6,8 +6,8 @@ import torch
 
 from ibc_tutorial.cli import main
 from ibc_tutorial.driving import Expert, make_env
-from ibc_tutorial.driving.collect import CollectConfig, Recorder, collect
 from ibc_tutorial.driving.analysis import exit_counts, junction_visits, log_junction_visits
+from ibc_tutorial.driving.collect import CollectConfig, Recorder, collect
 from ibc_tutorial.driving.dataset import VERSION, DemoDataset, DemoLog
 
 

@@ -73,7 +73,7 @@ def test_expert_follows_its_route():
     town = env.town
     turns = [
         town.lanes[b].turn
-        for a, b in zip(lanes[:-1], lanes[1:])
+        for a, b in zip(lanes[:-1], lanes[1:], strict=True)
         if a != b and a in town.approach_of_lane and town.approaches[town.approach_of_lane[a]].is_junction
     ]
     assert len(turns) >= 2 and turns == list(route.turns[: len(turns)])
@@ -103,8 +103,9 @@ def test_same_seed_same_drive_and_noise_changes_only_execution():
 
 
 def test_brake_noise_holds_brakes_and_the_labels_drive_on():
-    """Held brakes (``brake_noise``) replace only the executed acceleration, with a brake of the given strength, for
-    the configured number of steps; the labels stay the expert's, so at rest away from a red light they say "go"."""
+    """Held brakes (``brake_noise``) replace only the executed acceleration, with a brake of the given
+    strength, for the configured number of steps; the labels stay the expert's, so at rest away from a red
+    light they say "go"."""
     sim = DrivingSim("town01")
     route = random_route(sim.town, np.random.default_rng(0))
     sim.reset(np.random.default_rng(5), route=route)
@@ -123,7 +124,8 @@ def test_brake_noise_holds_brakes_and_the_labels_drive_on():
     held = labels[:, 1] != executed[:, 1]
     assert held.mean() > 0.1
     assert np.all((executed[held, 1] <= -0.4 + 1e-6) & (executed[held, 1] >= -0.8 - 1e-6))  # -0.8 x U(0.5, 1)
-    # each run of held steps lasts 10-20 steps (a run may be cut by the end of the drive or merge with the next)
+    # each run of held steps lasts 10-20 steps (a run may be cut by the end of the drive or merge with the
+    # next)
     edges = np.flatnonzero(np.diff(np.r_[0, held.astype(int), 0]))
     lengths = edges[1::2] - edges[::2]
     assert lengths[:-1].min() >= 10
@@ -165,7 +167,7 @@ def test_replanning_mid_route_goes_on_with_the_next_turn():
         lanes.append(expert.current_lane)
     turns = [
         town.lanes[b].turn
-        for a, b in zip(lanes[:-1], lanes[1:])
+        for a, b in zip(lanes[:-1], lanes[1:], strict=True)
         if a != b and a in town.approach_of_lane and town.approaches[town.approach_of_lane[a]].is_junction
     ]
     assert len(turns) >= 3 and turns == list(env.route.turns[: len(turns)])

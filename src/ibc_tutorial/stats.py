@@ -9,9 +9,9 @@ farther than IBC" is about the *method*, so its uncertainty has both parts. This
   difference of two methods' means, and for a method's mean over the expert's on the same starts;
 - ``verdict`` and ``compare``: the rule that turns an interval into "holds", "does not hold" or
   "cannot tell at this scale" (the ordering of two means never decides);
-- ``exit_spread`` and ``exit_spread_test`` (over ``driving.analysis.exit_counts``): the free-driving (Fig. 5) question,
-  does one agent leave the same junction approach by different exits more than another does,
-  beyond what chance gives with so few visits (a stratified permutation test);
+- ``exit_spread`` and ``exit_spread_test`` (over ``driving.analysis.exit_counts``): the free-driving
+  (Fig. 5) question, does one agent leave the same junction approach by different exits more than
+  another does, beyond what chance gives with so few visits (a stratified permutation test);
 - ``episode_table``: the per-episode values of a replication folder's runs (every agent of a
   method, or the expert's row; the table's starts or the held-out ones) as an (agents, episodes)
   array, the input of the intervals.

@@ -535,8 +535,7 @@ def plot_energy_landscape(
     expert=None,
     path=None,
     title: str = "The energy landscape",
-    xlabel: str = "distance to the tree (m)",
-    ylabel: str = STEER_LABEL,
+    labels: tuple[str, str] = ("distance to the tree (m)", STEER_LABEL),
     ax=None,
 ):
     """E(x, y) with the observation along x and the action along y, shifted per observation so
@@ -548,6 +547,7 @@ def plot_energy_landscape(
         energies: (n, G) energies.
         expert: optional (x, y) arrays of expert samples to overlay as dots.
         path: optional (n,) action per column to draw as a red line (e.g. the argmin).
+        labels: the x and y axis labels.
 
     The x axis runs from the largest distance (left) to the smallest, in the car's direction of travel.
     """
@@ -566,7 +566,7 @@ def plot_energy_landscape(
     if expert is not None or path is not None:
         ax.legend(loc="lower left", fontsize=8, markerscale=4, facecolor="0.55")
     ax.set_xlim(x.max(), x.min())  # far on the left: the car drives from left to right
-    label_axes(ax, xlabel, ylabel, title)
+    label_axes(ax, *labels, title)
     return finish(fig, own)
 
 

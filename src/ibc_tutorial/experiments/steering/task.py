@@ -30,8 +30,8 @@ from dataclasses import replace
 import numpy as np
 import torch
 
-from ibc_tutorial.driving.collect import Recorder
 from ibc_tutorial.driving.analysis import exit_counts, log_junction_visits
+from ibc_tutorial.driving.collect import Recorder
 from ibc_tutorial.driving.dataset import DemoDataset, DemoLog
 from ibc_tutorial.driving.expert import Expert, ExpertConfig
 from ibc_tutorial.driving.routes import Route, random_route, uniform_exit
