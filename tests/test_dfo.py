@@ -69,7 +69,8 @@ def test_unequal_valleys_argmax_lands_on_the_deeper_floor(init):
 
 
 def test_sample_follows_the_sharpened_distribution_on_unequal_valleys():
-    """After k energy evaluations the population follows roughly p(y|x)^k: the shallow valley fades with n_iters."""
+    """After k energy evaluations the population follows roughly p(y|x)^k: the shallow valley fades with
+    n_iters."""
     g = torch.Generator().manual_seed(2)
     experts = symmetric_experts()
     share = {}
@@ -88,7 +89,9 @@ def test_sample_follows_the_sharpened_distribution_on_unequal_valleys():
 
 def test_results_inside_bounds_even_when_the_minimum_is_outside():
     # energy falling towards y = +2, outside [−1, 1]: noise pushes samples out, they are clamped
-    energy = lambda y: 50 * ((y - 2.0) ** 2).sum(-1)
+    def energy(y):
+        return 50 * ((y - 2.0) ** 2).sum(-1)
+
     experts = torch.tensor([[0.9], [0.5], [-0.9]])
     g = torch.Generator().manual_seed(3)
     tr = dfo_trace(energy, experts, cfg(low=-1.0, high=1.0, init="uniform", select="argmax"), generator=g)
@@ -96,8 +99,11 @@ def test_results_inside_bounds_even_when_the_minimum_is_outside():
         assert s.min() >= -1.0 and s.max() <= 1.0
     assert (tr.samples[-1] == 1.0).float().mean() > 0.2  # clamped onto the bound, not redrawn
     assert float(tr.action[0]) == 1.0
+
     # per-dimension bounds in 2-D
-    e2 = lambda y: ((y - torch.tensor([5.0, -5.0])) ** 2).sum(-1)
+    def e2(y):
+        return ((y - torch.tensor([5.0, -5.0])) ** 2).sum(-1)
+
     a = dfo(e2, torch.zeros(4, 2), cfg(low=[-1.0, -0.5], high=[1.0, 0.5], select="argmax"), generator=g)
     assert torch.allclose(a, torch.tensor([1.0, -0.5]))
 
@@ -111,7 +117,7 @@ def test_reproducible_with_a_generator_and_trace_matches_dfo():
     assert torch.equal(a1, a2) and torch.equal(a1, tr.action) and tr.config == c
     assert len(tr.samples) == 5 and tr.energy_evaluations == 256 * 5
     assert tr.sigmas[:4] == [0.5, 0.25, 0.125, 0.0625] and math.isnan(tr.sigmas[4])
-    for p, e in zip(tr.probs, tr.energies):
+    for p, e in zip(tr.probs, tr.energies, strict=True):
         torch.testing.assert_close(p, torch.softmax(-e, 0))
     # the population shrinks onto the floors: spread around the nearest floor falls
     spread = [float(((s.abs() - 0.5) ** 2).mean()) for s in tr.samples]
@@ -128,7 +134,10 @@ def test_single_is_batched_with_b_equal_1_and_rows_are_independent():
     assert a.shape == (1,) and b.shape == (1, 1) and torch.equal(a, b[0])
     # B = 3 observations, each with its own single valley at c_b
     centres = torch.tensor([-0.6, 0.1, 0.7])
-    energy = lambda y: (y[..., 0] - centres[:, None]) ** 2 / TAU  # (B, N, 1) -> (B, N)
+
+    def energy(y):
+        return (y[..., 0] - centres[:, None]) ** 2 / TAU  # (B, N, 1) -> (B, N)
+
     acts = dfo(energy, experts, cfg(select="argmax"), n_obs=3, generator=torch.Generator().manual_seed(0))
     assert acts.shape == (3, 1)
     torch.testing.assert_close(acts[:, 0], centres, atol=0.02, rtol=0)
@@ -253,8 +262,13 @@ def test_single_and_batched_forms_agree_row_by_row():
     experts = symmetric_experts()
     c = DFOConfig(n_samples=256, n_iters=1, init="uniform", select="argmax")
     centres = torch.tensor([-0.6, 0.1, 0.7])
-    batched = lambda y: (y[..., 0] - centres[:, None]) ** 2 / TAU  # (B, N, 1) -> (B, N)
-    single = lambda y: (y[:, 0] - centres[0]) ** 2 / TAU  # (N, 1) -> (N,), observation 0
+
+    def batched(y):
+        return (y[..., 0] - centres[:, None]) ** 2 / TAU  # (B, N, 1) -> (B, N)
+
+    def single(y):
+        return (y[:, 0] - centres[0]) ** 2 / TAU  # (N, 1) -> (N,), observation 0
+
     acts = dfo(batched, experts, c, n_obs=3, generator=torch.Generator().manual_seed(4))  # (3, 1)
     one = dfo(single, experts, c, generator=torch.Generator().manual_seed(4))  # (1,)
     assert acts.shape == (3, 1) and one.shape == (1,)
@@ -333,3 +347,28 @@ def test_dfo_stepper_titles_the_last_iteration_by_the_choice_made(select):
     assert ("argmax" in ax.get_title()) == (select == "argmax")
     assert energy_ax.get_ylabel() == "energy E(x, y) (nats, red)" and ax.get_xlabel() and ax.get_ylabel()
     plt.close(fig)
+
+
+def test_energy_policy_acts_in_eval_mode_and_restores_training():
+    from ibc_tutorial.optimizers import EnergyPolicy
+    from ibc_tutorial.optimizers.grid import GridOptimizer, action_grid
+
+    class Model(torch.nn.Module):  # E(x, y) = (y − x)², and it records its mode when scored
+        def __init__(self):
+            super().__init__()
+            self.modes = []
+
+        def embed(self, obs):
+            return obs
+
+        def energy_from_embedding(self, z, actions):
+            self.modes.append(self.training)
+            return ((actions[None] - z[:, None, :]) ** 2).sum(-1)  # (B, G)
+
+    model = Model().train()
+    policy = EnergyPolicy(model, GridOptimizer(action_grid(21)))
+    a = policy(torch.tensor([[0.3], [-0.7]]))
+    torch.testing.assert_close(a, torch.tensor([[0.3], [-0.7]]))
+    assert model.modes == [False] and model.training  # scored in eval mode, then restored
+    with pytest.raises(ValueError, match="ActionOptimizer"):
+        EnergyPolicy(model, "dfo")

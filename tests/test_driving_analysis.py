@@ -3,8 +3,9 @@
 import numpy as np
 import pytest
 
-from ibc_tutorial.driving import get_town, rollout
+from ibc_tutorial.driving import EnvConfig, RolloutRecording, get_town, rollout
 from ibc_tutorial.driving.analysis import (
+    exit_counts,
     exits_per_approach,
     junction_crossings,
     junction_visits,
@@ -14,9 +15,8 @@ from ibc_tutorial.driving.analysis import (
 
 @pytest.fixture(scope="module")
 def expert_drive():
-    (r,) = rollout(
-        "expert", town="town02", episodes=1, steps=400, bev_size=32, seed=3, record_steps=True, keep_obs=True
-    )
+    env = EnvConfig("town02", bev_size=32, max_steps=400)
+    (r,) = rollout("expert", env, episodes=1, seed=3, record=RolloutRecording(steps=True, obs=True))
     return r
 
 
@@ -35,12 +35,19 @@ def test_rollout_records_every_step(expert_drive):
 
 
 def test_rollout_scores_alone_and_refuses_bad_requests():
-    (r,) = rollout("expert", town="town02", episodes=1, steps=5, bev_size=32, seed=3, record_xy=False)
+    env = EnvConfig("town02", bev_size=32, max_steps=5)
+    (r,) = rollout("expert", env, episodes=1, seed=3, record=RolloutRecording(xy=False))
     assert r.xy is None and r.trace is None and r.steps == 5
-    with pytest.raises(ValueError, match="keep_obs"):
-        rollout("expert", episodes=1, steps=5, keep_obs=True)
+    with pytest.raises(ValueError, match="obs needs steps"):
+        RolloutRecording(obs=True)
+    with pytest.raises(ValueError, match="xy"):
+        RolloutRecording(xy="yes")
     with pytest.raises(ValueError, match="policy"):
-        rollout("pid", episodes=1, steps=5)
+        rollout("pid", env, episodes=1)
+    with pytest.raises(ValueError, match="env must be an EnvConfig"):
+        rollout("expert", "town02", episodes=1)
+    with pytest.raises(ValueError, match="record must be a RolloutRecording"):
+        rollout("expert", env, episodes=1, record={"xy": False})
 
 
 def test_junction_visits_read_the_exit_from_the_lanes(expert_drive):
@@ -55,6 +62,16 @@ def test_junction_visits_read_the_exit_from_the_lanes(expert_drive):
         {"approach": ap.id, "node": ap.node, "turn": turn, "step": 13},
     ]
     assert exits_per_approach(visits) == {ap.id: {"node": ap.node, "visits": 2, "turns": [turn]}}
+    assert exit_counts(visits) == {ap.id: {t: 2 * (t == turn) for t in ("left", "straight", "right")}}
+    # a record that ends inside the junction: counted only with ended_inside, by the connector entered
+    (other_turn, other_conn), *_ = [(t, c) for t, c in ap.exits.items() if t != turn]
+    ends_inside = lanes + [ap.lane] * 2 + [other_conn] * 3
+    assert junction_visits(tw, np.array(ends_inside)) == visits
+    assert junction_visits(tw, np.array(ends_inside), ended_inside=True) == visits + [
+        {"approach": ap.id, "node": ap.node, "turn": other_turn, "step": 17}
+    ]
+    with pytest.raises(ValueError, match="turn"):
+        exit_counts([{"approach": 1, "turn": "u-turn"}])
     assert all(
         v["turn"] in ("left", "straight", "right")
         for v in junction_visits("town02", expert_drive.trace["lane"])
@@ -167,8 +184,9 @@ def test_on_step_sees_what_the_policy_sees_and_must_be_callable():
     def hook(t, episodes, batch):
         seen.append((t, episodes, batch["state"].copy()))
 
-    rollout(policy, town="town02", episodes=2, steps=4, bev_size=32, seed=3, record_xy=False, on_step=hook)
+    env = EnvConfig("town02", bev_size=32, max_steps=4)
+    rollout(policy, env, episodes=2, seed=3, record=RolloutRecording(xy=False, on_step=hook))
     assert [s[0] for s in seen] == [0, 1, 2, 3] and all(s[1] == [0, 1] for s in seen)
-    assert all(np.array_equal(s[2], g[1]) for s, g in zip(seen, given))
+    assert all(np.array_equal(s[2], g[1]) for s, g in zip(seen, given, strict=True))
     with pytest.raises(ValueError, match="on_step must be callable"):
-        rollout(policy, episodes=1, steps=2, on_step="print")
+        RolloutRecording(on_step="print")

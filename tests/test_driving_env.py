@@ -117,7 +117,7 @@ def test_reset_is_reproducible():
     a = run(make_env("town01", bev_size=64), 7, actions)
     b = run(make_env("town01", bev_size=64), 7, actions)
     assert len(a) == len(b)
-    for (oa, ia), (ob, ib) in zip(a, b):
+    for (oa, ia), (ob, ib) in zip(a, b, strict=True):
         assert np.array_equal(oa["bev"], ob["bev"]) and np.array_equal(oa["state"], ob["state"]) and ia == ib
     c = run(make_env("town01", bev_size=64), 8, actions)
     assert (c[0][1]["x"], c[0][1]["y"]) != (a[0][1]["x"], a[0][1]["y"])
@@ -181,7 +181,7 @@ def test_stopping_at_a_red_light_is_not_an_infraction():
     red_light_setup(env, 0)
     expert = Expert(env)
     gaps, states = [], []
-    for t in range(500):
+    for _ in range(500):
         obs, r, term, trunc, info = env.step(expert.act())
         front = np.array([info["x"], info["y"]]) + 2.3 * np.array(
             [math.cos(info["yaw"]), math.sin(info["yaw"])]

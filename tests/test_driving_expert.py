@@ -73,7 +73,7 @@ def test_expert_follows_its_route():
     town = env.town
     turns = [
         town.lanes[b].turn
-        for a, b in zip(lanes[:-1], lanes[1:])
+        for a, b in zip(lanes[:-1], lanes[1:], strict=True)
         if a != b and a in town.approach_of_lane and town.approaches[town.approach_of_lane[a]].is_junction
     ]
     assert len(turns) >= 2 and turns == list(route.turns[: len(turns)])
@@ -103,8 +103,9 @@ def test_same_seed_same_drive_and_noise_changes_only_execution():
 
 
 def test_brake_noise_holds_brakes_and_the_labels_drive_on():
-    """Held brakes (``brake_noise``) replace only the executed acceleration, with a brake of the given strength, for
-    the configured number of steps; the labels stay the expert's, so at rest away from a red light they say "go"."""
+    """Held brakes (``brake_noise``) replace only the executed acceleration, with a brake of the given
+    strength, for the configured number of steps; the labels stay the expert's, so at rest away from a red
+    light they say "go"."""
     sim = DrivingSim("town01")
     route = random_route(sim.town, np.random.default_rng(0))
     sim.reset(np.random.default_rng(5), route=route)
@@ -123,7 +124,8 @@ def test_brake_noise_holds_brakes_and_the_labels_drive_on():
     held = labels[:, 1] != executed[:, 1]
     assert held.mean() > 0.1
     assert np.all((executed[held, 1] <= -0.4 + 1e-6) & (executed[held, 1] >= -0.8 - 1e-6))  # -0.8 x U(0.5, 1)
-    # each run of held steps lasts 10-20 steps (a run may be cut by the end of the drive or merge with the next)
+    # each run of held steps lasts 10-20 steps (a run may be cut by the end of the drive or merge with the
+    # next)
     edges = np.flatnonzero(np.diff(np.r_[0, held.astype(int), 0]))
     lengths = edges[1::2] - edges[::2]
     assert lengths[:-1].min() >= 10
@@ -165,16 +167,17 @@ def test_replanning_mid_route_goes_on_with_the_next_turn():
         lanes.append(expert.current_lane)
     turns = [
         town.lanes[b].turn
-        for a, b in zip(lanes[:-1], lanes[1:])
+        for a, b in zip(lanes[:-1], lanes[1:], strict=True)
         if a != b and a in town.approach_of_lane and town.approaches[town.approach_of_lane[a]].is_junction
     ]
     assert len(turns) >= 3 and turns == list(env.route.turns[: len(turns)])
 
 
 def test_batched_rollout_matches_single_episodes():
+    from ibc_tutorial.driving.env import EnvConfig
     from ibc_tutorial.driving.rollout import rollout
 
-    results = rollout("expert", town="town02", episodes=3, steps=400, bev_size=32, seed=5)
+    results = rollout("expert", EnvConfig("town02", bev_size=32, max_steps=400), episodes=3, seed=5)
     for r in results:
         env = make_env("town02", bev_size=32, max_steps=400)
         distance, infractions, terminated = drive_expert(env, r.seed, 400)
@@ -187,12 +190,12 @@ def test_batched_rollout_matches_single_episodes():
         assert obs["bev"].dtype == np.float32 and obs["state"].shape == (obs["bev"].shape[0], 3)
         return np.tile([0.4, 2.0], (len(obs["state"]), 1))  # clipped to [-1, 1]
 
-    results = rollout(straight, town="town02", episodes=4, steps=300, bev_size=32)
+    results = rollout(straight, EnvConfig("town02", bev_size=32, max_steps=300), episodes=4)
     assert all(r.terminated and r.termination in ("off_road", "building") for r in results)
     assert seen[0] == 4 and seen[-1] < 4  # finished episodes leave the batch
     assert all(r.score == pytest.approx(r.distance_m * 0.7**r.red_light_infractions) for r in results)
     with pytest.raises(ValueError, match="policy"):
-        rollout("random")
+        rollout("random", EnvConfig("town02"))
 
 
 def test_pid_derivative_on_measurement_has_no_set_point_kick():

@@ -18,7 +18,7 @@ def loop_kde(query, data, h):
         total = 0.0
         for x in data.tolist():
             prod = 1.0
-            for qd, xd in zip(q, x):
+            for qd, xd in zip(q, x, strict=True):
                 u = (qd - xd) / h
                 prod *= math.exp(-0.5 * u * u) / math.sqrt(2 * math.pi)
             total += prod
@@ -102,7 +102,8 @@ def test_inverse_density_weights_sum_to_one_and_rank_rare_actions_higher():
 
 
 def test_inverse_density_weights_raise_the_share_of_rare_actions_in_minibatches():
-    """Drawn with probabilities w_i (as the training loop draws minibatches), rare actions are seen far more often."""
+    """Drawn with probabilities w_i (as the training loop draws minibatches), rare actions are seen far more
+    often."""
     g = torch.Generator().manual_seed(4)
     actions = torch.cat(
         [torch.randn(950, 1, generator=g) * 0.05, 0.8 + torch.randn(50, 1, generator=g) * 0.05]
@@ -133,7 +134,7 @@ def test_empty_inputs_are_refused():
         kde_density(torch.zeros(3, 0), torch.zeros(5, 0))
 
 
-# --------------------------------------------------------------------------- numerical range (tiny or huge h, many D)
+# ---------------------------------------------------------------- numerical range (tiny or huge h, many D)
 def test_tiny_bandwidth_gives_exact_densities_or_names_the_bandwidth():
     g = torch.Generator().manual_seed(5)
     data = torch.rand(20, 1, generator=g)
@@ -225,7 +226,7 @@ def loop_kde_reflected(query, data, h, low, high):
         total = 0.0
         for x in data.tolist():
             prod = 1.0
-            for qd, xd in zip(q, x):
+            for qd, xd in zip(q, x, strict=True):
                 prod *= sum(norm.pdf((qd - c) / h) / h for c in (xd, 2 * low - xd, 2 * high - xd))
             total += prod
         out.append(total / m)

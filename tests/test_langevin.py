@@ -4,11 +4,9 @@ import pytest
 import torch
 
 import ibc_tutorial.optimizers.langevin
-from ibc_tutorial.optimizers import ActionOptimizer
 from ibc_tutorial.optimizers.common import bounds
 from ibc_tutorial.optimizers.langevin import (
     LangevinConfig,
-    LangevinOptimizer,
     langevin,
     langevin_trace,
     polynomial_schedule,
@@ -21,14 +19,16 @@ def test_polynomial_schedule_matches_the_ibc_formula():
     assert rates[0] == pytest.approx(1e-1) and rates[-1] == pytest.approx(1e-5)
     for k, r in enumerate(rates):  # (init − final)(1 − k/(n−1))^2 + final
         assert r == pytest.approx((1e-1 - 1e-5) * (1 - k / 24) ** 2 + 1e-5)
-    assert all(a > b for a, b in zip(rates, rates[1:]))
+    assert all(a > b for a, b in zip(rates[:-1], rates[1:], strict=True))
     assert polynomial_schedule(0, 1) == pytest.approx(1e-1)
     with pytest.raises(ValueError, match="step"):
         polynomial_schedule(25, 25)
 
 
 def test_langevin_descends_to_a_quadratic_minimum():
-    energy = lambda y: ((y - torch.tensor([0.3, -0.4])) ** 2).sum(-1) * 20  # (N, 2) -> (N,)
+    def energy(y):
+        return ((y - torch.tensor([0.3, -0.4])) ** 2).sum(-1) * 20  # (N, 2) -> (N,)
+
     g = torch.Generator().manual_seed(0)
     experts = torch.zeros(3, 2)
     tr = langevin_trace(
@@ -44,7 +44,10 @@ def test_langevin_descends_to_a_quadratic_minimum():
 def test_one_step_is_the_reference_update():
     """y ← clip(y − clip(ε(½ dE/dy + noise·n), ±0.1·half-range), low, high) with n ~ N(0, I)."""
     c = torch.tensor([0.5])
-    energy = lambda y: ((y - c) ** 2).sum(-1)  # dE/dy = 2 (y − c)
+
+    def energy(y):
+        return ((y - c) ** 2).sum(-1)  # dE/dy = 2 (y − c)
+
     experts = torch.zeros(2, 1)
     g1 = torch.Generator().manual_seed(3)
     tr = langevin_trace(
@@ -62,7 +65,9 @@ def test_one_step_is_the_reference_update():
 
 
 def test_langevin_stays_in_bounds_and_is_reproducible():
-    energy = lambda y: -5 * y.sum(-1)  # pulls towards +inf
+    def energy(y):
+        return -5 * y.sum(-1)  # pulls towards +inf
+
     experts = torch.zeros(2, 1)
     c = LangevinConfig(n_samples=128, n_iters=30, step_init=0.5, delta_clip=1.0)
     tr = langevin_trace(energy, experts, c, generator=torch.Generator().manual_seed(1))
@@ -73,7 +78,10 @@ def test_langevin_stays_in_bounds_and_is_reproducible():
 
 def test_langevin_batched_form_and_errors():
     centres = torch.tensor([[-0.5], [0.6]])
-    energy = lambda y: 20 * ((y - centres[:, None, :]) ** 2).sum(-1)  # (B, N, 1) -> (B, N)
+
+    def energy(y):
+        return 20 * ((y - centres[:, None, :]) ** 2).sum(-1)  # (B, N, 1) -> (B, N)
+
     acts = langevin(
         energy,
         torch.zeros(2, 1),
@@ -82,7 +90,10 @@ def test_langevin_batched_form_and_errors():
         generator=torch.Generator().manual_seed(2),
     )
     torch.testing.assert_close(acts, centres, atol=0.05, rtol=0)
-    e = lambda y: (y**2).sum(-1)
+
+    def e(y):
+        return (y**2).sum(-1)
+
     with pytest.raises(ValueError, match="n_samples"):
         LangevinConfig(n_samples=0)
     with pytest.raises(ValueError, match="low must be < high"):
@@ -98,7 +109,9 @@ def test_langevin_batched_form_and_errors():
 
 
 def test_single_form_is_batched_with_b_equal_1_and_the_optimizer_protocol():
-    energy = lambda y: 20 * ((y - 0.3) ** 2).sum(-1)  # (N, 1) -> (N,)
+    def energy(y):
+        return 20 * ((y - 0.3) ** 2).sum(-1)  # (N, 1) -> (N,)
+
     c = LangevinConfig(n_samples=64, n_iters=10, select="sample")
     a = langevin(energy, torch.zeros(2, 1), c, generator=torch.Generator().manual_seed(3))
     b = langevin(
@@ -117,18 +130,26 @@ def test_single_form_is_batched_with_b_equal_1_and_the_optimizer_protocol():
         def energy_from_embedding(self, z, actions):
             return 20 * ((actions - z[:, None, :]) ** 2).sum(-1)  # (B, N)
 
-    opt = LangevinOptimizer(torch.zeros(2, 1), LangevinConfig(n_samples=128, n_iters=60))
-    assert isinstance(opt, ActionOptimizer)
-    obs = torch.tensor([[-0.5], [0.6]])
-    torch.testing.assert_close(
-        opt.infer(Model(), obs, generator=torch.Generator().manual_seed(2)), obs, atol=0.05, rtol=0
-    )
+    # on a model: the observations embedded once, every chain scored against its own embedding
+    model, obs = Model(), torch.tensor([[-0.5], [0.6]])
+    z = model.embed(obs)  # (B, E)
+    found = langevin(
+        lambda y: model.energy_from_embedding(z, y),
+        torch.zeros(2, 1),
+        LangevinConfig(n_samples=128, n_iters=60),
+        n_obs=len(z),
+        generator=torch.Generator().manual_seed(2),
+    )  # (B, 1)
+    torch.testing.assert_close(found, obs, atol=0.05, rtol=0)
 
 
 def test_ula_noise_samples_the_boltzmann_distribution_and_ibc_noise_does_not():
     """E = y² / (2 s²) is the Gaussian N(0, s²): ULA's chains spread like it; the reference's collapse."""
     s = 0.2
-    energy = lambda y: (y[:, 0] ** 2) / (2 * s * s)  # (N, 1) -> (N,)
+
+    def energy(y):
+        return (y[:, 0] ** 2) / (2 * s * s)  # (N, 1) -> (N,)
+
     base = dict(
         n_samples=4000, n_iters=300, step_init=0.004, step_final=0.004, delta_clip=10.0, low=-5.0, high=5.0
     )
@@ -154,7 +175,10 @@ def test_ula_noise_samples_the_boltzmann_distribution_and_ibc_noise_does_not():
 def test_one_ula_step_is_the_textbook_update():
     """y ← clip(y − (ε/2) dE/dy − √ε n): ULA with gradient step η = ε/2 and noise √(2η)."""
     c = torch.tensor([0.5])
-    energy = lambda y: ((y - c) ** 2).sum(-1)  # dE/dy = 2 (y − c)
+
+    def energy(y):
+        return ((y - c) ** 2).sum(-1)  # dE/dy = 2 (y − c)
+
     tr = langevin_trace(
         energy,
         torch.zeros(2, 1),
@@ -173,7 +197,10 @@ def test_the_noise_comes_from_the_generator_and_goes_to_the_actions_device(monke
     "another device" simulated with torch's meta device (shapes, no values, so the finiteness check of the
     energies is switched off); the CPU run is unchanged (``test_one_step_is_the_reference_update``)."""
     monkeypatch.setattr(ibc_tutorial.optimizers.langevin, "energies", lambda energy_fn, y: energy_fn(y))
-    energy = lambda y: 20 * ((y - 0.3) ** 2).sum(-1)  # (B, N, D) -> (B, N)
+
+    def energy(y):
+        return 20 * ((y - 0.3) ** 2).sum(-1)  # (B, N, D) -> (B, N)
+
     c = LangevinConfig(n_samples=16, n_iters=4)
     lo, hi = bounds(c.low, c.high, 2)  # on the CPU, as ``langevin`` makes them
     y = torch.rand(3, 16, 2, generator=torch.Generator().manual_seed(0)) * 2 - 1  # (B, N, D)

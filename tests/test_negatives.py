@@ -114,3 +114,32 @@ def test_expert_clipping_per_dimension_bounds():
     assert (neg[..., 0] >= -1).all() and (neg[..., 0] <= 1).all()
     assert (neg[..., 1] >= 0).all() and (neg[..., 1] <= 0.5).all()
     assert (neg[..., 1] == 0.5).any() and (neg[..., 1] == 0.0).any()
+
+
+def test_check_box_is_the_one_check_of_action_bounds():
+    from ibc_tutorial.utils import check_box
+
+    lo, hi = check_box(-1.0, [1.0, 0.5])  # a single number stands for every dimension
+    assert torch.equal(lo, torch.tensor([-1.0, -1.0])) and torch.equal(hi, torch.tensor([1.0, 0.5]))
+    assert check_box(0.0, 1.0, 3)[0].shape == (3,)
+    for low, high, d, match in [
+        (1.0, -1.0, None, "low must be < high"),
+        ([-1.0, 0.5], [1.0, 0.0], None, "low must be < high"),
+        (float("nan"), 1.0, None, "low must be finite"),
+        ([], 1.0, None, "low must hold"),
+        ("a", 1.0, None, "low must be a number"),
+        ([-1.0, -1.0], 1.0, 3, "D = 3"),
+    ]:
+        with pytest.raises(ValueError, match=match):
+            check_box(low, high, d)
+    with pytest.raises(ValueError, match="bounds: low must be < high"):
+        check_box(1.0, 0.0, name="bounds")
+
+
+def test_info_nce_objective_needs_a_sampler():
+    from ibc_tutorial.negatives import NegativeSampler
+    from ibc_tutorial.objectives import info_nce_objective
+
+    assert isinstance(UniformSampler(), NegativeSampler) and isinstance(ExpertSampler(0.1), NegativeSampler)
+    with pytest.raises(ValueError, match="sampler must be a NegativeSampler"):
+        info_nce_objective(torch.nn.Linear(1, 1), "uniform", 8)

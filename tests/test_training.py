@@ -1,4 +1,5 @@
-"""The one training loop (resumable, any data with ``batch``) and the energy-model objectives (InfoNCE with any sampler, grid variants)."""
+"""The one training loop (resumable, any data with ``batch``) and the energy-model objectives (InfoNCE with
+any sampler, grid variants)."""
 
 import pytest
 import torch
@@ -105,7 +106,10 @@ def test_training_is_seeded_and_records_evaluations():
     runs = []
     for _ in range(2):
         model = small_model(seed=3)
-        evals = lambda: float(model.energy(torch.zeros(1, 1), torch.zeros(1, 1, 1)))  # noqa: E731
+
+        def evals(model=model):  # this run's model
+            return float(model.energy(torch.zeros(1, 1), torch.zeros(1, 1, 1)))
+
         res = train(
             model,
             info_nce_objective(model, ExpertSampler(0.1), 8),
@@ -164,7 +168,7 @@ def test_a_resumed_run_is_bit_identical(tmp_path):
     state = torch.load(tmp_path / "state.pt", weights_only=True)
     second = small_model(seed=99)  # other initial weights: all overwritten by the state
     res_b = train(second, info_nce_objective(second, ExpertSampler(0.1), 8), data, config, state=state)
-    assert all(torch.equal(a, b) for a, b in zip(_params(whole), _params(second)))
+    assert all(torch.equal(a, b) for a, b in zip(_params(whole), _params(second), strict=True))
     assert res_whole.steps == [20, 40, 60] and res_a.steps == [20, 33] and res_b.steps == [40, 60]
     assert res_b.losses[1] == res_whole.losses[2]  # steps 41-60: the same minibatches and counter-examples
 
@@ -239,7 +243,9 @@ def test_cosine_schedule_decays_and_resumes_bit_identically():
         data,
         TrainConfig(**{**config.__dict__, "lr_schedule": "constant"}),
     )
-    assert not all(torch.equal(a, b) for a, b in zip(_params(whole), _params(constant)))  # the schedule acts
+    assert not all(
+        torch.equal(a, b) for a, b in zip(_params(whole), _params(constant), strict=True)
+    )  # the schedule acts
 
     class Killed(Exception):
         pass
@@ -257,7 +263,7 @@ def test_cosine_schedule_decays_and_resumes_bit_identically():
     assert saved["step"] == 20
     second = small_model(seed=99)
     train(second, info_nce_objective(second, ExpertSampler(0.1), 8), data, config, state=saved)
-    assert all(torch.equal(a, b) for a, b in zip(_params(whole), _params(second)))
+    assert all(torch.equal(a, b) for a, b in zip(_params(whole), _params(second), strict=True))
     assert trainer.learning_rate(0) == 1e-2 and trainer.learning_rate(30) == pytest.approx(5e-3)
     assert 0 < trainer.learning_rate(59) < 1e-4
     with pytest.raises(ValueError, match="lr_schedule"):

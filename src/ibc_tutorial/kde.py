@@ -31,7 +31,7 @@ import math
 
 import torch
 
-from ibc_tutorial.utils import check_int, check_positive, check_tensor
+from ibc_tutorial.utils import check_box, check_int, check_positive, check_tensor
 
 DEFAULT_BANDWIDTH = 0.2
 """h = 0.2, the bandwidth the DA-IBC paper chose "through trial-and-error experimentation" (sec. 4.2)."""
@@ -92,14 +92,7 @@ def _check_bounds(bounds, d: int) -> tuple[torch.Tensor, torch.Tensor] | None:
         return None
     if not isinstance(bounds, (tuple, list)) or len(bounds) != 2:
         raise ValueError(f"bounds must be None or a pair (low, high), got {bounds!r}")
-    lo, hi = (torch.as_tensor(b, dtype=torch.float64).reshape(-1) for b in bounds)
-    lo, hi = (t.expand(d) if t.numel() == 1 else t for t in (lo, hi))
-    if lo.shape != (d,) or hi.shape != (d,):
-        raise ValueError(
-            f"bounds must hold one number or D = {d} numbers per side, got {tuple(lo.shape)} and {tuple(hi.shape)}"
-        )
-    if not (torch.isfinite(lo).all() and torch.isfinite(hi).all() and (lo < hi).all()):
-        raise ValueError(f"bounds must be finite with low < high, got low={lo.tolist()}, high={hi.tolist()}")
+    lo, hi = check_box(*bounds, d, name="bounds", dtype=torch.float64)  # (D,), (D,)
     return lo, hi
 
 
@@ -164,7 +157,8 @@ def _check_kde_args(
     check_tensor("data", data, ndim=2)
     if query.shape[1] != data.shape[1]:
         raise ValueError(
-            f"{name} and data must have the same number of dimensions D, got {name} {tuple(query.shape)} and data {tuple(data.shape)}"
+            f"{name} and data must have the same number of dimensions D, got {name} {tuple(query.shape)} and "
+            f"data {tuple(data.shape)}"
         )
     if len(query) == 0:
         raise ValueError(f"{name} must hold at least one point, got shape {tuple(query.shape)}")
@@ -229,7 +223,8 @@ def kde_density(
     out = dens.to(dtype)
     if not torch.isfinite(out).all():
         raise ValueError(
-            f"bandwidth h = {h:g} is too small for D = {data.shape[1]}: densities reach {float(dens.max()):.3g}, "
+            f"bandwidth h = {h:g} is too small for D = {data.shape[1]}: densities reach "
+            f"{float(dens.max()):.3g}, "
             f"beyond {dtype}; use a larger bandwidth, or float64 inputs"
         )
     return out

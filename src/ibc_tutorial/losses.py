@@ -40,7 +40,8 @@ def _check_actions(name: str, actions: torch.Tensor) -> torch.Tensor:
         raise ValueError(f"{name} must be a floating-point tensor, got dtype {actions.dtype}")
     if (actions < -1).any() or (actions > 1).any():
         raise ValueError(
-            f"{name} must lie in [-1, 1], got values in [{float(actions.min()):.3g}, {float(actions.max()):.3g}]"
+            f"{name} must lie in [-1, 1], got values in [{float(actions.min()):.3g}, "
+            f"{float(actions.max()):.3g}]"
         )
     return actions
 
@@ -184,7 +185,8 @@ def _check_energies(pos_energy: torch.Tensor, neg_energy: torch.Tensor, weights:
     check_tensor("neg_energy", neg_energy, shape=(b, None))
     if neg_energy.shape[1] < 1:
         raise ValueError(
-            f"neg_energy must hold at least one counter-example per sample, got shape {tuple(neg_energy.shape)}"
+            f"neg_energy must hold at least one counter-example per sample, got shape "
+            f"{tuple(neg_energy.shape)}"
         )
     if weights is not None:
         check_tensor("weights", weights, shape=(b,))
@@ -279,7 +281,8 @@ def grid_cross_entropy(energies: torch.Tensor, targets: torch.Tensor) -> torch.T
     _check_batch("energies", energies)
     if energies.shape[1] < 1:
         raise ValueError(
-            f"energies must hold at least one candidate per sample (K >= 1), got shape {tuple(energies.shape)}"
+            f"energies must hold at least one candidate per sample (K >= 1), got shape "
+            f"{tuple(energies.shape)}"
         )
     check_tensor("targets", targets, shape=tuple(energies.shape))
     sums = targets.sum(dim=1)  # (B,)

@@ -25,31 +25,11 @@ anyway (e.g. to compare).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Protocol
+from typing import Protocol, runtime_checkable
 
 import torch
 
-from ibc_tutorial.utils import check_int, check_positive, check_tensor, draw_device
-
-
-def _bounds(low, high) -> tuple[torch.Tensor, torch.Tensor]:
-    """``low``/``high`` (numbers or length-D sequences/tensors) -> two (D,) tensors of torch's default dtype."""
-    lo = torch.as_tensor(low, dtype=torch.get_default_dtype()).reshape(-1)
-    hi = torch.as_tensor(high, dtype=torch.get_default_dtype()).reshape(-1)
-    if lo.numel() == 0 or hi.numel() == 0:
-        raise ValueError("low and high must each hold at least one number")
-    if lo.shape != hi.shape:
-        if lo.numel() == 1:
-            lo = lo.expand_as(hi)
-        elif hi.numel() == 1:
-            hi = hi.expand_as(lo)
-        else:
-            raise ValueError(f"low and high must have the same length D, got {lo.numel()} and {hi.numel()}")
-    if not torch.isfinite(lo).all() or not torch.isfinite(hi).all():
-        raise ValueError("low and high must be finite")
-    if not (lo < hi).all():
-        raise ValueError(f"low must be < high in every dimension, got low={lo.tolist()}, high={hi.tolist()}")
-    return lo.clone(), hi.clone()
+from ibc_tutorial.utils import check_box, check_int, check_positive, check_tensor, draw_device
 
 
 def uniform_negatives(
@@ -70,14 +50,14 @@ def uniform_negatives(
         n_neg: N, counter-examples per sample.
         low, high: the action bounds y_min, y_max, each of length D.
         generator: a seeded ``torch.Generator`` (None = torch's global one).
-        device: where the result goes (default: the generator's, the CPU). The draws are made on the generator's
-            device (``utils.draw_device``) and moved: the same numbers on every device.
+        device: where the result goes (default: the generator's, the CPU). The draws are made on
+            the generator's device (``utils.draw_device``) and moved: the same numbers on every device.
     Returns:
         (B, N, D) in torch's default dtype, on ``device``.
     """
     b = check_int("batch_size", batch_size, minimum=1)
     n = check_int("n_neg", n_neg, minimum=1)
-    lo, hi = _bounds(low, high)
+    lo, hi = check_box(low, high)
     u = torch.rand(b, n, len(lo), generator=generator, device=draw_device(generator))  # (B, N, D) in [0, 1)
     device = u.device if device is None else torch.device(device)
     return lo.to(device) + (hi - lo).to(device) * u.to(device)  # (B, N, D)
@@ -133,16 +113,16 @@ def expert_negatives(
     if sigma > 0:
         neg = neg + sigma * torch.randn(b, n, d, generator=generator, device=where).to(device)  # + N(0, σ²I)
     if low is not None:
-        lo, hi = _bounds(low, high)
-        if len(lo) != d:
-            raise ValueError(f"low and high must have length D = {d}, got {len(lo)}")
+        lo, hi = check_box(low, high, d)  # (D,), (D,)
         neg = torch.clamp(neg, lo.to(device), hi.to(device))  # (B, N, D), per-dimension bounds (D,)
     return neg  # (B, N, D)
 
 
 # --------------------------------------------------------------------------- samplers
+@runtime_checkable
 class NegativeSampler(Protocol):
-    """What the training objective calls once per minibatch."""
+    """What the training objective (``objectives.info_nce_objective``) calls once per minibatch:
+    ``UniformSampler``, ``ExpertSampler``, or any callable of this form."""
 
     def __call__(
         self, actions: torch.Tensor, n_neg: int, generator: torch.Generator | None = None
@@ -155,7 +135,7 @@ class UniformSampler:
     """IBC: counter-examples uniform in [low, high], whatever the minibatch holds."""
 
     def __init__(self, low: float | Sequence[float] = -1.0, high: float | Sequence[float] = 1.0):
-        self.low, self.high = _bounds(low, high)
+        self.low, self.high = check_box(low, high)
 
     def __call__(
         self, actions: torch.Tensor, n_neg: int, generator: torch.Generator | None = None
@@ -166,7 +146,8 @@ class UniformSampler:
             low, high = low.expand(actions.shape[1]), high.expand(actions.shape[1])
         if len(low) != actions.shape[1]:
             raise ValueError(
-                f"actions must have D = {len(low)} columns to match the bounds, got shape {tuple(actions.shape)}"
+                f"actions must have D = {len(low)} columns to match the bounds, got shape "
+                f"{tuple(actions.shape)}"
             )
         return uniform_negatives(len(actions), n_neg, low, high, generator, device=actions.device)
 

@@ -1,4 +1,5 @@
-"""Training objectives: the losses of the book as ``objective(batch, generator) -> scalar`` for ``training.train``.
+"""Training objectives: the losses of the book as ``objective(batch, generator) -> scalar`` for
+``training.train``.
 
 Each builder closes over a model (and, for energy models, the way its counter-examples are
 chosen), so one loop trains every variant of the book:
@@ -17,11 +18,12 @@ and ``"actions"``.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 
 import torch
 
 from ibc_tutorial.losses import grid_cross_entropy, info_nce, soft_targets, temporal_smoothing
+from ibc_tutorial.negatives import NegativeSampler
 from ibc_tutorial.training import Objective
 from ibc_tutorial.utils import check_int, check_positive, check_tensor
 
@@ -45,7 +47,7 @@ def likelihood_objective(
 
 def info_nce_objective(
     model: torch.nn.Module,
-    sampler: Callable[[torch.Tensor, int, torch.Generator], torch.Tensor],
+    sampler: NegativeSampler,
     n_neg: int,
     *,
     obs_key: str = "obs",
@@ -61,7 +63,7 @@ def info_nce_objective(
 
     Args:
         model: an ``EnergyModel``.
-        sampler: ``sampler(actions (B, D), n_neg, generator) -> (B, N, D)``.
+        sampler: a ``negatives.NegativeSampler``, ``sampler(actions (B, D), n_neg, generator) -> (B, N, D)``.
         n_neg: N_neg, counter-examples per sample (the paper: 1024).
         obs_key, action_key: keys of the observations and expert actions (B, D) in a batch.
         weight_key: key of per-sample weights (B,) for eq. 5, or None for eq. 2. (The DA-IBC
@@ -69,6 +71,8 @@ def info_nce_objective(
             ``sample_probs`` to ``train`` for that.)
     """
     n_neg = check_int("n_neg", n_neg, minimum=1)
+    if not isinstance(sampler, NegativeSampler):
+        raise ValueError(f"sampler must be a NegativeSampler (a callable), got {type(sampler).__name__}")
 
     def objective(batch: dict[str, torch.Tensor], generator: torch.Generator) -> torch.Tensor:
         actions = batch[action_key]  # (B, D)

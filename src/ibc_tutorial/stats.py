@@ -9,9 +9,9 @@ farther than IBC" is about the *method*, so its uncertainty has both parts. This
   difference of two methods' means, and for a method's mean over the expert's on the same starts;
 - ``verdict`` and ``compare``: the rule that turns an interval into "holds", "does not hold" or
   "cannot tell at this scale" (the ordering of two means never decides);
-- ``exit_counts``, ``exit_spread`` and ``exit_spread_test``: the free-driving (Fig. 5) question,
-  does one agent leave the same junction approach by different exits more than another does,
-  beyond what chance gives with so few visits (a stratified permutation test);
+- ``exit_spread`` and ``exit_spread_test`` (over ``driving.analysis.exit_counts``): the free-driving
+  (Fig. 5) question, does one agent leave the same junction approach by different exits more than
+  another does, beyond what chance gives with so few visits (a stratified permutation test);
 - ``episode_table``: the per-episode values of a replication folder's runs (every agent of a
   method, or the expert's row; the table's starts or the held-out ones) as an (agents, episodes)
   array, the input of the intervals.
@@ -27,6 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ibc_tutorial.driving.analysis import exit_counts  # noqa: F401 (the one count of exits, stats.exit_counts too)
+from ibc_tutorial.driving.lanes import TURNS  # the exits of a junction approach
 from ibc_tutorial.utils import check_choice, check_int, check_probability
 
 DEFAULT_RESAMPLES = 10_000
@@ -35,8 +37,6 @@ LEVEL = 0.95
 """Coverage of the intervals: 95 %, the 2.5th to the 97.5th percentile of the resampled statistic."""
 HOLDS, DOES_NOT_HOLD, CANNOT_TELL = "holds", "does not hold", "cannot tell at this scale"
 """The three verdicts of ``verdict``."""
-TURNS = ("left", "straight", "right")
-"""The exits of a junction approach, as ``driving.analysis.junction_visits`` names them."""
 EPISODE_VALUES = ("score", "distance_m", "red_light_infractions", "steps")
 """The per-episode numbers of a ``final_eval.json`` row that ``episode_table`` can read."""
 _CHUNK = 1 << 22
@@ -270,24 +270,6 @@ def judge(claim: str, interval: Interval, threshold: float = 0.0) -> Judgement:
 
 
 # --------------------------------------------------------------------------- free driving (Fig. 5)
-def exit_counts(visits) -> dict[int, dict[str, int]]:
-    """Visits of each junction approach by exit: ``{approach: {"left": n, "straight": n, "right": n}}``.
-
-    ``visits``: the dicts of ``driving.analysis.junction_visits`` (keys "approach" and "turn").
-    """
-    out: dict[int, dict[str, int]] = {}
-    for v in visits:
-        try:
-            ap, turn = int(v["approach"]), v["turn"]
-        except (TypeError, KeyError, ValueError):
-            raise ValueError(
-                f"visits must be dicts with an integer 'approach' and a 'turn', got {v!r}"
-            ) from None
-        check_choice("turn", turn, TURNS)
-        out.setdefault(ap, dict.fromkeys(TURNS, 0))[turn] += 1
-    return out
-
-
 def exit_spread(visits, min_visits: int = 2) -> tuple[int, int]:
     """(visits not by their approach's most common exit, visits) over approaches visited >= ``min_visits`` times.
 

@@ -30,7 +30,8 @@ import torch
 from ibc_tutorial.utils import check_choice, check_int, check_positive, check_tensor, progress
 
 Objective = Callable[[Any, torch.Generator], torch.Tensor]
-"""``objective(batch, generator) -> scalar loss``: what ``train`` minimises (see ``ibc_tutorial.objectives``)."""
+"""``objective(batch, generator) -> scalar loss``: what ``train`` minimises (see ``ibc_tutorial.objectives``).
+"""
 
 
 @runtime_checkable
@@ -117,7 +118,8 @@ def draw_minibatch(
 
 
 def as_minibatches(data) -> Minibatches:
-    """``data`` as ``Minibatches``: a dict of tensors is wrapped in ``TensorData``, anything else must have ``batch``."""
+    """``data`` as ``Minibatches``: a dict of tensors is wrapped in ``TensorData``, anything else must have
+    ``batch``."""
     if isinstance(data, Mapping):
         return TensorData(data)
     if not isinstance(data, Minibatches):
@@ -136,7 +138,7 @@ class Trainer:
         model: the parameters to optimise (trained in place).
         objective: ``objective(batch, generator) -> scalar`` (see ``ibc_tutorial.objectives``).
         data: a dict of tensors with a common first dimension M, or any ``Minibatches``.
-        config: see ``TrainConfig``.
+        config: see ``TrainConfig`` (its defaults if None).
         sample_probs: optional (M,) probabilities of drawing each sample (e.g.
             ``kde.inverse_density_weights``); uniform when None.
     """
@@ -146,10 +148,11 @@ class Trainer:
         model: torch.nn.Module,
         objective: Objective,
         data,
-        config: TrainConfig = TrainConfig(),
+        config: TrainConfig | None = None,
         *,
         sample_probs: torch.Tensor | None = None,
     ):
+        config = TrainConfig() if config is None else config  # a fresh one each run: it is mutable
         check_int("config.steps", config.steps, minimum=1)
         check_int("config.batch_size", config.batch_size, minimum=1)
         check_int("config.log_every", config.log_every, minimum=1)
@@ -254,7 +257,7 @@ def train(
     model: torch.nn.Module,
     objective: Objective,
     data,
-    config: TrainConfig = TrainConfig(),
+    config: TrainConfig | None = None,
     *,
     sample_probs: torch.Tensor | None = None,
     evaluate: Callable[[], object] | None = None,

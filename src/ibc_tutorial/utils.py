@@ -131,6 +131,52 @@ def check_tensor(
     return x
 
 
+def check_box(
+    low, high, d: int | None = None, *, name: str = "", dtype: torch.dtype | None = None
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """The action box [low, high] as two (D,) tensors: the one check of action bounds in the library.
+
+    ``low`` and ``high`` are numbers, or sequences, arrays or tensors with one number per action
+    dimension; a single number stands for every dimension. D is ``d`` if given, else the longer
+    of the two. ValueError naming ``low`` or ``high`` (after ``name: `` if given, e.g. "bounds")
+    unless each holds 1 or D finite numbers and low < high in every dimension.
+
+    Returns copies in ``dtype`` (torch's default dtype if None), on the CPU.
+    """
+    prefix = f"{name}: " if name else ""
+    dtype = torch.get_default_dtype() if dtype is None else dtype
+    out = []
+    for arg, v in (("low", low), ("high", high)):
+        try:
+            t = torch.as_tensor(v.tolist() if hasattr(v, "tolist") else v, dtype=dtype).reshape(-1)
+        except (TypeError, ValueError, RuntimeError):
+            raise ValueError(f"{prefix}{arg} must be a number or a sequence of numbers, got {v!r}") from None
+        if t.numel() == 0:
+            raise ValueError(f"{prefix}{arg} must hold at least one number")
+        if not torch.isfinite(t).all():
+            raise ValueError(f"{prefix}{arg} must be finite numbers, got {t.tolist()}")
+        out.append(t)
+    lo, hi = out
+    n = max(len(lo), len(hi)) if d is None else d
+    for arg, t in (("low", lo), ("high", hi)):
+        if t.numel() not in (1, n):
+            if d is None:
+                raise ValueError(
+                    f"{prefix}low and high must have the same length D (or one be a single number), "
+                    f"got {len(lo)} and {len(hi)}"
+                )
+            raise ValueError(
+                f"{prefix}{arg} must be a number or have one entry per action dimension (D = {n}), "
+                f"got {t.numel()} entries"
+            )
+    lo, hi = lo.expand(n).clone(), hi.expand(n).clone()  # (D,), (D,)
+    if not (lo < hi).all():
+        raise ValueError(
+            f"{prefix}low must be < high in every action dimension, got low={lo.tolist()}, high={hi.tolist()}"
+        )
+    return lo, hi
+
+
 # --------------------------------------------------------------------------- devices
 DEVICE_TYPES = ("cpu", "cuda", "mps")
 """Device types ``check_device`` accepts: the CPU, an NVIDIA GPU (``cuda`` or ``cuda:N``), Apple's ``mps``."""

@@ -91,7 +91,7 @@ def energy_explorer(
     return w.VBox([slider, image])
 
 
-# =========================================================================== chapter 06: DFO iteration stepper
+# ========================================================================== chapter 06: DFO iteration stepper
 def _dfo_iteration_figure(trace: DFOTrace, it: int, x: np.ndarray, e: np.ndarray, bins: int):
     """One iteration of a 1-D ``DFOTrace``, drawn by ``plotting.ingredients.draw_dfo_iteration``
     (the one implementation, shared with the static ``plot_dfo_iterations``), with axis labels."""
@@ -108,7 +108,7 @@ def dfo_stepper(
     energy_fn,
     grid,
     expert_actions,
-    config: DFOConfig = DFOConfig(n_samples=2000),
+    config: DFOConfig | None = None,
     *,
     seed: int = 0,
     bins: int = 60,
@@ -124,10 +124,12 @@ def dfo_stepper(
         energy_fn: maps actions (N, 1) to energies (N,).
         grid: (G, 1) actions at which to draw the energy curve.
         expert_actions: (M, 1) the expert actions DFO initialises from.
-        config: the DFO settings; its ``init`` and ``select`` are the controls' initial values.
+        config: the DFO settings (``DFOConfig(n_samples=2000)`` if None); its ``init`` and
+            ``select`` are the controls' initial values.
         seed: the initial seed of the run's generator.
         bins: histogram bins over the grid's range.
     """
+    config = DFOConfig(n_samples=2000) if config is None else config
     x = grid[:, 0].numpy()  # (G,)
     e = energy_fn(grid).detach().numpy()  # (G,)
     iteration = w.IntSlider(value=1, min=1, max=config.n_iters, description="iteration")

@@ -13,7 +13,7 @@ Modules, one concern each:
 - ``env``      the Gymnasium environment (registered as ``ibc_tutorial/Town01-v0`` and ``-Town02-v0``)
 - ``dataset``  the demonstration log and the torch ``Dataset`` that renders its BEVs
 - ``collect``  driving the expert to record demonstrations (``ibc-tutorial collect``)
-- ``rollout``  the one loop over environments: closed-loop episodes of a ``Policy``, batched
+- ``rollout``  the one loop over environments: closed-loop episodes of a ``DrivingPolicy``, batched
                (scores, trajectories, per-step records)
 - ``analysis`` where a car went: junction passes, exits per approach, road coverage
 - ``render``   RGB pictures
@@ -24,7 +24,7 @@ from ibc_tutorial.driving.car import Car, CarConfig
 from ibc_tutorial.driving.env import ENV_IDS, DrivingEnv, EnvConfig, make_env, register_envs
 from ibc_tutorial.driving.expert import PID, Expert, ExpertConfig, stops_for_light
 from ibc_tutorial.driving.lights import GREEN, RED, YELLOW, LightSchedule, LightTiming
-from ibc_tutorial.driving.rollout import EpisodeResult, Policy, rollout
+from ibc_tutorial.driving.rollout import DrivingPolicy, EpisodeResult, RolloutRecording, rollout
 from ibc_tutorial.driving.routes import Route, random_route
 from ibc_tutorial.driving.sim import DrivingSim, score
 from ibc_tutorial.driving.towns import TOWNS, Town, get_town
@@ -45,6 +45,7 @@ __all__ = [
     "PID",
     "Expert",
     "ExpertConfig",
+    "stops_for_light",
     "GREEN",
     "YELLOW",
     "RED",
@@ -53,7 +54,8 @@ __all__ = [
     "Route",
     "random_route",
     "EpisodeResult",
-    "Policy",
+    "DrivingPolicy",
+    "RolloutRecording",
     "rollout",
     "DrivingSim",
     "score",

@@ -1,9 +1,10 @@
-"""Where a car went: junction passes, exits taken per approach, share of the road network covered.
+"""Where a car went: junction passes, exits taken per approach (``exit_counts``, the one count of
+them), share of the road network covered.
 
 The measures of the DA-IBC paper's Fig. 5 analogue (free driving in town02, chapter 09): a
 multimodal agent leaves one junction approach by different exits on different visits and so
 covers more of the town; a unimodal one always turns the same way. The inputs are the
-per-step records of ``driving.rollout(..., record_steps=True)`` (its ``EpisodeResult.trace``).
+per-step records of ``driving.rollout`` with ``RolloutRecording(steps=True)`` (its ``EpisodeResult.trace``).
 
 And two measures of the expert's labels (chapter 07): ``light_label_conflicts`` (how often the
 BEV's light channels contradict the expert near a stop line, per encoding) and
@@ -14,8 +15,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from ibc_tutorial.driving.lanes import TURNS
 from ibc_tutorial.driving.towns import Town, get_town
-from ibc_tutorial.utils import check_positive
+from ibc_tutorial.utils import check_choice, check_positive
 
 COVERAGE_HEADING = np.pi / 3
 """A waypoint counts as passed only by a pose heading within this angle (60 degrees) of its lane."""
@@ -25,37 +27,73 @@ def _town(town) -> Town:
     return get_town(town) if isinstance(town, str) else town
 
 
-def junction_visits(town, lanes: np.ndarray) -> list[dict]:
+def junction_visits(town, lanes: np.ndarray, *, ended_inside: bool = False) -> list[dict]:
     """Every pass through a junction in a sequence of lanes: ``{"approach", "node", "turn", "step"}``.
 
     The exit is read from the first road lane after the approach lane: the turn whose connector
     leads onto it (robust to the overlapping connectors at a junction's entry). ``step`` is the
-    last step on the approach lane.
+    last step on the approach lane. With ``ended_inside``, a record that ends inside a junction
+    (a demonstration's route ends once its last turn is begun) adds that pass too, its exit read
+    from the first of the approach's connectors it entered.
     """
     tw = _town(town)
     road = set(tw.road_lanes)
+    lanes = np.asarray(lanes).reshape(-1)
     visits = []
     prev, prev_step = None, None
-    for k, lane in enumerate(np.asarray(lanes).tolist()):
+    for k, lane in enumerate(lanes.tolist()):
         if lane not in road:
             continue
         if prev is not None and lane != prev:
-            ap_id = tw.approach_of_lane.get(prev)
-            if ap_id is not None and tw.approaches[ap_id].is_junction:
-                ap = tw.approaches[ap_id]
-                for turn, conn in ap.exits.items():
-                    if lane in tw.lanes[conn].successors:
-                        visits.append(
-                            {
-                                "approach": int(ap_id),
-                                "node": int(ap.node),
-                                "turn": turn,
-                                "step": int(prev_step),
-                            }
-                        )
-                        break
+            visits += _junction_pass(
+                tw, prev, prev_step, lambda conn, lane=lane: lane in tw.lanes[conn].successors
+            )
         prev, prev_step = lane, k
+    if ended_inside and prev is not None and len(lanes) and int(lanes[-1]) not in road:
+        entered = lanes[prev_step + 1 :].tolist()  # the lanes after the last road lane
+        first = {conn: entered.index(conn) for conn in set(entered)}
+        visits += _junction_pass(tw, prev, prev_step, first.__contains__, order=first.get)
     return visits
+
+
+def _junction_pass(tw: Town, lane: int, step: int, took, order=None) -> list[dict]:
+    """The pass from approach lane ``lane`` (last on it at ``step``) by the first exit whose connector
+    ``took(connector)`` accepts (in the order of ``order(connector)`` if given); [] if none or no junction."""
+    ap_id = tw.approach_of_lane.get(lane)
+    if ap_id is None or not tw.approaches[ap_id].is_junction:
+        return []
+    ap = tw.approaches[ap_id]
+    exits = [(turn, conn) for turn, conn in ap.exits.items() if took(conn)]
+    if order is not None:
+        exits.sort(key=lambda e: order(e[1]))
+    if not exits:
+        return []
+    return [{"approach": int(ap_id), "node": int(ap.node), "turn": exits[0][0], "step": int(step)}]
+
+
+def log_junction_visits(log) -> list[dict]:
+    """``junction_visits`` of every episode of a demonstration log (``driving.dataset.DemoLog``),
+    the pass each route ends inside included (``ended_inside``): the exits its expert took."""
+    return [v for sl in log.episodes() for v in junction_visits(log.town, log.lane[sl], ended_inside=True)]
+
+
+def exit_counts(visits) -> dict[int, dict[str, int]]:
+    """Visits of each junction approach by exit: ``{approach: {"left": n, "straight": n, "right": n}}``.
+
+    The one count of exits per junction approach (chapters 07, 09, 10). ``visits``: the dicts of
+    ``junction_visits`` or ``log_junction_visits`` (keys "approach" and "turn").
+    """
+    out: dict[int, dict[str, int]] = {}
+    for v in visits:
+        try:
+            ap, turn = int(v["approach"]), v["turn"]
+        except (TypeError, KeyError, ValueError):
+            raise ValueError(
+                f"visits must be dicts with an integer 'approach' and a 'turn', got {v!r}"
+            ) from None
+        check_choice("turn", turn, TURNS)
+        out.setdefault(ap, dict.fromkeys(TURNS, 0))[turn] += 1
+    return out
 
 
 def junction_crossings(town, lanes: np.ndarray, steer: np.ndarray) -> list[dict]:
@@ -114,11 +152,19 @@ def junction_crossings(town, lanes: np.ndarray, steer: np.ndarray) -> list[dict]
 
 
 def exits_per_approach(visits: list[dict]) -> dict[int, dict]:
-    """Per junction approach: visits and the different exits taken, ``{approach: {"node", "visits", "turns"}}``."""
+    """Per junction approach: visits and the different exits taken, ``{approach: {"node", "visits",
+    "turns"}}``.
+
+    The summary the replication's free-driving record stores; the counts are ``exit_counts``'s,
+    ``turns`` lists the exits taken in the order first taken.
+    """
+    counts = exit_counts(visits)
     out: dict[int, dict] = {}
     for v in visits:
-        d = out.setdefault(v["approach"], {"node": v["node"], "visits": 0, "turns": []})
-        d["visits"] += 1
+        d = out.setdefault(
+            v["approach"],
+            {"node": v["node"], "visits": sum(counts[int(v["approach"])].values()), "turns": []},
+        )
         if v["turn"] not in d["turns"]:
             d["turns"].append(v["turn"])
     return out
@@ -281,7 +327,7 @@ def speed_control_report(town: str = "town02", seeds=range(5), steps: int = 3000
         switch = [k for k in range(1, len(target)) if {target[k - 1], target[k]} == speeds]
         jumps.append(max((abs(acc[k] - acc[k - 1]) for k in switch), default=0.0))
         edges = np.flatnonzero(np.diff(np.r_[0, np.array(stopping, dtype=int), 0]))
-        for a0, a1 in zip(edges[::2], edges[1::2]):
+        for a0, a1 in zip(edges[::2], edges[1::2], strict=True):
             sign = np.sign(acc[a0:a1])
             sign = sign[sign != 0]
             flips.append(int((np.diff(sign) != 0).sum()))

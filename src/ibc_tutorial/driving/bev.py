@@ -52,8 +52,9 @@ CHANNELS = ("drivable area", "lane boundaries", "lights t-16", "lights t-9", "li
 LIGHT_LEVELS = (0.3, 0.6, 1.0)
 """Value of a stop line in channels 2-4 by light state: green 0.3, yellow 0.6, red 1.0 (0 = no line)."""
 LIGHT_ENCODINGS = ("intensity", "flag")
-"""How the light channels draw a stop line: "intensity" (by state: red 1.0, yellow 0.6, green 0.3; the book's), or
-"flag" (one "must stop" bit: red and yellow 1.0, green not drawn; kept for chapter 08's ablation)."""
+"""How the light channels draw a stop line: "intensity" (by state: red 1.0, yellow 0.6, green 0.3; the
+book's), or "flag" (one "must stop" bit: red and yellow 1.0, green not drawn; kept for chapter 08's
+ablation)."""
 LIGHT_SHIFTS = (2, 4, 6)
 """Bit offsets of the 2-bit light codes of channels 2, 3, 4 in a packed view byte."""
 
@@ -202,7 +203,7 @@ class TownRaster:
     def _paint_polygon(self, mask: np.ndarray, poly: np.ndarray) -> None:
         win, xy, shape = self._window(*poly.min(0), *poly.max(0))
         inside = np.ones(len(xy), dtype=bool)
-        for a, b in zip(poly, np.roll(poly, -1, axis=0)):  # convex, counter-clockwise
+        for a, b in zip(poly, np.roll(poly, -1, axis=0), strict=True):  # convex, counter-clockwise
             inside &= (b[0] - a[0]) * (xy[:, 1] - a[1]) - (b[1] - a[1]) * (xy[:, 0] - a[0]) >= 0
         mask[win] |= inside.reshape(shape)
 
@@ -293,7 +294,8 @@ class BEVRenderer:
         return idx
 
     def packed(self, x: float, y: float, yaw: float, lights: np.ndarray) -> np.ndarray:
-        """(S, S) uint8 packed view, one byte per pixel (cheap to store; see the module docstring and ``unpack``)."""
+        """(S, S) uint8 packed view, one byte per pixel (cheap to store; see the module docstring and
+        ``unpack``)."""
         lights = self.check_lights(lights)
         return self._pool(self._lut(lights).take(self.raster.code.ravel().take(self._indices(x, y, yaw))))
 

@@ -101,7 +101,8 @@ class Car:
 
     # ------------------------------------------------------------------ state
     def reset(self, x: float, y: float, yaw: float, speed: float = 0.0) -> None:
-        """Place the car at (x, y) heading ``yaw`` (radians) with forward ``speed`` (m/s), controls at rest."""
+        """Place the car at (x, y) heading ``yaw`` (radians) with forward ``speed`` (m/s),
+        controls at rest."""
         self.body.position = (x, y)
         self.body.angle = yaw
         self.body.velocity = (speed * math.cos(yaw), speed * math.sin(yaw))

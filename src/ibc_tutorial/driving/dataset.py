@@ -20,7 +20,6 @@ import hashlib
 import io
 import json
 import zipfile
-from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -111,7 +110,8 @@ class DemoLog:
         )
 
     def history_rows(self, index: np.ndarray) -> np.ndarray:
-        """(B, 3) rows holding the light states 15, 8 and 0 steps before each sample (clamped at its episode's start)."""
+        """(B, 3) rows holding the light states 15, 8 and 0 steps before each sample (clamped at its episode's
+        start)."""
         index = np.asarray(index, dtype=np.int64)
         back = np.minimum(np.array(HISTORY_LAGS)[None, :], self.step[index][:, None])  # (B, 3)
         return index[:, None] - back
@@ -124,7 +124,7 @@ class DemoLog:
         """The rows of each episode, in order."""
         starts = np.flatnonzero(self.step == 0)
         ends = np.append(starts[1:], len(self))
-        return [slice(int(a), int(b)) for a, b in zip(starts, ends)]
+        return [slice(int(a), int(b)) for a, b in zip(starts, ends, strict=True)]
 
     # ------------------------------------------------------------------ files
     def checksum(self) -> str:
@@ -157,7 +157,8 @@ class DemoLog:
 
     @classmethod
     def load(cls, path) -> DemoLog:
-        """Read a log written by ``save``; ValueError if the file is damaged, foreign or of another version."""
+        """Read a log written by ``save``; ValueError if the file is damaged, foreign or of
+        another version."""
         path = Path(path)
         if not path.is_file():
             raise ValueError(f"no demonstration file at {path}")
@@ -249,28 +250,6 @@ class DemoLog:
 
 class _Refused(Exception):
     """Internal: a readable file that is not a valid demonstration log."""
-
-
-def exit_counts(log: DemoLog) -> dict[int, Counter]:
-    """For every junction approach the log drives through: how often it left by each exit.
-
-    Returns ``{approach id: Counter({"left": n, "straight": n, "right": n})}`` counted from the
-    lanes the expert followed (a road lane into a junction, then the connector it took).
-    """
-    town = get_town(log.town)
-    out: dict[int, Counter] = {}
-    for sl in log.episodes():
-        lanes = log.lane[sl]
-        change = np.flatnonzero(lanes[1:] != lanes[:-1])
-        for k in change:
-            a, b = int(lanes[k]), int(lanes[k + 1])
-            ap = town.approach_of_lane.get(a)
-            if ap is None or not town.approaches[ap].is_junction:
-                continue
-            turn = town.lanes[b].turn
-            if town.approaches[ap].exits.get(turn) == b:
-                out.setdefault(ap, Counter())[turn] += 1
-    return out
 
 
 class DemoDataset(torch.utils.data.Dataset):

@@ -195,7 +195,8 @@ class DrivingEnv(gymnasium.Env):
             ) from None
         if lane not in self.town.road_lanes or not 0 <= s <= self.town.lanes[lane].length:
             raise ValueError(
-                f"options['start'] must name a road lane of {self.town.name} and a position on it, got {start!r}"
+                f"options['start'] must name a road lane of {self.town.name} and a position on it, got "
+                f"{start!r}"
             )
         return lane, s
 
@@ -228,21 +229,28 @@ def make_env(
     seed: int | None = None,
     render_mode: str | None = None,
     light_encoding: str = "intensity",
+    *,
+    config: EnvConfig | None = None,
 ) -> DrivingEnv:
     """A driving environment (see ``DrivingEnv``), made through its Gymnasium id so that it carries
-    its spec, without Gymnasium's wrappers; if ``seed`` is given it is reset with it once."""
-    check_choice("town", town, TOWNS)
+    its spec, without Gymnasium's wrappers; if ``seed`` is given it is reset with it once.
+
+    ``config``, if given, is the whole setting (its town, BEV size, car, lights, ...) and the
+    arguments ``town`` to ``max_steps`` and ``light_encoding`` are not used."""
+    if config is not None and not isinstance(config, EnvConfig):
+        raise ValueError(f"config must be an EnvConfig or None, got {type(config).__name__}")
+    if config is None:
+        check_choice("town", town, TOWNS)
+        settings = dict(
+            bev_size=bev_size, routeless=routeless, max_steps=max_steps, light_encoding=light_encoding
+        )
+    else:
+        town, settings = config.town, dict(config=config)
     if render_mode is not None:
         check_choice("render_mode", render_mode, DrivingEnv.metadata["render_modes"])
     register_envs()
     env = gymnasium.make(
-        ENV_IDS[town],
-        bev_size=bev_size,
-        routeless=routeless,
-        max_steps=max_steps,
-        render_mode=render_mode,
-        light_encoding=light_encoding,
-        disable_env_checker=True,
+        ENV_IDS[town], render_mode=render_mode, disable_env_checker=True, **settings
     ).unwrapped
     if seed is not None:
         check_int("seed", seed, minimum=0)

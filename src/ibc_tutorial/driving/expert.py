@@ -13,10 +13,10 @@ point trajectory and a PID controller"):
   is scaled by ``max(1 - |steer|, 0.25)``;
 * lights: a red or yellow stop line of its lane within ``stop_distance_m`` ahead stops the car
   before the line, braking with the constant deceleration that stops it ``stop_margin_m``
-  short of the line once that deceleration exceeds ``brake_trigger`` (once begun, the stop
-  runs to its end without handing back to the PID, so it never chatters between throttle and
-  brake), and holding full brake there; a yellow light that it can no longer stop for (it would need more than full
-  braking) is passed. Red lights are never passed.
+  short of the line once that deceleration exceeds ``brake_trigger`` (once begun, the stop runs to its end
+  without handing back to the PID, so it never chatters between throttle and brake), and holding full brake
+  there; a yellow light that it can no longer stop for (it would need more than full braking) is passed. Red
+  lights are never passed.
 
 The action is [steer, throttle - brake] in [-1, 1]^2. Optional perturbations for data
 collection (DART-style, [Laskey et al. 2017]) change what is *executed*, not the expert's label:
@@ -91,14 +91,15 @@ class ExpertConfig:
     noise_steps: tuple[int, int] = (5, 15)
     """Range of a perturbation's length in steps."""
     brake_noise: float = 0.0
-    """Strength of braking perturbations during collection, in [0, 1] (0 = none): the executed acceleration is held
-    at -brake_noise x U(0.5, 1) for ``brake_steps`` steps."""
+    """Strength of braking perturbations during collection, in [0, 1] (0 = none): the executed acceleration is
+    held at -brake_noise x U(0.5, 1) for ``brake_steps`` steps."""
     brake_prob: float = 0.01
     """Chance per step that a braking perturbation starts (when none is running)."""
     brake_steps: tuple[int, int] = (10, 30)
     """Range of a braking perturbation's length in steps (1-3 s at 10 Hz)."""
     hesitate_prob: float = 1.0
-    """Chance that a braking perturbation starts when the expert leaves from rest (with ``brake_noise`` > 0)."""
+    """Chance that a braking perturbation starts when the expert leaves from rest (with ``brake_noise`` > 0).
+    """
 
     def __post_init__(self):
         for name in ("lookahead_m", "turn_lookahead_m", "cruise_speed", "turn_speed", "stop_distance_m"):
@@ -109,7 +110,8 @@ class ExpertConfig:
             check_probability(f"ExpertConfig.{name}", getattr(self, name))
         if len(self.brake_steps) != 2 or not 1 <= self.brake_steps[0] <= self.brake_steps[1]:
             raise ValueError(
-                f"ExpertConfig.brake_steps must be (low, high) with 1 <= low <= high, got {self.brake_steps!r}"
+                f"ExpertConfig.brake_steps must be (low, high) with 1 <= low <= high, got "
+                f"{self.brake_steps!r}"
             )
 
 
@@ -358,9 +360,10 @@ class Expert:
 
     # ------------------------------------------------------------------ noise
     def perturb(self, action: np.ndarray) -> np.ndarray:
-        """The action actually executed during collection: ``action`` with a steering offset and a held brake, when
-        one of those perturbations is running (see the module's doc). Each draws from the expert's generator only
-        when its size is above 0, so a collection without it is the same as before it existed."""
+        """The action actually executed during collection: ``action`` with a steering offset and a held brake,
+        when one of those perturbations is running (see the module's doc). Each draws from the expert's
+        generator only when its size is above 0, so a collection without it is the same as before it
+        existed."""
         c = self.config
         out = np.array(action, dtype=np.float32)
         if c.steer_noise > 0:

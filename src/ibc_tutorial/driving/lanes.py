@@ -222,31 +222,22 @@ def build_lanes(nodes: np.ndarray, edges: list[tuple[int, int]]) -> tuple[list[L
                     lane = Lane(
                         len(lanes), "connector", start, end, float(np.linalg.norm(end - start)), node=n
                     )
-                elif cross > 0:
-                    c = start + left_of(t_in) * LEFT_TURN_RADIUS
-                    lane = Lane(
-                        len(lanes),
-                        "connector",
-                        start,
-                        end,
-                        LEFT_TURN_RADIUS * math.pi / 2,
-                        turn="left",
-                        node=n,
-                        center=c,
-                        radius=LEFT_TURN_RADIUS,
+                else:  # a quarter circle, to the left if cross > 0
+                    turn, r, side = (
+                        ("left", LEFT_TURN_RADIUS, left_of)
+                        if cross > 0
+                        else ("right", RIGHT_TURN_RADIUS, right_of)
                     )
-                else:
-                    c = start + right_of(t_in) * RIGHT_TURN_RADIUS
                     lane = Lane(
                         len(lanes),
                         "connector",
                         start,
                         end,
-                        RIGHT_TURN_RADIUS * math.pi / 2,
-                        turn="right",
+                        r * math.pi / 2,
+                        turn=turn,
                         node=n,
-                        center=c,
-                        radius=RIGHT_TURN_RADIUS,
+                        center=start + side(t_in) * r,
+                        radius=r,
                     )
                 lane.successors = [road_lane[(n, node_arms[b])]]
                 lanes.append(lane)

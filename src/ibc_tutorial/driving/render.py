@@ -41,14 +41,17 @@ def bev_to_rgb(bev: np.ndarray) -> np.ndarray:
     img[:] = BACKGROUND
     for ch in range(2):
         img[bev[ch] > 0] = ROAD_COLOURS[ch]
-    for ch, bright in zip(range(2, 5), LAG_BRIGHTNESS):
-        for colour, level in zip(LIGHT_COLOURS, LIGHT_LEVELS):
+    for ch, bright in zip(range(2, 5), LAG_BRIGHTNESS, strict=True):
+        for colour, level in zip(LIGHT_COLOURS, LIGHT_LEVELS, strict=True):
             img[np.isclose(bev[ch], level, atol=0.05)] = (colour * bright).astype(np.uint8)
     return img
 
 
-def draw_ego(img: np.ndarray, car: CarConfig = CarConfig()) -> np.ndarray:
-    """Draw the car (heading up) on a (S, S, 3) picture of a BEV of side S; returns a copy."""
+def draw_ego(img: np.ndarray, car: CarConfig | None = None) -> np.ndarray:
+    """Draw the car (heading up) on a (S, S, 3) picture of a BEV of side S; returns a copy.
+
+    ``car``: its dimensions (``CarConfig()`` if None)."""
+    car = CarConfig() if car is None else car
     img = img.copy()
     scale = img.shape[0] / FULL_SIZE
     res = PIXELS_PER_METRE * scale

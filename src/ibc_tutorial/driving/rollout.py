@@ -4,16 +4,17 @@ The DA-IBC paper scores an agent over 10 episodes of 3000 steps in town02 (its F
 the episodes run side by side, so that a neural policy is called once per step on a batch of
 observations rather than once per episode and step:
 
-    results = rollout(policy, town="town02", episodes=10, steps=3000, bev_size=64, seed=0)
+    results = rollout(policy, EnvConfig("town02", bev_size=64, max_steps=3000), episodes=10, seed=0)
 
-``policy`` is a ``Policy`` (below), or the string ``"expert"`` for the PID expert. Episode ``i``
-starts from ``env.reset(seed=seed + i)``, so two policies evaluated with the same ``seed`` meet
-the same starts and the same light phases.
+``policy`` is a ``DrivingPolicy`` (below), or the string ``"expert"`` for the PID expert. Each
+episode runs in an environment of the given ``EnvConfig`` for at most its ``max_steps`` steps;
+episode ``i`` starts from ``env.reset(seed=seed + i)``, so two policies evaluated with the same
+``seed`` meet the same starts and the same light phases.
 
-The same loop serves three uses: scores only (the evaluation), the car's positions
-(``record_xy``: the free-driving trajectories), and a per-step record of where the car was and
-what it saw (``record_steps``, optionally with the observations: ``keep_obs``), from which the
-Fig. 6 moments (a junction, a red light) are picked. The demonstrations are collected by
+The same loop serves three uses, chosen by a ``RolloutRecording``: scores only (the
+evaluation), the car's positions (``xy``: the free-driving trajectories), and a per-step record
+of where the car was and what it saw (``steps``, optionally with the observations: ``obs``),
+from which the Fig. 6 moments (a junction, a red light) are picked. The demonstrations are collected by
 ``driving.collect`` on the simulator itself, not here: the expert drives fixed routes there,
 with steering perturbations, which the Gymnasium environment does not model.
 """
@@ -25,19 +26,47 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ibc_tutorial.driving.env import DrivingEnv, make_env
+from ibc_tutorial.driving.env import DrivingEnv, EnvConfig, make_env
 from ibc_tutorial.driving.expert import Expert
 from ibc_tutorial.driving.lights import GREEN
 from ibc_tutorial.utils import check_int, progress
 
-Policy = Callable[[dict[str, np.ndarray]], np.ndarray]
-"""A closed-loop policy, the one form every driving policy of the book takes:
+DrivingPolicy = Callable[[dict[str, np.ndarray]], np.ndarray]
+"""A closed-loop policy in the town, the one form every driving policy of the book takes:
 ``policy({"bev": float32 (B, 5, S, S), "state": float32 (B, 3)}) -> actions (B, 2)`` on numpy
 batches (B = the episodes still running), actions (steer, acceleration) in [-1, 1]
 (``experiments.agents.Agent.policy(seed)`` makes one from a trained agent)."""
 
+StepHook = Callable[[int, list[int], dict[str, np.ndarray]], None]
+"""``on_step(t, episodes, batch)``: see ``RolloutRecording.on_step``."""
+
 TRACE_KEYS = ("pose", "speed", "lane", "red_ahead", "entry_dist")
 """Per-state entries of ``EpisodeResult.trace`` (besides ``actions``, ``bev`` and ``state``)."""
+
+
+@dataclass(frozen=True)
+class RolloutRecording:
+    """What ``rollout`` keeps of each episode besides its score, and who may watch it run."""
+
+    xy: bool = True
+    """Keep the car's positions, the start included, in ``EpisodeResult.xy``."""
+    steps: bool = False
+    """Keep the per-step record (pose, speed, lane, lights ahead, actions) in ``EpisodeResult.trace``."""
+    obs: bool = False
+    """With ``steps``, keep the observations (``bev``, ``state``) in the trace too."""
+    on_step: StepHook | None = None
+    """Called as ``on_step(t, episodes, batch)`` before the policy acts at step t (0-based), with
+    the indices of the running episodes (the rows of ``batch``) and the observations the policy
+    is about to see; it must not change them (not called for the expert)."""
+
+    def __post_init__(self) -> None:
+        for name in ("xy", "steps", "obs"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
+        if self.obs and not self.steps:
+            raise ValueError("obs needs steps=True (the observations are kept in the per-step record)")
+        if self.on_step is not None and not callable(self.on_step):
+            raise ValueError(f"on_step must be callable or None, got {type(self.on_step).__name__}")
 
 
 @dataclass
@@ -61,11 +90,11 @@ class EpisodeResult:
     xy: np.ndarray = field(repr=False, default=None)
     """(steps + 1, 2) the car's positions, the start included (if recorded)."""
     trace: dict = field(repr=False, default=None)
-    """With ``record_steps``: arrays over the T + 1 states (the start included): ``pose`` (T+1, 3),
+    """With ``RolloutRecording.steps``: arrays over the T + 1 states (the start included): ``pose`` (T+1, 3),
     ``speed`` (T+1,), ``lane`` (T+1,) (the lane whose waypoint is nearest, heading aligned),
     ``red_ahead`` (T+1,) (the light of the approach the car is on shows red or yellow),
     ``entry_dist`` (T+1,) (metres to that approach's junction entry, inf off approaches),
-    ``actions`` (T, 2); with ``keep_obs`` also ``bev`` (T+1, 5, S, S) and ``state`` (T+1, 3)."""
+    ``actions`` (T, 2); with ``RolloutRecording.obs`` also ``bev`` (T+1, 5, S, S) and ``state`` (T+1, 3)."""
 
 
 class _Trace:
@@ -104,54 +133,44 @@ class _Trace:
 
 
 def rollout(
-    policy: Policy | str,
-    town: str = "town02",
+    policy: DrivingPolicy | str,
+    env: EnvConfig,
     episodes: int = 10,
-    steps: int = 3000,
-    bev_size: int = 64,
     seed: int = 0,
-    routeless: bool = True,
-    record_xy: bool = True,
-    record_steps: bool = False,
-    keep_obs: bool = False,
+    *,
+    record: RolloutRecording = RolloutRecording(),
     show_progress: bool | None = None,
-    light_encoding: str = "intensity",
-    on_step: Callable[[int, list[int], dict[str, np.ndarray]], None] | None = None,
 ) -> list[EpisodeResult]:
-    """Run ``episodes`` episodes of at most ``steps`` steps side by side; return one result each.
+    """Run ``episodes`` episodes of at most ``env.max_steps`` steps side by side; return one result each.
 
     Actions are clipped to [-1, 1] (a NaN still raises the environment's ValueError).
 
     Args:
-        policy: a ``Policy`` or "expert".
-        record_xy: keep every episode's positions in ``EpisodeResult.xy``.
-        record_steps: keep the per-step record in ``EpisodeResult.trace``.
-        keep_obs: with ``record_steps``, keep the observations in the trace too.
-        light_encoding: how the BEV draws the lights (``driving.bev.LIGHT_ENCODINGS``).
-        on_step: called as ``on_step(t, episodes, batch)`` before the policy acts at step t (0-based),
-            with the indices of the running episodes (the rows of ``batch``) and the observations
-            the policy is about to see; it must not change them (not called for the expert).
+        policy: a ``DrivingPolicy`` or "expert".
+        env: the environments' settings (town, BEV size and light encoding, routes or none,
+            ``max_steps`` the length of an episode).
+        episodes: how many episodes, side by side.
+        seed: episode ``i`` starts from ``reset(seed=seed + i)``.
+        record: what to keep besides the scores (``RolloutRecording``: positions by default).
+        show_progress: a progress bar over the steps (None: tqdm's default, silent under ``TQDM_DISABLE``).
     """
     episodes = check_int("episodes", episodes, minimum=1)
-    steps = check_int("steps", steps, minimum=1)
     seed = check_int("seed", seed, minimum=0)
     if isinstance(policy, str) and policy != "expert":
         raise ValueError(f"policy must be a callable or 'expert', got {policy!r}")
     if not isinstance(policy, str) and not callable(policy):
         raise ValueError(f"policy must be a callable or 'expert', got {type(policy).__name__}")
-    if keep_obs and not record_steps:
-        raise ValueError("keep_obs needs record_steps=True")
-    if on_step is not None and not callable(on_step):
-        raise ValueError(f"on_step must be callable or None, got {type(on_step).__name__}")
-    envs = [
-        make_env(town, bev_size=bev_size, routeless=routeless, max_steps=steps, light_encoding=light_encoding)
-        for _ in range(episodes)
-    ]
-    obs, infos = zip(*(env.reset(seed=seed + i) for i, env in enumerate(envs)))
+    if not isinstance(env, EnvConfig):
+        raise ValueError(f"env must be an EnvConfig, got {type(env).__name__}")
+    if not isinstance(record, RolloutRecording):
+        raise ValueError(f"record must be a RolloutRecording, got {type(record).__name__}")
+    town, steps, on_step = env.town, env.max_steps, record.on_step
+    envs = [make_env(config=env) for _ in range(episodes)]
+    obs, infos = zip(*(e.reset(seed=seed + i) for i, e in enumerate(envs)), strict=True)
     obs, infos = list(obs), list(infos)
     experts = [Expert(env) for env in envs] if policy == "expert" else None
     tracks = [[(info["x"], info["y"])] for info in infos]
-    traces = [_Trace(env, keep_obs) for env in envs] if record_steps else None
+    traces = [_Trace(e, record.obs) for e in envs] if record.steps else None
     if traces:
         for i in range(episodes):
             traces[i].note(obs[i], infos[i])
@@ -176,7 +195,7 @@ def rollout(
         still = []
         for k, i in enumerate(active):
             obs[i], _, terminated, truncated, info = envs[i].step(actions[k])
-            if record_xy:
+            if record.xy:
                 tracks[i].append((info["x"], info["y"]))
             if traces:
                 traces[i].rows["actions"].append(actions[k])
@@ -200,7 +219,7 @@ def rollout(
                 info["score"],
                 bool(info["termination"]),
                 info["termination"],
-                np.array(tracks[i]) if record_xy else None,
+                np.array(tracks[i]) if record.xy else None,
                 traces[i].arrays() if traces else None,
             )
         )

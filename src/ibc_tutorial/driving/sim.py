@@ -31,9 +31,9 @@ def score(distance_m: float, infractions: int) -> float:
 class DrivingSim:
     """A town, its lights and one car; ``step`` advances one 0.1 s control step."""
 
-    def __init__(
-        self, town: str = "town01", car: CarConfig = CarConfig(), timing: LightTiming = LightTiming()
-    ):
+    def __init__(self, town: str = "town01", car: CarConfig | None = None, timing: LightTiming | None = None):
+        car = CarConfig() if car is None else car  # the defaults: CarConfig(), LightTiming()
+        timing = LightTiming() if timing is None else timing
         self.town = get_town(town)
         self.raster = get_raster(town)
         self.space = pymunk.Space()

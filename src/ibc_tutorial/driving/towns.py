@@ -1,8 +1,8 @@
 """The two towns, laid out after CARLA's town01 (training) and town02 (evaluation).
 
 Only T-junctions and corners, one 4 m lane per direction, right-hand traffic, rounded
-corners, as in CARLA's first two towns (the layouts are listed in ``docs/design.md``). A layout is a list of node
-centres, the axis-aligned roads between them, and the rectangular blocks the roads enclose;
+corners, as in CARLA's first two towns (the layouts are listed in ``docs/design.md``). A layout is a list of
+node centres, the axis-aligned roads between them, and the rectangular blocks the roads enclose;
 ``Town`` turns it into lanes with dense waypoints, approaches with their legal exits, stop
 lines (one traffic-light head per junction approach) and building footprints.
 
@@ -43,7 +43,7 @@ def _layout(name, nodes: dict[str, tuple[float, float]], chains: list[list[str]]
     keys = list(nodes)
     roads = []
     for chain in chains:
-        for a, b in zip(chain[:-1], chain[1:]):
+        for a, b in zip(chain[:-1], chain[1:], strict=True):
             roads.append((keys.index(a), keys.index(b)))
     return TownLayout(name, tuple(nodes.values()), tuple(roads), tuple(blocks))
 

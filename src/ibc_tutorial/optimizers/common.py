@@ -1,4 +1,8 @@
-"""What DFO and Langevin share: the action box, the two forms of energy function, the final choice.
+"""What DFO and Langevin share: the action box, the initial population, the two forms of energy
+function, the final choice.
+
+- ``INITS``, ``initial_weights``, ``initial_samples``: the initialisation, Algorithm 1 line 2 of
+  the DA-IBC paper (Langevin starts its chains the same way).
 
 Energy functions come in two forms:
 
@@ -17,70 +21,51 @@ draws the same indices and noise from the same seeded generator as on the CPU.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 
 import torch
 
-from ibc_tutorial.utils import check_choice, check_tensor, draw_device
+from ibc_tutorial.kde import inverse_density_weights, kde_density
+from ibc_tutorial.utils import check_box as check_action_box
+from ibc_tutorial.utils import check_choice, check_int, check_tensor, draw_device
 
 SELECTIONS = ("sample", "argmax")
 """Final choice: "sample" ŷ ~ Categorical({ỹ_i}, {p̃_i}) (Algorithm 1 line 14 of the DA-IBC paper)
 or "argmax", the lowest energy (the original IBC)."""
 
+INITS = ("uniform", "kde", "inverse-kde", "expert")
+"""Initialisations of Algorithm 1: "uniform" (original IBC), "kde" (Algorithm 1 line 2 as printed:
+w_i ∝ KDE(y_i)), "inverse-kde" (the DA-IBC paper's text, sec. 2.4.1: w_i = 1 / ĝ(y_i)) and
+"expert" (every expert action equally likely, w_i = 1 / M: initial samples distributed like ĝ)."""
+
 
 def check_box(low, high) -> tuple[float | tuple[float, ...], float | tuple[float, ...]]:
-    """Validate the action box [low, high] of a config: numbers, or one number per action dimension.
+    """Validate the action box [low, high] of a config (``utils.check_box``): numbers, or one per dimension.
 
-    Returns ``(low, high)`` as floats or tuples of floats. Whether a tuple's length matches the
-    actions' D is checked when the actions are known (``bounds``).
+    Returns ``(low, high)`` as floats or tuples of floats, as given. Whether a tuple's length
+    matches the actions' D is checked when the actions are known (``bounds``).
     """
-    out = []
-    for name, v in (("low", low), ("high", high)):
-        if hasattr(v, "tolist"):  # a tensor or an array: a number (0-d) or a list
-            v = v.tolist()
-        try:
-            v = tuple(float(x) for x in v) if isinstance(v, Sequence) else float(v)
-        except (TypeError, ValueError):
-            raise ValueError(f"{name} must be a number or a sequence of numbers, got {v!r}") from None
-        values = v if isinstance(v, tuple) else (v,)
-        if not values or not all(math.isfinite(x) for x in values):
-            raise ValueError(f"{name} must be finite numbers, got {v!r}")
-        out.append(v)
-    lo, hi = out
-    lo_t, hi_t = (t if isinstance(t, tuple) else (t,) for t in (lo, hi))
-    if len(lo_t) == len(hi_t) or 1 in (len(lo_t), len(hi_t)):
-        n = max(len(lo_t), len(hi_t))
-        pairs = zip(lo_t * n if len(lo_t) == 1 else lo_t, hi_t * n if len(hi_t) == 1 else hi_t)
-        if not all(a < b for a, b in pairs):
-            raise ValueError(f"low must be < high in every action dimension, got low={lo}, high={hi}")
-    return lo, hi
+    lo, hi = check_action_box(low, high, dtype=torch.float64)  # (D,), (D,)
+
+    def as_given(v, t: torch.Tensor):
+        v = v.tolist() if hasattr(v, "tolist") else v  # a tensor or an array: a number (0-d) or a list
+        return tuple(float(x) for x in t) if isinstance(v, Sequence) else float(t[0])
+
+    return as_given(low, lo), as_given(high, hi)
 
 
 def bounds(low, high, d: int) -> tuple[torch.Tensor, torch.Tensor]:
-    """``low``/``high`` (numbers, or sequences of length D) as (D,) tensors with low < high.
+    """``low``/``high`` (numbers, or sequences of length D) as (D,) tensors with low < high
+    (``utils.check_box``).
 
     In torch's default dtype (float32 unless a chapter sets float64), like the populations.
     """
-    lo = torch.as_tensor(low, dtype=torch.get_default_dtype()).reshape(-1)
-    hi = torch.as_tensor(high, dtype=torch.get_default_dtype()).reshape(-1)
-    for name, t in (("low", lo), ("high", hi)):
-        if t.numel() not in (1, d):
-            raise ValueError(
-                f"{name} must be a number or have one entry per action dimension (D = {d}), got {t.numel()} entries"
-            )
-        if not torch.isfinite(t).all():
-            raise ValueError(f"{name} must be finite, got {t.tolist()}")
-    lo, hi = lo.expand(d).clone(), hi.expand(d).clone()  # (D,), (D,)
-    if not (lo < hi).all():
-        raise ValueError(
-            f"low must be < high in every action dimension, got low={lo.tolist()}, high={hi.tolist()}"
-        )
-    return lo, hi
+    return check_action_box(low, high, d)
 
 
 def check_expert_actions(expert_actions: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor) -> torch.Tensor:
-    """(M, D) expert actions inside [lo, hi], M >= 1, in the default dtype, without gradient (on their device)."""
+    """(M, D) expert actions inside [lo, hi], M >= 1, in the default dtype, without gradient (on their
+    device)."""
     if len(expert_actions) == 0:
         raise ValueError("expert_actions must hold at least one action (M >= 1)")
     lo, hi = lo.to(expert_actions.device), hi.to(expert_actions.device)  # (D,), (D,)
@@ -138,8 +123,103 @@ def single_observation(energy_fn):
 
 
 def check_call(expert_actions: torch.Tensor, config, config_type: type) -> tuple[torch.Tensor, torch.Tensor]:
-    """Check the arguments every optimizer call shares; return the action box ``bounds`` (lo, hi), each (D,)."""
+    """Check the arguments every optimizer call shares; return the action box ``bounds`` (lo,
+    hi), each (D,)."""
     check_tensor("expert_actions", expert_actions, ndim=2)
     if not isinstance(config, config_type):
         raise ValueError(f"config must be a {config_type.__name__}, got {type(config).__name__}")
     return bounds(config.low, config.high, expert_actions.shape[1])
+
+
+# --------------------------------------------------------------------------- line 2: the initial population
+def initial_weights(expert_actions: torch.Tensor, config) -> torch.Tensor | None:
+    """The Categorical weights over expert actions of Algorithm 1 line 2; None for ``init="uniform"``.
+
+    "kde": w_i ∝ ĝ(y_i) (the algorithm as printed), from ``kde.kde_density``; "inverse-kde":
+    w_i ∝ 1 / ĝ(y_i) (the text), ``kde.inverse_density_weights``; "expert": w_i = 1 / M. Computing them costs
+    a KDE over the M expert actions (M² kernel evaluations): closed-loop code computes them once and passes
+    them to ``dfo`` as ``init_weights``.
+
+    Args:
+        expert_actions: (M, D) expert actions.
+        config: a ``DFOConfig`` or ``LangevinConfig`` (its ``init`` and ``bandwidth`` are used).
+    Returns:
+        (M,) weights summing to 1 in the default dtype, on the expert actions' device, or None.
+    """
+    check_tensor("expert_actions", expert_actions, ndim=2)
+    if config.init == "uniform":
+        return None
+    if config.init == "expert":  # each expert action equally likely: draws distributed like ĝ
+        m = len(expert_actions)
+        return torch.full((m,), 1.0 / m, dtype=torch.get_default_dtype(), device=expert_actions.device)
+    device, experts = expert_actions.device, expert_actions.cpu()  # the KDE is computed on the CPU
+    if config.init == "inverse-kde":
+        w = inverse_density_weights(experts, config.bandwidth)  # (M,) eqs. 4-5
+        return w.to(torch.get_default_dtype()).to(device)
+    g = kde_density(experts, experts, config.bandwidth).to(torch.float64)  # (M,) ĝ(y_i), eq. 4
+    return (g / g.sum()).to(torch.get_default_dtype()).to(device)
+
+
+def initial_samples(
+    expert_actions: torch.Tensor,
+    n_obs: int,
+    config,
+    *,
+    init_weights: torch.Tensor | None = None,
+    generator: torch.Generator | None = None,
+) -> torch.Tensor:
+    """The initial population {ỹ_i} of Algorithm 1 line 2, for ``n_obs`` observations: (B, N, D).
+
+    "uniform": ỹ_i ~ U(low, high) (original IBC). "kde"/"inverse-kde": ỹ_i ~ Categorical({y_i^expert},
+    {w_i}) with the weights of ``initial_weights`` (or the given ``init_weights``): copies of
+    expert actions, no noise yet (the first noise comes after the first resampling, line 9).
+
+    Args:
+        expert_actions: (M, D) expert actions inside the box, M >= 1.
+        n_obs: B, the number of observations.
+        config: a ``DFOConfig`` or ``LangevinConfig`` (``n_samples``, ``init``, ``low``, ``high``,
+            ``bandwidth``).
+        init_weights: optional precomputed (M,) weights (skips the KDE).
+        generator: a seeded ``torch.Generator`` for reproducible draws (made on its device, the
+            CPU for a ``torch.Generator()``, then moved).
+
+    Returns the population on the expert actions' device.
+    """
+    check_tensor("expert_actions", expert_actions, ndim=2)
+    check_int("n_obs", n_obs, minimum=1)
+    m, d = expert_actions.shape
+    lo, hi = bounds(config.low, config.high, d)  # (D,), (D,)
+    experts = check_expert_actions(expert_actions, lo, hi)  # (M, D), default dtype
+    n = config.n_samples
+    if config.init == "uniform":
+        u = torch.rand(n_obs, n, d, generator=generator, device=draw_device(generator))  # (B, N, D)
+        lo, hi, u = lo.to(experts.device), hi.to(experts.device), u.to(experts.device)
+        return lo + (hi - lo) * u
+    if init_weights is None:
+        init_weights = initial_weights(experts, config)
+    else:
+        check_tensor("init_weights", init_weights, shape=(m,))
+        if (init_weights < 0).any() or init_weights.sum() <= 0:
+            raise ValueError("init_weights must be non-negative with a positive sum")
+    idx = multinomial(init_weights, n_obs * n, generator, replacement=True)  # (B·N,)
+    return experts[idx.to(experts.device)].reshape(n_obs, n, d)  # (B, N, D)
+
+
+def prepare_call(
+    energy_fn, expert_actions: torch.Tensor, config, config_type: type, n_obs, init_weights, generator
+):
+    """What every DFO and Langevin call begins with: the checks, the batched energy function and
+    the initial population of Algorithm 1 line 2.
+
+    ``n_obs`` None (one observation: ``energy_fn`` maps (N, D) to (N,)) or B. Returns
+    ``(fn, y, lo, hi)``: the batched energy function ((B, N, D) -> (B, N)), the population
+    y (B, N, D) and the action box (D,), (D,).
+    """
+    lo, hi = check_call(expert_actions, config, config_type)
+    if n_obs is None:
+        b, fn = 1, single_observation(energy_fn)
+    else:
+        b, fn = check_int("n_obs", n_obs, minimum=1), energy_fn
+    with torch.no_grad():
+        y = initial_samples(expert_actions, b, config, init_weights=init_weights, generator=generator)
+    return fn, y, lo, hi  # y: (B, N, D)

@@ -10,31 +10,37 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import torch
 
-from ibc_tutorial.kde import DEFAULT_BANDWIDTH, inverse_density_weights, kde_density
-from ibc_tutorial.optimizers.common import (
+from ibc_tutorial.kde import DEFAULT_BANDWIDTH
+from ibc_tutorial.optimizers import EnergyPolicy
+from ibc_tutorial.optimizers.common import (  # INITS and the initialisation: importable from here too
+    INITS,
     SELECTIONS,
-    bounds,
     check_box,
     check_call,
     check_expert_actions,
     energies,
+    initial_samples,
+    initial_weights,
     multinomial,
+    prepare_call,
     select_action,
-    single_observation,
 )
-from ibc_tutorial.utils import check_choice, check_int, check_positive, check_tensor, draw_device
+from ibc_tutorial.utils import check_choice, check_int, check_positive, draw_device
 
-if TYPE_CHECKING:  # type hints only: langevin imports this module
-    from ibc_tutorial.optimizers.langevin import LangevinConfig
-
-INITS = ("uniform", "kde", "inverse-kde", "expert")
-"""Initialisations of Algorithm 1: "uniform" (original IBC), "kde" (Algorithm 1 line 2 as printed:
-w_i ∝ KDE(y_i)), "inverse-kde" (the DA-IBC paper's text, sec. 2.4.1: w_i = 1 / ĝ(y_i)) and
-"expert" (every expert action equally likely, w_i = 1 / M: initial samples distributed like ĝ)."""
+__all__ = [
+    "INITS",
+    "DFOConfig",
+    "DFOTrace",
+    "DFOOptimizer",
+    "dfo",
+    "dfo_policy",
+    "dfo_trace",
+    "initial_samples",
+    "initial_weights",
+]
 
 
 @dataclass(frozen=True)
@@ -50,7 +56,8 @@ class DFOConfig:
     n_iters: int = 5
     """N_iters, the number of energy evaluations of the population (the paper: 5)."""
     sigma_init: float = 0.5
-    """σ_init, the standard deviation of the first noise, added after the first resampling (the paper: 0.5)."""
+    """σ_init, the standard deviation of the first noise, added after the first resampling (the paper: 0.5).
+    """
     shrink: float = 0.5
     """K, the factor shrinking σ after each iteration, σ ← K σ (the paper: 0.5)."""
     low: float | tuple[float, ...] = -1.0
@@ -97,82 +104,6 @@ class DFOTrace:
     """Number of energy evaluations, N × N_iters: the cost of one decision."""
     config: DFOConfig
     """The settings the trace was run with (``config.select`` tells how ``action`` was chosen)."""
-
-
-# --------------------------------------------------------------------------- line 2: the initial population
-def initial_weights(
-    expert_actions: torch.Tensor, config: DFOConfig | LangevinConfig = DFOConfig()
-) -> torch.Tensor | None:
-    """The Categorical weights over expert actions of Algorithm 1 line 2; None for ``init="uniform"``.
-
-    "kde": w_i ∝ ĝ(y_i) (the algorithm as printed), from ``kde.kde_density``; "inverse-kde":
-    w_i ∝ 1 / ĝ(y_i) (the text), ``kde.inverse_density_weights``; "expert": w_i = 1 / M. Computing them costs a KDE over
-    the M expert actions (M² kernel evaluations): closed-loop code computes them once and passes
-    them to ``dfo`` as ``init_weights``.
-
-    Args:
-        expert_actions: (M, D) expert actions.
-        config: a ``DFOConfig`` or ``LangevinConfig`` (its ``init`` and ``bandwidth`` are used).
-    Returns:
-        (M,) weights summing to 1 in the default dtype, on the expert actions' device, or None.
-    """
-    check_tensor("expert_actions", expert_actions, ndim=2)
-    if config.init == "uniform":
-        return None
-    if config.init == "expert":  # each expert action equally likely: draws distributed like ĝ
-        m = len(expert_actions)
-        return torch.full((m,), 1.0 / m, dtype=torch.get_default_dtype(), device=expert_actions.device)
-    device, experts = expert_actions.device, expert_actions.cpu()  # the KDE is computed on the CPU
-    if config.init == "inverse-kde":
-        w = inverse_density_weights(experts, config.bandwidth)  # (M,) eqs. 4-5
-        return w.to(torch.get_default_dtype()).to(device)
-    g = kde_density(experts, experts, config.bandwidth).to(torch.float64)  # (M,) ĝ(y_i), eq. 4
-    return (g / g.sum()).to(torch.get_default_dtype()).to(device)
-
-
-def initial_samples(
-    expert_actions: torch.Tensor,
-    n_obs: int,
-    config: DFOConfig | LangevinConfig = DFOConfig(),
-    *,
-    init_weights: torch.Tensor | None = None,
-    generator: torch.Generator | None = None,
-) -> torch.Tensor:
-    """The initial population {ỹ_i} of Algorithm 1 line 2, for ``n_obs`` observations: (B, N, D).
-
-    "uniform": ỹ_i ~ U(low, high) (original IBC). "kde"/"inverse-kde": ỹ_i ~ Categorical({y_i^expert},
-    {w_i}) with the weights of ``initial_weights`` (or the given ``init_weights``): copies of
-    expert actions, no noise yet (the first noise comes after the first resampling, line 9).
-
-    Args:
-        expert_actions: (M, D) expert actions inside the box, M >= 1.
-        n_obs: B, the number of observations.
-        config: a ``DFOConfig`` or ``LangevinConfig`` (``n_samples``, ``init``, ``low``, ``high``,
-            ``bandwidth``).
-        init_weights: optional precomputed (M,) weights (skips the KDE).
-        generator: a seeded ``torch.Generator`` for reproducible draws (made on its device, the
-            CPU for a ``torch.Generator()``, then moved).
-
-    Returns the population on the expert actions' device.
-    """
-    check_tensor("expert_actions", expert_actions, ndim=2)
-    check_int("n_obs", n_obs, minimum=1)
-    m, d = expert_actions.shape
-    lo, hi = bounds(config.low, config.high, d)  # (D,), (D,)
-    experts = check_expert_actions(expert_actions, lo, hi)  # (M, D), default dtype
-    n = config.n_samples
-    if config.init == "uniform":
-        u = torch.rand(n_obs, n, d, generator=generator, device=draw_device(generator))  # (B, N, D)
-        lo, hi, u = lo.to(experts.device), hi.to(experts.device), u.to(experts.device)
-        return lo + (hi - lo) * u
-    if init_weights is None:
-        init_weights = initial_weights(experts, config)
-    else:
-        check_tensor("init_weights", init_weights, shape=(m,))
-        if (init_weights < 0).any() or init_weights.sum() <= 0:
-            raise ValueError("init_weights must be non-negative with a positive sum")
-    idx = multinomial(init_weights, n_obs * n, generator, replacement=True)  # (B·N,)
-    return experts[idx.to(experts.device)].reshape(n_obs, n, d)  # (B, N, D)
 
 
 # --------------------------------------------------------------------------- lines 3-14
@@ -259,15 +190,8 @@ def dfo(
     Returns:
         (D,) the action ŷ, or (B, D) one per observation.
     """
-    lo, hi = check_call(expert_actions, config, DFOConfig)
-    if n_obs is None:
-        b, fn = 1, single_observation(energy_fn)
-    else:
-        b, fn = check_int("n_obs", n_obs, minimum=1), energy_fn
+    fn, y, lo, hi = prepare_call(energy_fn, expert_actions, config, DFOConfig, n_obs, init_weights, generator)
     with torch.no_grad():
-        y = initial_samples(
-            expert_actions, b, config, init_weights=init_weights, generator=generator
-        )  # (B, N, D)
         action, _ = _dfo_core(fn, y, config, lo, hi, generator, record=False)  # (B, D)
     return action[0] if n_obs is None else action
 
@@ -280,17 +204,15 @@ def dfo_trace(
     init_weights: torch.Tensor | None = None,
     generator: torch.Generator | None = None,
 ) -> DFOTrace:
-    """``dfo`` for one observation (``energy_fn``: (N, D) -> (N,)), also returning every iteration's population.
+    """``dfo`` for one observation (``energy_fn``: (N, D) -> (N,)), also returning every iteration's
+    population.
 
     Same arguments and the same draws as ``dfo``: with equally seeded generators,
     ``dfo_trace(...).action`` equals ``dfo(...)``. For figures and widgets.
     """
-    lo, hi = check_call(expert_actions, config, DFOConfig)
+    fn, y, lo, hi = prepare_call(energy_fn, expert_actions, config, DFOConfig, None, init_weights, generator)
     with torch.no_grad():
-        y = initial_samples(
-            expert_actions, 1, config, init_weights=init_weights, generator=generator
-        )  # (1, N, D)
-        action, rec = _dfo_core(single_observation(energy_fn), y, config, lo, hi, generator, record=True)
+        action, rec = _dfo_core(fn, y, config, lo, hi, generator, record=True)  # y, action: (1, N, D), (1, D)
     return DFOTrace(
         samples=[s[0] for s in rec["samples"]],
         energies=[e[0] for e in rec["energies"]],
@@ -351,24 +273,13 @@ def dfo_policy(
     *,
     init_weights: torch.Tensor | None = None,
     generator: torch.Generator | None = None,
-):
+) -> EnergyPolicy:
     """A closed-loop policy ``policy(obs) -> actions (B, D)`` running ``dfo`` on ``model`` in eval mode.
 
     ``model`` is an energy model with ``embed(obs) -> z`` and ``energy_from_embedding(z, actions
     (B, N, D)) -> (B, N)`` (see ``DFOOptimizer.infer``); ``obs`` is a batch of observations, a
     tensor or a dict of tensors. The initial weights over ``expert_actions`` are computed once,
-    here. The model is put in eval mode for each decision and restored after it.
+    here. The model is put in eval mode for each decision and restored after it
+    (``optimizers.EnergyPolicy`` with a ``DFOOptimizer``).
     """
-    optimizer = DFOOptimizer(expert_actions, config, init_weights=init_weights)
-
-    def policy(obs) -> torch.Tensor:
-        was_training = getattr(model, "training", False)
-        if was_training:
-            model.eval()
-        try:
-            return optimizer.infer(model, obs, generator=generator)  # (B, D)
-        finally:
-            if was_training:
-                model.train()
-
-    return policy
+    return EnergyPolicy(model, DFOOptimizer(expert_actions, config, init_weights=init_weights), generator)

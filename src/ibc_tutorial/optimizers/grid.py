@@ -8,11 +8,9 @@
 
 from __future__ import annotations
 
-import math
-
 import torch
 
-from ibc_tutorial.utils import check_int, check_tensor
+from ibc_tutorial.utils import check_box, check_int, check_tensor
 
 CHUNK_ELEMENTS = 1 << 20
 """``grid_energies`` scores at most about this many (observation, candidate, hidden unit)
@@ -29,8 +27,7 @@ def action_grid(n_per_dim: int, action_dim: int = 1, low: float = -1.0, high: fl
     """
     check_int("n_per_dim", n_per_dim, minimum=2)
     check_int("action_dim", action_dim, minimum=1)
-    if not (math.isfinite(low) and math.isfinite(high) and low < high):
-        raise ValueError(f"low must be < high (both finite), got low={low}, high={high}")
+    check_box(low, high, 1)  # numbers, finite, low < high
     axis = torch.linspace(low, high, n_per_dim)  # (n,)
     return torch.cartesian_prod(*[axis] * action_dim).reshape(-1, action_dim)  # (n^D, D)
 

@@ -4,7 +4,6 @@
 - ``langevin``: one call for one observation (``n_obs=None``) or B observations (``n_obs=B``).
 - ``langevin_trace``: the same draws for one observation, keeping the population after every step.
 - ``polynomial_schedule``: the step size ε_k of each step.
-- ``LangevinOptimizer``: ``langevin`` on an energy model, an ``ActionOptimizer``.
 
 **What it is.** The IBC reference's update is annealed noisy gradient descent,
 
@@ -27,14 +26,13 @@ import torch
 
 from ibc_tutorial.kde import DEFAULT_BANDWIDTH
 from ibc_tutorial.optimizers.common import (
+    INITS,
     SELECTIONS,
     check_box,
-    check_call,
     energies,
+    prepare_call,
     select_action,
-    single_observation,
 )
-from ibc_tutorial.optimizers.dfo import INITS, initial_samples, initial_weights
 from ibc_tutorial.utils import check_choice, check_int, check_positive, draw_device
 
 NOISES = ("ibc", "ula")
@@ -70,9 +68,11 @@ class LangevinConfig:
     bandwidth: float = DEFAULT_BANDWIDTH
     """h, the KDE bandwidth of the "kde" and "inverse-kde" initialisations."""
     init: str = "uniform"
-    """Initial chains: "uniform" in the box (IBC), or "kde"/"inverse-kde" draws of expert actions as in DFO."""
+    """Initial chains: "uniform" in the box (IBC), or "kde"/"inverse-kde" draws of expert actions as in DFO.
+    """
     select: str = "argmax"
-    """Final choice from the last energies: "argmax" (IBC's greedy evaluation) or "sample" (as Algorithm 1 line 14)."""
+    """Final choice from the last energies: "argmax" (IBC's greedy evaluation) or "sample" (as Algorithm 1
+    line 14)."""
     noise: str = "ibc"
     """"ibc": noise ε_k · n (the reference: annealing, not sampling); "ula": √ε_k · n (samples exp(−E))."""
 
@@ -103,7 +103,8 @@ class LangevinTrace:
     action: torch.Tensor
     """(D,) the returned action ŷ."""
     energy_evaluations: int
-    """Energy evaluations: N per step (each with a backward pass for the gradient) plus N for the final choice."""
+    """Energy evaluations: N per step (each with a backward pass for the gradient) plus N for the final
+    choice."""
     gradient_evaluations: int
     """Gradient evaluations dE/dy: N per step."""
     config: LangevinConfig
@@ -188,14 +189,9 @@ def langevin(
     Returns:
         (D,) the action ŷ, or (B, D) one per observation.
     """
-    lo, hi = check_call(expert_actions, config, LangevinConfig)
-    if n_obs is None:
-        b, fn = 1, single_observation(energy_fn)
-    else:
-        b, fn = check_int("n_obs", n_obs, minimum=1), energy_fn
-    y = initial_samples(
-        expert_actions, b, config, init_weights=init_weights, generator=generator
-    )  # (B, N, D)
+    fn, y, lo, hi = prepare_call(
+        energy_fn, expert_actions, config, LangevinConfig, n_obs, init_weights, generator
+    )
     action, _ = _langevin_core(fn, y, config, lo, hi, generator, record=False)
     action = action.detach()  # (B, D)
     return action[0] if n_obs is None else action
@@ -210,11 +206,10 @@ def langevin_trace(
     generator: torch.Generator | None = None,
 ) -> LangevinTrace:
     """``langevin`` for one observation, also returning the population after every step (same draws)."""
-    lo, hi = check_call(expert_actions, config, LangevinConfig)
-    y = initial_samples(
-        expert_actions, 1, config, init_weights=init_weights, generator=generator
-    )  # (1, N, D)
-    action, rec = _langevin_core(single_observation(energy_fn), y, config, lo, hi, generator, record=True)
+    fn, y, lo, hi = prepare_call(
+        energy_fn, expert_actions, config, LangevinConfig, None, init_weights, generator
+    )
+    action, rec = _langevin_core(fn, y, config, lo, hi, generator, record=True)  # y: (1, N, D)
     return LangevinTrace(
         samples=[s[0] for s in rec["samples"]],
         step_sizes=rec["steps"],
@@ -223,31 +218,3 @@ def langevin_trace(
         gradient_evaluations=config.n_samples * config.n_iters,
         config=config,
     )
-
-
-class LangevinOptimizer:
-    """``langevin`` on an energy model, an ``ActionOptimizer``: expert actions and weights fixed once."""
-
-    def __init__(
-        self,
-        expert_actions: torch.Tensor,
-        config: LangevinConfig = LangevinConfig(),
-        *,
-        init_weights: torch.Tensor | None = None,
-    ):
-        check_call(expert_actions, config, LangevinConfig)
-        self.expert_actions, self.config = expert_actions, config
-        self.init_weights = initial_weights(expert_actions, config) if init_weights is None else init_weights
-
-    def infer(self, model, obs, *, generator: torch.Generator | None = None) -> torch.Tensor:
-        """(B, D) actions for a batch of B observations; the observations are embedded once."""
-        with torch.no_grad():
-            z = model.embed(obs)  # (B, E)
-        return langevin(
-            lambda a: model.energy_from_embedding(z, a),
-            self.expert_actions,
-            self.config,
-            n_obs=len(z),
-            init_weights=self.init_weights,
-            generator=generator,
-        )  # (B, D)

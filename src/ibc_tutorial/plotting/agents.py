@@ -64,7 +64,8 @@ def plot_agent_architecture(
         0.6,
         2.9,
         2.4,
-        f"IBC / DA-IBC energy head:\nW_z z + b  (once per x)\n+ W_a y  (per candidate y)\nReLU -> {head_hidden} -> ReLU\n-> E(x, y)  (scalar)",
+        f"IBC / DA-IBC energy head:\nW_z z + b  (once per x)\n+ W_a y  (per candidate y)\nReLU -> "
+        f"{head_hidden} -> ReLU\n-> E(x, y)  (scalar)",
         "#fcbba1",
     )
     box(6.2, 0.3, 1.2, 0.9, "action y\n(steer, acc)", "#f0f0f0")
@@ -91,7 +92,8 @@ def plot_training_curves(
     title: str = "Score in town02 during training (mean ± std over seeds)",
     ax=None,
 ):
-    """Score (or another key of ``curves[method][seed]``) against epoch: mean and ±1 std over seeds per method."""
+    """Score (or another key of ``curves[method][seed]``) against epoch: mean and ±1 std over seeds per
+    method."""
     if ax is None:
         _, ax = plt.subplots(figsize=(7.5, 4.2))
     for method, per_seed in curves.items():
@@ -117,7 +119,7 @@ def plot_loss_curves(curves: dict, *, title: str = "Training loss"):
     """One panel per method: loss per logged point (``curves[method] = (x, losses)``)."""
     n = check_panels("curves", curves)
     fig, axes = plt.subplots(1, n, figsize=(4.0 * n, 3.3), squeeze=False)
-    for ax, (method, (x, loss)) in zip(axes[0], curves.items()):
+    for ax, (method, (x, loss)) in zip(axes[0], curves.items(), strict=True):
         ax.plot(x, loss, "o-", color=METHOD_COLORS.get(method))
         label_axes(
             ax,
@@ -132,10 +134,11 @@ def plot_loss_curves(curves: dict, *, title: str = "Training loss"):
 def plot_trajectories(
     town, trajectories: dict, *, titles: dict | None = None, suptitle: str = "Free driving in town02"
 ):
-    """One map per entry of ``trajectories`` ({name: [xy (T, 2), ...]}), each episode a line, starts as dots."""
+    """One map per entry of ``trajectories`` ({name: [xy (T, 2), ...]}), each episode a line,
+    starts as dots."""
     n = check_panels("trajectories", trajectories)
     fig, axes = plt.subplots(1, n, figsize=(6.0 * n, 5.4), squeeze=False)
-    for ax, (name, tracks) in zip(axes[0], trajectories.items()):
+    for ax, (name, tracks) in zip(axes[0], trajectories.items(), strict=True):
         plot_town(town, ax=ax, title=(titles or {}).get(name, name), markers=False)
         for k, xy in enumerate(tracks):
             xy = as_array(xy)  # (T, 2)
@@ -148,7 +151,8 @@ def plot_trajectories(
 
 
 def plot_energy_landscapes(panels: list, steer, accel, *, suptitle: str = "Energy landscapes of DA-IBC"):
-    """Per panel (title, E (A, S) over accel x steer, points (K, 2), bev (5, S, S) or None): the BEV and E with the points."""
+    """Per panel (title, E (A, S) over accel x steer, points (K, 2), bev (5, S, S) or None): the BEV and E
+    with the points."""
     check_panels("panels", panels)
     fig, axes = plt.subplots(
         len(panels),
@@ -157,7 +161,7 @@ def plot_energy_landscapes(panels: list, steer, accel, *, suptitle: str = "Energ
         squeeze=False,
         gridspec_kw={"width_ratios": [1, 1.5]},
     )
-    for (ax_b, ax_e), (title, e, points, bev) in zip(axes, panels):
+    for (ax_b, ax_e), (title, e, points, bev) in zip(axes, panels, strict=True):
         if bev is not None:
             draw_bev(ax_b, bev)
         ax_b.set_xticks([])
@@ -191,7 +195,7 @@ def plot_exit_counts(counts: dict, *, title: str = "Exits taken at each junction
         n, 1, figsize=(max(6.0, 0.45 * len(approaches) + 2.0), 2.6 * n), squeeze=False, sharex=True
     )
     x = np.arange(len(approaches))
-    for ax, (method, per) in zip(axes[:, 0], counts.items()):
+    for ax, (method, per) in zip(axes[:, 0], counts.items(), strict=True):
         bottom = np.zeros(len(approaches))
         for turn, color in (("left", "C1"), ("straight", "0.6"), ("right", "C4")):
             h = np.array([per.get(a, {}).get(turn, 0) for a in approaches], dtype=float)
@@ -221,7 +225,7 @@ def plot_labels_at_rest(
     n = check_panels("labels", labels)
     fig, axes = plt.subplots(1, n, figsize=(4.2 * n, 3.2), squeeze=False, sharey=True)
     edges = np.linspace(-1, 1, bins + 1)
-    for ax, (name, acc) in zip(axes[0], labels.items()):
+    for ax, (name, acc) in zip(axes[0], labels.items(), strict=True):
         acc = as_array(acc, float).ravel()  # (N,)
         ax.hist(acc, bins=edges, weights=np.full(len(acc), 1.0 / max(len(acc), 1)), color="C0")
         go = float((acc > 0.2).mean()) if len(acc) else 0.0
@@ -245,7 +249,7 @@ def plot_crossing_steering(
     is drawn as red crosses (crossings the car did not finish)."""
     n = check_panels("crossings", crossings)
     fig, axes = plt.subplots(1, n, figsize=(4.0 * n, 3.9), squeeze=False, sharex=True, sharey=True)
-    for ax, (name, groups) in zip(axes[0], crossings.items()):
+    for ax, (name, groups) in zip(axes[0], crossings.items(), strict=True):
         check_panels(f"crossings[{name!r}]", groups)
         k = 0
         for label, points in groups.items():
@@ -302,7 +306,7 @@ def plot_crossing_energies(
     for ax in axes.ravel()[n:]:
         ax.set_visible(False)
     image = None
-    for ax, (name, energies) in zip(axes.ravel(), panels.items()):
+    for ax, (name, energies) in zip(axes.ravel(), panels.items(), strict=False):
         e = as_array(energies, float).reshape(-1, len(steer))  # (T, G)
         if len(e) == 0:
             raise ValueError(f"panels[{name!r}] must hold at least one state's energies")

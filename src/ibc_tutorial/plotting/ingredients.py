@@ -19,7 +19,7 @@ from ibc_tutorial.plotting.common import (
     finish,
     label_axes,
 )
-from ibc_tutorial.plotting.multimodality import rollout_figure
+from ibc_tutorial.plotting.multimodality import RolloutStyle, rollout_figure
 from ibc_tutorial.utils import check_int, check_positive
 
 
@@ -360,8 +360,5 @@ def plot_tree_rollouts(world, rollouts: dict, *, max_episodes: int = 60):
         _tree_counts,
         title="Closed-loop rollouts of the energy model with DFO inference",
         figsize=(9.0, 2.1 * n + 0.6),
-        max_episodes=max_episodes,
-        crosses=False,
-        alpha=0.7,
-        fontsize=9,
+        style=RolloutStyle(max_episodes=max_episodes, crosses=False, alpha=0.7, fontsize=9),
     )

@@ -6,6 +6,8 @@ the side-road world) and the trajectories coloured by their outcome.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import matplotlib.pyplot as plt
 import numpy as np
 import torch
@@ -32,10 +34,11 @@ TREE_MODE_COLORS = {"passes left": TREE_SIDE_COLORS[-1], "passes right": TREE_SI
 """The same colours keyed by the tree experts' mode names (``TreeWorld.mode_names``), so that a
 side has one colour in every figure."""
 SIDE_ROAD_COLORS = {"main road": "C0", "side road": "C2", "off road": "C3"}
-"""Colours of the side-road world: ended on the main road (blue), on the side road (green), off the road (red)."""
+"""Colours of the side-road world: ended on the main road (blue), on the side road (green), off the road
+(red)."""
 
 
-# =========================================================================== scenes and rollouts (chapters 01-03, 06)
+# =================================================================== scenes and rollouts (chapters 01-03, 06)
 def draw_tree(ax, world) -> None:
     """The tree (green disc) and, dashed, the circle the car's centre must stay out of."""
     c = world.config
@@ -79,7 +82,8 @@ def rollout_colors(world, rollouts) -> list[str]:
         return [TREE_SIDE_COLORS[int(v)] for v in world.pass_side(rollouts)]
     main, took = world.stayed_on_main_road(rollouts), world.took_side_road(rollouts)
     names = [
-        "main road" if m else ("side road" if t else "off road") for m, t in zip(main.tolist(), took.tolist())
+        "main road" if m else ("side road" if t else "off road")
+        for m, t in zip(main.tolist(), took.tolist(), strict=True)
     ]
     return [SIDE_ROAD_COLORS[n] for n in names]
 
@@ -136,6 +140,20 @@ def outcome_key(world, *, crosses: bool = True) -> list:
     return handles
 
 
+@dataclass(frozen=True)
+class RolloutStyle:
+    """How ``rollout_figure`` draws each panel (``draw_rollouts``' options and the panel titles)."""
+
+    max_episodes: int = 60
+    """Episodes drawn per panel (the first ones)."""
+    crosses: bool = True
+    """Mark where an episode collided with a cross."""
+    alpha: float = 0.6
+    """Opacity of the trajectories."""
+    fontsize: float = 10
+    """Font size of the panel titles."""
+
+
 def rollout_figure(
     world,
     rollouts: dict,
@@ -144,17 +162,16 @@ def rollout_figure(
     title: str,
     figsize: tuple,
     ncols: int = 1,
-    max_episodes: int = 60,
-    crosses: bool = True,
-    alpha: float = 0.6,
-    fontsize: float = 10,
-    xlabel: str = X_LABEL,
+    style: RolloutStyle = RolloutStyle(),
     compressed: bool = False,
 ):
     """Closed-loop ``rollouts`` ({name: Rollouts}) of several policies, one ``draw_rollouts`` panel
-    each in ``ncols`` columns, titled ``f"{name}: {summary(world, rollouts[name])}"``; empty
-    panels are hidden; the colour key (``outcome_key``) sits in the first panel. ``compressed``
-    lays the figure out with matplotlib's compressed layout instead of ``tight_layout``."""
+    each in ``ncols`` columns, titled ``f"{name}: {summary(world, rollouts[name])}"``, drawn as
+    ``style`` says; empty panels are hidden; the colour key (``outcome_key``) sits in the first
+    panel. ``compressed`` lays the figure out with matplotlib's compressed layout instead of
+    ``tight_layout``."""
+    if not isinstance(style, RolloutStyle):
+        raise ValueError(f"style must be a RolloutStyle, got {type(style).__name__}")
     n = check_panels("rollouts", rollouts)
     ncols = check_int("ncols", ncols, minimum=1)
     nrows = -(-n // ncols)
@@ -168,21 +185,31 @@ def rollout_figure(
         layout="compressed" if compressed else None,
     )
     x_end = max(float(r.states[:, :, 0].max()) for r in rollouts.values()) + 1.0
-    for ax, (name, r) in zip(axes.flat, rollouts.items()):
-        draw_rollouts(ax, world, r, max_episodes=max_episodes, x_end=x_end, crosses=crosses, alpha=alpha)
-        ax.set_title(f"{name}: {summary(world, r)}", fontsize=fontsize)
+    for ax, (name, r) in zip(
+        axes.flat, rollouts.items(), strict=False
+    ):  # more axes than panels: the rest are hidden
+        draw_rollouts(
+            ax,
+            world,
+            r,
+            max_episodes=style.max_episodes,
+            x_end=x_end,
+            crosses=style.crosses,
+            alpha=style.alpha,
+        )
+        ax.set_title(f"{name}: {summary(world, r)}", fontsize=style.fontsize)
     for k in range(n, nrows * ncols):  # empty panels: hide them, label the axis of the panel above
         axes.flat[k].axis("off")
         if k - ncols >= 0:
             axes.flat[k - ncols].xaxis.set_tick_params(labelbottom=True)
-            axes.flat[k - ncols].set_xlabel(xlabel)
+            axes.flat[k - ncols].set_xlabel(X_LABEL)
     for ax in axes[:, 0]:
         ax.set_ylabel(Y_LABEL)
     for ax in axes[-1]:
         if ax.axison:
-            ax.set_xlabel(xlabel)
+            ax.set_xlabel(X_LABEL)
     axes.flat[0].legend(
-        handles=outcome_key(world, crosses=crosses),
+        handles=outcome_key(world, crosses=style.crosses),
         loc="upper left",
         fontsize=7,
         framealpha=0.9,
@@ -205,7 +232,8 @@ def _side_road_shares(world, r) -> str:
     main, side = world.stayed_on_main_road(r).numpy(), world.took_side_road(r).numpy()
     sw = world.swerve(r).numpy()
     mean = f"{np.nanmean(sw):.2f} m" if (~np.isnan(sw)).any() else "n/a"
-    return f"main road {main.mean():.0%}, side road {side.mean():.0%}, off road {r.collided.float().mean():.0%}; mean swerve {mean}"
+    off = r.collided.float().mean()
+    return f"main road {main.mean():.0%}, side road {side.mean():.0%}, off road {off:.0%}; mean swerve {mean}"
 
 
 def _grid_shares(world, r) -> str:
@@ -241,7 +269,7 @@ def plot_tree_scene(
     colors = _mode_colors(world.mode_names)
     draw_tracks(ax, states, [colors[int(v)] for v in m], max_episodes=max_episodes)
     draw_tree(ax, world)
-    for mode, (name, color) in enumerate(zip(world.mode_names, colors)):
+    for mode, (name, color) in enumerate(zip(world.mode_names, colors, strict=True)):
         ax.plot([], [], color=color, label=f"{name} ({int((m == mode).sum())})")
     ax.set_aspect("equal")
     label_axes(ax, X_LABEL, Y_LABEL, title, legend=True, loc="lower left")
@@ -266,7 +294,7 @@ def plot_actions_by_distance(
     a = as_array(demos.actions[:, 0])
     m = as_array(demos.mode)
     idx = np.random.default_rng(0).permutation(len(d))[:max_points]
-    for mode, (name, color) in enumerate(zip(world.mode_names, _mode_colors(world.mode_names))):
+    for mode, (name, color) in enumerate(zip(world.mode_names, _mode_colors(world.mode_names), strict=True)):
         sel = idx[m[idx] == mode]
         ax.scatter(d[sel], a[sel], s=3, color=color, alpha=0.35, label=f"expert, {name}", rasterized=True)
     if window is not None:
@@ -331,7 +359,7 @@ def plot_constant_losses(
     n = check_panels("losses", losses)
     c = as_array(constants)
     fig, axes = plt.subplots(1, n, figsize=(4.6 * n, 3.4), squeeze=False)
-    for i, (ax, (name, loss)) in enumerate(zip(axes[0], losses.items())):
+    for i, (ax, (name, loss)) in enumerate(zip(axes[0], losses.items(), strict=True)):
         loss = as_array(loss)
         color = f"C{i + 2}"
         ax.plot(c, loss, color=color, lw=2)
@@ -355,7 +383,12 @@ def plot_tree_closed_loop(
     the car stopped)."""
     n = check_panels("rollouts", rollouts)
     return rollout_figure(
-        world, rollouts, _tree_shares, title=title, figsize=(8.5, 2.2 * n), max_episodes=max_episodes
+        world,
+        rollouts,
+        _tree_shares,
+        title=title,
+        figsize=(8.5, 2.2 * n),
+        style=RolloutStyle(max_episodes=max_episodes),
     )
 
 
@@ -369,8 +402,7 @@ def plot_side_road(world, rollouts: dict, *, title: str = "The side road", max_e
         _side_road_shares,
         title=title,
         figsize=(8.5, 2.8 * n),
-        max_episodes=max_episodes,
-        crosses=False,
+        style=RolloutStyle(max_episodes=max_episodes, crosses=False),
     )
 
 
@@ -438,7 +470,7 @@ def plot_action_distributions(
     data = as_array(data_actions, float).reshape(-1)
     colors = {"deterministic": "C3", "mean": "C3", "mode": "C2", "argmax": "C3", "paper": "C3"}
     ymax = 1.0
-    for ax, (name, policy) in zip(axes[0], policies.items()):
+    for ax, (name, policy) in zip(axes[0], policies.items(), strict=True):
         ymax = max(ymax, _data_histogram(ax, data, 40, "expert data"))
         if policy.has_density:
             with torch.no_grad():
@@ -489,13 +521,12 @@ def plot_rollout_grid(world, rollouts: dict, *, title: str, ncols: int = 2, max_
         title=title,
         figsize=(5.6 * ncols, 2.0 * nrows + 0.4),
         ncols=ncols,
-        max_episodes=max_episodes,
-        fontsize=9,
+        style=RolloutStyle(max_episodes=max_episodes, fontsize=9),
         compressed=True,
     )
 
 
-# =========================================================================== chapter 03: energy models and InfoNCE
+# ====================================================================== chapter 03: energy models and InfoNCE
 def plot_energy_landscape(
     distances,
     actions,
@@ -504,8 +535,7 @@ def plot_energy_landscape(
     expert=None,
     path=None,
     title: str = "The energy landscape",
-    xlabel: str = "distance to the tree (m)",
-    ylabel: str = STEER_LABEL,
+    labels: tuple[str, str] = ("distance to the tree (m)", STEER_LABEL),
     ax=None,
 ):
     """E(x, y) with the observation along x and the action along y, shifted per observation so
@@ -517,6 +547,7 @@ def plot_energy_landscape(
         energies: (n, G) energies.
         expert: optional (x, y) arrays of expert samples to overlay as dots.
         path: optional (n,) action per column to draw as a red line (e.g. the argmin).
+        labels: the x and y axis labels.
 
     The x axis runs from the largest distance (left) to the smallest, in the car's direction of travel.
     """
@@ -535,7 +566,7 @@ def plot_energy_landscape(
     if expert is not None or path is not None:
         ax.legend(loc="lower left", fontsize=8, markerscale=4, facecolor="0.55")
     ax.set_xlim(x.max(), x.min())  # far on the left: the car drives from left to right
-    label_axes(ax, xlabel, ylabel, title)
+    label_axes(ax, *labels, title)
     return finish(fig, own)
 
 
@@ -587,7 +618,7 @@ def plot_command_traces(
     n = len(traces)
     fig, axes = plt.subplots(n, 1, figsize=(7.0, 0.6 + 1.25 * n), sharex=True, sharey=True, squeeze=False)
     ref = None if reference is None else as_array(traces[reference], float).reshape(-1)
-    for i, (ax, (label, x)) in enumerate(zip(axes[:, 0], traces.items())):
+    for i, (ax, (label, x)) in enumerate(zip(axes[:, 0], traces.items(), strict=True)):
         x = as_array(x, float).reshape(-1)
         if ref is not None and label != reference:
             ax.plot(np.arange(len(ref)) * dt, ref, color="0.6", lw=0.9, label=reference)

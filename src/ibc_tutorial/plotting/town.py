@@ -279,9 +279,11 @@ def plot_action_histograms(actions, *, title: str = "The expert's actions in the
     return finish(fig, True, title=title)
 
 
-def plot_exit_counts(town, counts: dict, *, title: str = "Exits taken at each junction approach"):
+def plot_exit_map(town, counts: dict, *, title: str = "Exits taken at each junction approach"):
     """The map with, at every junction approach the data drives through, how often it left by each
-    exit (L left, S straight, R right); approaches left by two different exits are boxed in red."""
+    exit (L left, S straight, R right); approaches left by two different exits are boxed in red.
+
+    ``counts``: ``{approach: {"left": n, "straight": n, "right": n}}`` (``driving.analysis.exit_counts``)."""
     fig, ax = _map_figure(town, (8.0, 6.8), title)
     letters = {"left": "L", "straight": "S", "right": "R"}
     for ap_id, c in counts.items():
@@ -289,7 +291,7 @@ def plot_exit_counts(town, counts: dict, *, title: str = "Exits taken at each ju
         back = -ap.direction  # place the label on the approach, 14 m before the junction
         p = np.asarray(ap.entry) + back * 14.0
         text = " ".join(f"{letters[k]}{c[k]}" for k in ("left", "straight", "right") if c.get(k))
-        multi = len(c) > 1
+        multi = sum(n > 0 for n in c.values()) > 1
         ax.text(
             p[0],
             p[1],

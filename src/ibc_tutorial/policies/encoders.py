@@ -14,7 +14,8 @@ from torch import nn
 from ibc_tutorial.utils import check_int, check_tensor
 
 SPEED_SCALE = 10.0
-"""``BEVStateEncoder`` divides the speed entry of the state (m/s) by this before its MLP (inputs of order 1)."""
+"""``BEVStateEncoder`` divides the speed entry of the state (m/s) by this before its MLP (inputs of order 1).
+"""
 
 
 class ObservationEncoder(nn.Module):
@@ -40,7 +41,7 @@ class MLPEncoder(ObservationEncoder):
         check_int("layers", layers, minimum=1)
         dims = [obs_dim] + [hidden] * (layers - 1) + [embed_dim]
         mods: list[nn.Module] = []
-        for i, (a, b) in enumerate(zip(dims[:-1], dims[1:])):
+        for a, b in zip(dims[:-1], dims[1:], strict=True):
             mods.append(nn.Linear(a, b))
             mods.append(nn.ReLU())
         self.net = nn.Sequential(*mods)
@@ -59,9 +60,11 @@ def _conv_out(size: int, n: int) -> int:
 
 
 class BEVStateEncoder(ObservationEncoder):
-    """Dict observations ``{"bev": (B, 5, S, S), "state": (B, 3)}`` -> z (B, 2 * embed_dim): the DA-IBC paper's Fig. 2.
+    """Dict observations ``{"bev": (B, 5, S, S), "state": (B, 3)}`` -> z (B, 2 * embed_dim): the DA-IBC
+    paper's Fig. 2.
 
-    The BEV (float32: road channels 0/1, light channels 0.3 / 0.6 / 1.0) goes through ``len(channels)`` 3x3 stride-2 convolutions with
+    The BEV (float32: road channels 0/1, light channels 0.3 / 0.6 / 1.0) goes through ``len(channels)`` 3x3
+    stride-2 convolutions with
     ReLU, then a linear layer to ``embed_dim`` (the paper's 256-d BEV embedding); the state
     (speed in m/s, previous steer, previous acceleration) through a two-layer MLP to
     ``embed_dim`` (the paper's 256-d state embedding). z is their concatenation (sec. 3.3).

@@ -27,7 +27,8 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-from ibc_tutorial.optimizers.grid import grid_argmin, grid_energies
+from ibc_tutorial.optimizers import EnergyPolicy
+from ibc_tutorial.optimizers.grid import GridOptimizer, grid_energies
 from ibc_tutorial.policies.encoders import ObservationEncoder
 from ibc_tutorial.utils import check_int, check_tensor, draw_device
 
@@ -49,7 +50,8 @@ class EnergyModel(nn.Module):
         super().__init__()
         if not isinstance(encoder, nn.Module) or not hasattr(encoder, "embed_dim"):
             raise ValueError(
-                f"encoder must be an ObservationEncoder (an nn.Module with embed_dim), got {type(encoder).__name__}"
+                f"encoder must be an ObservationEncoder (an nn.Module with embed_dim), got "
+                f"{type(encoder).__name__}"
             )
         self.encoder = encoder
         self.action_dim = check_int("action_dim", action_dim, minimum=1)
@@ -124,31 +126,26 @@ class EnergyModel(nn.Module):
         if not ok:
             got = tuple(actions.shape) if isinstance(actions, torch.Tensor) else type(actions).__name__
             raise ValueError(
-                f"actions must be a tensor of shape ({batch}, N, {self.action_dim}) or (N, {self.action_dim}), got {got}"
+                f"actions must be a tensor of shape ({batch}, N, {self.action_dim}) or (N, "
+                f"{self.action_dim}), got {got}"
             )
         return actions
 
 
-class GridArgminPolicy:
+class GridArgminPolicy(EnergyPolicy):
     """An implicit policy for rollouts: obs (B, obs_dim) -> argmin over ``grid`` of E(obs, ·), (B, D).
 
     A plain callable (the toy worlds' policy interface), evaluated without gradients, with the
-    model in eval mode. ``grid`` is (G, D), e.g. ``optimizers.grid.action_grid(201)`` for steering.
+    model in eval mode: ``optimizers.EnergyPolicy`` with a ``GridOptimizer``. ``grid`` is (G, D),
+    e.g. ``optimizers.grid.action_grid(201)`` for steering.
     """
 
     def __init__(self, model: EnergyModel, grid: torch.Tensor):
         check_tensor("grid", grid, ndim=2)
         if grid.shape[1] != model.action_dim:
             raise ValueError(f"grid must have shape (G, {model.action_dim}), got {tuple(grid.shape)}")
-        self.model, self.grid = model, grid
-
-    def __call__(self, obs) -> torch.Tensor:
-        was_training = self.model.training
-        self.model.eval()
-        try:
-            return grid_argmin(self.model, obs, self.grid)  # (B, D)
-        finally:
-            self.model.train(was_training)
+        super().__init__(model, GridOptimizer(grid))
+        self.grid = grid
 
 
 class GridSamplePolicy:

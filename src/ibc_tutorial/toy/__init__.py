@@ -24,7 +24,14 @@ from ibc_tutorial.toy import car
 from ibc_tutorial.toy.junction import SITUATIONS, JunctionConfig, JunctionWorld
 from ibc_tutorial.toy.side_road import SideRoadConfig, SideRoadWorld
 from ibc_tutorial.toy.tree import TreeConfig, TreeWorld
-from ibc_tutorial.toy.world import Demonstrations, Policy, Rollouts, ToyConfig, ToyWorld, check_policy_actions
+from ibc_tutorial.toy.world import (
+    Demonstrations,
+    Rollouts,
+    ToyConfig,
+    ToyPolicy,
+    ToyWorld,
+    check_policy_actions,
+)
 
 __all__ = [
     "TreeWorld",
@@ -38,7 +45,7 @@ __all__ = [
     "ToyConfig",
     "Demonstrations",
     "Rollouts",
-    "Policy",
+    "ToyPolicy",
     "check_policy_actions",
     "car",
 ]

@@ -72,7 +72,8 @@ class JunctionWorld:
         check_probability("config.p_red", config.p_red)
         if not config.p_junction + config.p_red < 1:
             raise ValueError(
-                f"config.p_junction + config.p_red must be < 1 (some cruising), got {config.p_junction} + {config.p_red}"
+                f"config.p_junction + config.p_red must be < 1 (some cruising), got {config.p_junction} + "
+                f"{config.p_red}"
             )
         self.config = config
 

@@ -50,7 +50,8 @@ class SideRoadConfig(ToyConfig):
     expert_holds_start_offset: bool = False
     """The side-road experts steer back to the centre line of the main road (lane keeping)."""
     corner_length: float = 6.0
-    """Length (m, along x) over which the side-road expert's path bends from the main road into the side road."""
+    """Length (m, along x) over which the side-road expert's path bends from the main road into the side road.
+    """
     swerve_from: float = 5.0
     """``swerve`` looks at the part of each episode from this far (m) before the branch point on."""
 
@@ -89,7 +90,8 @@ class SideRoadWorld(ToyWorld):
         return torch.tensor([self.config.straight_prob, 1.0 - self.config.straight_prob])
 
     def side_road_lateral(self, x: torch.Tensor) -> torch.Tensor:
-        """y (m) of the side road's centre line at ``x`` (0 before the branch, negative beyond: to the right)."""
+        """y (m) of the side road's centre line at ``x`` (0 before the branch, negative beyond: to
+        the right)."""
         return -math.tan(math.radians(self.config.side_angle_deg)) * (x - self.config.branch_x).clamp_min(0.0)
 
     def reference_lateral(self, x: torch.Tensor, plan: torch.Tensor) -> torch.Tensor:
@@ -102,11 +104,13 @@ class SideRoadWorld(ToyWorld):
         return torch.where(plan[:, 0] == 1, bend, plan[:, 1])
 
     def on_main_road(self, positions: torch.Tensor) -> torch.Tensor:
-        """(...,) bool: the point ``positions`` (..., 2) is within ``road_half_width`` of the main road's centre line."""
+        """(...,) bool: the point ``positions`` (..., 2) is within ``road_half_width`` of the main road's
+        centre line."""
         return positions[..., 1].abs() <= self.config.road_half_width
 
     def on_side_road(self, positions: torch.Tensor) -> torch.Tensor:
-        """(...,) bool: the point is within ``road_half_width`` of the side road's centre line, beyond the branch."""
+        """(...,) bool: the point is within ``road_half_width`` of the side road's centre line, beyond the
+        branch."""
         rel = positions[..., :2] - torch.tensor([self.config.branch_x, 0.0])
         u = self.side_direction
         along = rel[..., 0] * u[0] + rel[..., 1] * u[1]

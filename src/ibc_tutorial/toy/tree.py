@@ -93,7 +93,8 @@ class TreeWorld(ToyWorld):
         )
         if not c.swerve_start_min <= c.swerve_start_max:
             raise ValueError(
-                f"config.swerve_start_min must be <= config.swerve_start_max, got {c.swerve_start_min} and {c.swerve_start_max}"
+                f"config.swerve_start_min must be <= config.swerve_start_max, got {c.swerve_start_min} and "
+                f"{c.swerve_start_max}"
             )
         check_probability("config.right_prob", c.right_prob)
 

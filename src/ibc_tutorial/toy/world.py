@@ -32,8 +32,10 @@ import torch
 from ibc_tutorial.toy import car
 from ibc_tutorial.utils import check_int, check_positive, check_positive_fields, check_tensor
 
-Policy = Callable[[torch.Tensor], torch.Tensor]
-"""policy(obs (B, obs_dim)) -> actions (B, 1) in [-1, 1], +1 = full right."""
+ToyPolicy = Callable[[torch.Tensor], torch.Tensor]
+"""A closed-loop policy in a toy world: ``policy(obs (B, obs_dim)) -> actions (B, 1)`` in [-1, 1],
++1 = full right, on tensor batches (an explicit policy's controller, a ``GridArgminPolicy``, a
+``dfo_policy``). The town's is ``driving.rollout.DrivingPolicy``, on numpy dict batches."""
 
 
 @dataclass
@@ -135,7 +137,8 @@ class Rollouts:
 
 
 def check_policy_actions(actions, batch: int) -> torch.Tensor:
-    """Return ``actions`` in the default dtype (B, 1), or raise ValueError saying what a policy must return."""
+    """Return ``actions`` in the default dtype (B, 1), or raise ValueError saying what a policy
+    must return."""
     if not isinstance(actions, torch.Tensor):
         raise ValueError(
             f"policy must return a torch.Tensor of shape ({batch}, 1), got {type(actions).__name__}"
@@ -223,7 +226,8 @@ class ToyWorld:
         raise NotImplementedError
 
     def contact_fraction(self, p0: torch.Tensor, p1: torch.Tensor) -> torch.Tensor:
-        """Fraction in [0, 1] of the move ``p0 -> p1`` (B, 2) at which the car collides; inf if it does not."""
+        """Fraction in [0, 1] of the move ``p0 -> p1`` (B, 2) at which the car collides; inf if
+        it does not."""
         raise NotImplementedError
 
     def sample_plans(self, start: torch.Tensor, generator: torch.Generator) -> torch.Tensor:
@@ -365,7 +369,7 @@ class ToyWorld:
         )
 
     def rollout(
-        self, policy: Policy, n_episodes: int, seed: int, *, initial_states: torch.Tensor | None = None
+        self, policy: ToyPolicy, n_episodes: int, seed: int, *, initial_states: torch.Tensor | None = None
     ) -> Rollouts:
         """Run ``policy`` in closed loop on ``n_episodes`` episodes at once, started from the
         start distribution drawn with ``seed`` (or from ``initial_states`` (E, 3) when given).

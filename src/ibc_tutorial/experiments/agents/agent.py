@@ -12,7 +12,7 @@ The network (the DA-IBC paper's sec. 3.3 and Fig. 2):
 ``architecture(method, preset)`` is the network's one description (what a checkpoint stores
 and checks); ``build_network`` builds from it. ``Agent`` couples a network with the way it acts
 (Beta mean; or Algorithm 1 with the method's initialisation and final selection) and gives the
-closed-loop ``driving.rollout.Policy`` that ``driving.rollout`` calls on numpy observation batches.
+closed-loop ``driving.rollout.DrivingPolicy`` that ``driving.rollout`` calls on numpy observation batches.
 
 **Devices.** ``Agent.to(device)`` puts the network and the expert actions (the DFO population's
 support) on a GPU; observations are moved there, the DFO draws are still made with the policy's
@@ -26,10 +26,10 @@ import numpy as np
 import torch
 from torch import nn
 
-from ibc_tutorial.driving.rollout import Policy
+from ibc_tutorial.driving.rollout import DrivingPolicy
 from ibc_tutorial.experiments.agents.presets import METHODS, Preset
 from ibc_tutorial.kde import inverse_density_weights
-from ibc_tutorial.optimizers.dfo import DFOConfig, dfo
+from ibc_tutorial.optimizers.dfo import DFOConfig, DFOOptimizer
 from ibc_tutorial.policies.encoders import BEVStateEncoder
 from ibc_tutorial.policies.energy import EnergyModel
 from ibc_tutorial.policies.explicit import BetaPolicy
@@ -182,19 +182,12 @@ class Agent:
         self.network.eval()
         if self.method == "bc":
             return self.network.act(obs, mode="mean").cpu()  # (B, 2)
-        z = self.network.embed(obs)  # (B, E), once per observation
         weights = self.init_weights if self.method == "da-ibc" else None
-        return dfo(
-            lambda a: self.network.energy_from_embedding(z, a),
-            self.expert_actions,
-            self.dfo_config,
-            n_obs=len(z),
-            init_weights=weights,
-            generator=generator,
-        ).cpu()  # (B, 2)
+        optimizer = DFOOptimizer(self.expert_actions, self.dfo_config, init_weights=weights)
+        return optimizer.infer(self.network, obs, generator=generator).cpu()  # (B, 2)
 
-    def policy(self, seed: int = 0) -> Policy:
-        """The seeded ``driving.rollout.Policy`` of this agent: numpy obs batch -> numpy actions (B, 2).
+    def policy(self, seed: int = 0) -> DrivingPolicy:
+        """The seeded ``driving.rollout.DrivingPolicy`` of this agent: numpy obs batch -> numpy actions (B, 2).
 
         Its DFO draws come from a CPU generator seeded with ``seed``, whatever the agent's device."""
         gen = torch.Generator().manual_seed(int(seed))

@@ -32,7 +32,8 @@ import torch
 from ibc_tutorial import __version__
 from ibc_tutorial.cli import UserError, check_input_file, check_output_file
 from ibc_tutorial.driving.analysis import junction_crossings
-from ibc_tutorial.driving.rollout import EpisodeResult, rollout
+from ibc_tutorial.driving.env import EnvConfig
+from ibc_tutorial.driving.rollout import EpisodeResult, RolloutRecording, rollout
 from ibc_tutorial.experiments.agents.agent import Agent
 from ibc_tutorial.experiments.agents.checkpoints import load_agent, training_seed
 from ibc_tutorial.utils import atomic_write_bytes, check_device, check_int
@@ -77,21 +78,9 @@ def evaluate_agent(
             agent.preset.bev_size,
             agent.preset.light_encoding,
         )
-    return rollout(
-        policy,
-        town=town,
-        episodes=episodes,
-        steps=steps,
-        bev_size=bev_size,
-        seed=seed,
-        routeless=routeless,
-        record_xy=record_xy,
-        record_steps=record_steps,
-        keep_obs=keep_obs,
-        show_progress=show_progress,
-        light_encoding=encoding,
-        on_step=on_step,
-    )
+    env = EnvConfig(town, bev_size, routeless, steps, light_encoding=encoding)
+    record = RolloutRecording(xy=record_xy, steps=record_steps, obs=keep_obs, on_step=on_step)
+    return rollout(policy, env, episodes, seed, record=record, show_progress=show_progress)
 
 
 def episode_rows(results: list[EpisodeResult]) -> list[dict]:

@@ -30,8 +30,9 @@ from dataclasses import replace
 import numpy as np
 import torch
 
+from ibc_tutorial.driving.analysis import exit_counts, log_junction_visits
 from ibc_tutorial.driving.collect import Recorder
-from ibc_tutorial.driving.dataset import DemoDataset, DemoLog, exit_counts
+from ibc_tutorial.driving.dataset import DemoDataset, DemoLog
 from ibc_tutorial.driving.expert import Expert, ExpertConfig
 from ibc_tutorial.driving.routes import Route, random_route, uniform_exit
 from ibc_tutorial.driving.sim import DrivingSim
@@ -147,10 +148,10 @@ def side_road_counts(log: DemoLog) -> dict:
     """How often the log's expert passed side roads straight on and took them, and how it left stems.
 
     Returns ``{"straight": n, "side_road": n, "share": side_road / (straight + side_road),
-    "stem": {"left": n, "right": n}}`` counted from the lanes driven (``dataset.exit_counts``)."""
+    "stem": {"left": n, "right": n}}`` counted from the lanes driven (``analysis.exit_counts``)."""
     town = get_town(log.town)
     through, stem = Counter(), Counter()
-    for ap, counts in exit_counts(log).items():
+    for ap, counts in exit_counts(log_junction_visits(log)).items():
         if "straight" in town.approaches[ap].exits:
             through["straight"] += counts.get("straight", 0)
             through["side_road"] += counts.get("left", 0) + counts.get("right", 0)
