@@ -209,6 +209,7 @@ def limits_and_prototypes(p, args) -> None:
         rl.proto_channels_last(p, ds, probs, rounds=args.reps)
         rl.proto_unpack(p, ds, rounds=args.reps)
         rl.proto_pool(ds, rounds=args.reps)
+        rl.proto_rollout(p, ds, probs)
         rl.proto_sim_profile()
     print(
         f"load average after: {os.getloadavg()[0]:.2f} (2 cores; above ~1 the times are inflated, "

@@ -35,7 +35,8 @@ import torch
 from torch.nn import functional as F
 from torch.utils.flop_counter import FlopCounterMode
 
-from ibc_tutorial.driving.bev import LIGHT_SHIFTS, UNPACK_TABLE
+from ibc_tutorial.driving.bev import UNPACK_TABLE
+from ibc_tutorial.driving.pooling import pool_packed
 from ibc_tutorial.driving.sim import DrivingSim
 from ibc_tutorial.experiments.agents.agent import Agent, build_network
 from ibc_tutorial.experiments.agents.train import DemoBatches, objective_for
@@ -478,11 +479,41 @@ def proto_channels_last(p, ds, probs, rounds=5) -> dict:
     x10, x10_cl = x[:10], x_cl[:10]
     with torch.no_grad():
         out["infer_cnn"] = ratio(lambda: cnn(x10), lambda: cnn_cl(x10_cl), rounds, 5)[0]
+    for method in ("bc", "ibc"):
+        out[method] = _channels_last_step(p, ds, probs, method, rounds)
     print(
         f"  (c) channels-last CNN: forward+backward at B={p.batch_size} {out['train_cnn']:.2f}x, forward at "
         f"B=10 {out['infer_cnn']:.2f}x; largest output difference {diff:.1e}"
     )
     return out
+
+
+def _channels_last_step(p, ds, probs, method, rounds) -> float:
+    """The whole training step of ``method`` with the network and the minibatch's BEVs channels-last."""
+
+    class ChannelsLast(DemoBatches):
+        def batch(self, indices):
+            b = super().batch(indices)
+            b["obs"]["bev"] = b["obs"]["bev"].contiguous(memory_format=torch.channels_last)
+            return b
+
+    cfg = TrainConfig(steps=10**6, batch_size=p.batch_size, lr=p.lr, progress=False)
+    trainers = []
+    for fmt, data in ((torch.contiguous_format, DemoBatches(ds)), (torch.channels_last, ChannelsLast(ds))):
+        torch.manual_seed(0)
+        net = build_network(method, p).to(memory_format=fmt)
+        trainers.append(Trainer(net, objective_for(method, net, p), data, cfg, sample_probs=probs))
+
+    def step(tr):
+        def one():
+            tr.config.steps = tr.step + 1
+            tr.run()
+
+        return one
+
+    r = ratio(step(trainers[0]), step(trainers[1]), rounds)[0]
+    print(f"  (c) channels-last, the whole {method} training step: {r:.2f}x")
+    return r
 
 
 def proto_unpack(p, ds, rounds=7) -> float:
@@ -507,39 +538,21 @@ def proto_unpack(p, ds, rounds=7) -> float:
     return r
 
 
-def pool_strided(codes: np.ndarray, k: int) -> np.ndarray:
-    """``BEVRenderer._pool`` written as k x k strided slices: (..., 192, 192) packed bytes -> (..., S, S).
-
-    The same result bit for bit (OR of the road bits, maximum of each 2-bit light code, which is the
-    maximum of the code's masked bits), with k² elementwise operations on whole (S, S) arrays instead of
-    numpy reductions over axes of length k (whose per-element overhead dominates a BEV render)."""
-    if k == 1:
-        return codes
-    parts = [codes[..., i::k, j::k] for i in range(k) for j in range(k)]
-    road = parts[0] & 3
-    lights = [parts[0] & (3 << sh) for sh in LIGHT_SHIFTS]
-    for t in parts[1:]:
-        road |= t & 3
-        for c, sh in enumerate(LIGHT_SHIFTS):
-            np.maximum(lights[c], t & (3 << sh), out=lights[c])
-    return road | lights[0] | lights[1] | lights[2]
-
-
 def proto_pool(ds, rounds=7) -> float:
-    """(f) BEV pooling (192 -> S): numpy reductions over short axes (today) vs strided slices; bit-identical
-    on random bytes and on real views."""
+    """(f) BEV pooling (192 -> S): numpy reductions over short axes (today) vs ``driving.pooling.pool_packed``
+    (strided slices); bit-identical on random bytes and on real views; a whole render; a whole rollout."""
     r = ds.renderer
     rng = np.random.default_rng(0)
     codes = rng.integers(0, 256, size=(4, 192, 192), dtype=np.uint8)
-    same = np.array_equal(r._pool(codes), pool_strided(codes, r.pool))
+    same = np.array_equal(r._pool(codes), pool_packed(codes, r.pool))
     pose, lights = ds.log.pose[0], r.check_lights(ds.log.light_history(np.array([0]))[0])
     view = r._lut(lights).take(r.raster.code.ravel().take(r._indices(*pose)))  # (192, 192) before pooling
-    same &= np.array_equal(r._pool(view), pool_strided(view, r.pool))
-    rr = ratio(lambda: r._pool(view), lambda: pool_strided(view, r.pool), rounds, 20)[0]
+    same &= np.array_equal(r._pool(view), pool_packed(view, r.pool))
+    rr = ratio(lambda: r._pool(view), lambda: pool_packed(view, r.pool), rounds, 20)[0]
 
     def render_strided():
         return r.unpack(
-            pool_strided(r._lut(lights).take(r.raster.code.ravel().take(r._indices(*pose))), r.pool)
+            pool_packed(r._lut(lights).take(r.raster.code.ravel().take(r._indices(*pose))), r.pool)
         )
 
     assert np.array_equal(render_strided(), r.render(*pose, lights))
@@ -549,6 +562,63 @@ def proto_pool(ds, rounds=7) -> float:
         f"{rv:.2f}x); bit-identical: {same}"
     )
     return rv
+
+
+def proto_rollout(p, ds, probs, steps: int = 60, rounds: int = 2) -> dict:
+    """(f) in the closed loop: evaluation episodes (``p.final_episodes`` batched, ``steps`` steps) of a BC
+    and a DA-IBC agent with the renderer's pooling as today and as ``pool_packed``, alternately; the time per
+    episode-step, the policy's share of it, and whether the episodes end identically."""
+    from ibc_tutorial.driving import bev
+    from ibc_tutorial.driving.rollout import rollout
+
+    today = bev.BEVRenderer._pool
+
+    def strided(self, codes):
+        return pool_packed(codes, self.pool)
+
+    out = {}
+    for method in ("bc", "da-ibc"):
+        torch.manual_seed(0)
+        agent = Agent(method, build_network(method, p).eval(), p, ds.actions, init_weights=probs)
+        runs = {"today": [], "strided": []}
+        for _ in range(rounds):
+            for name, pool in (("today", today), ("strided", strided)):
+                bev.BEVRenderer._pool = pool
+                policy, spent = agent.policy(0), [0.0]
+
+                def timed(obs, policy=policy, spent=spent):
+                    t = time.perf_counter()
+                    a = policy(obs)
+                    spent[0] += time.perf_counter() - t
+                    return a
+
+                t = time.perf_counter()
+                res = rollout(
+                    timed,
+                    "town02",
+                    p.final_episodes,
+                    steps,
+                    p.bev_size,
+                    seed=1000,
+                    record_xy=False,
+                    light_encoding=p.light_encoding,
+                    show_progress=False,
+                )
+                total = time.perf_counter() - t
+                n = sum(r.steps for r in res)
+                runs[name].append((total / n, spent[0] / total, [(r.steps, r.distance_m) for r in res]))
+        bev.BEVRenderer._pool = today
+        same = all(a[2] == b[2] for a, b in zip(runs["today"], runs["strided"], strict=True))
+        r = statistics.median(a[0] / b[0] for a, b in zip(runs["today"], runs["strided"], strict=True))
+        share_today = statistics.median(a[1] for a in runs["today"])
+        share_new = statistics.median(b[1] for b in runs["strided"])
+        out[method] = (r, share_today, share_new, same)
+        print(
+            f"  (f) {method} evaluation, {p.final_episodes} episodes x {steps} steps: strided pooling "
+            f"{r:.2f}x per episode-step; the policy's share {share_today:.0%} -> {share_new:.0%}; "
+            f"episodes identical: {same}"
+        )
+    return out
 
 
 def proto_sim_profile(steps=3000, top=10) -> None:
