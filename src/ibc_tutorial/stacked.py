@@ -6,8 +6,14 @@ head), the same data, the same settings. Trained one after the other, each step 
 is a chain of small convolutions and matrix products; stacked, the k agents' weights become one
 leading dimension (``torch.func.stack_module_state``) and one step of all k agents is one call of
 ``torch.func.vmap`` over that dimension: a grouped convolution instead of k convolutions, a
-batched matrix product instead of k (``benchmarks/bench_replicate.py --stacked`` measures what
-that buys on one CPU thread).
+batched matrix product instead of k.
+
+**Measured, and not used by the replication.** On one CPU thread (``benchmarks/bench_replicate.py
+--prototypes``, prototype (a)), a stacked step of k >= 2 laptop-preset agents costs *more* per agent than
+k separate steps (about 0.7x the throughput at k = 2, 0.5x at k = 5): the convolutions' work is already
+large per call (a 128-sample minibatch of 64 px views), so batching saves no overhead, and the grouped
+convolution's kernels are slower than the plain ones. The module stays as the measured prototype (and
+for a GPU, where k small models do not fill the device).
 
 What stays exactly as in k separate runs (``training.Trainer``, ``objectives.info_nce_objective``):
 
@@ -23,7 +29,7 @@ What stays exactly as in k separate runs (``training.Trainer``, ``objectives.inf
 What may differ: the floating-point rounding of the batched kernels (a grouped convolution and a
 batched matrix product may sum in another order than the k separate calls), so the weights agree
 with k separate runs to about 1e-6 after a step, not bit for bit (``tests/test_stacked.py`` checks
-the agreement, and ``bench_replicate.py --stacked`` prints the largest difference it sees).
+the agreement, and ``bench_replicate.py --prototypes`` prints the largest difference it sees).
 
 - ``StackedNetworks``: k networks as one set of stacked weights; ``embed``, ``energy_from_embedding``
   (for DFO over k agents' episodes at once), ``losses`` and ``unstack`` (back to k modules).
