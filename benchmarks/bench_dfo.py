@@ -42,7 +42,7 @@ from ibc_tutorial.policies import EnergyModel, MLPEncoder
 
 
 def plain_energy_fn(model: EnergyModel, z: torch.Tensor):
-    """The unsplit head: [z; y] concatenated for every candidate, then W [z; y] + b (same weights as ``model``)."""
+    """The unsplit head: [z; y] concatenated per candidate, then W [z; y] + b (the weights of ``model``)."""
     weight = torch.cat([model.obs_proj.weight, model.act_proj.weight], dim=1)  # (H, E + D): W = [W_z, W_a]
     bias = model.obs_proj.bias  # (H,)
 
@@ -51,6 +51,15 @@ def plain_energy_fn(model: EnergyModel, z: torch.Tensor):
         zy = torch.cat([z[:, None, :].expand(b, n, z.shape[1]), actions], dim=-1)  # (B, N, E + D)
         h = torch.relu(torch.nn.functional.linear(zy, weight, bias))  # (B, N, H)
         return model.head(h).squeeze(-1)
+
+    return energy
+
+
+def factorised_energy_fn(model: EnergyModel, z: torch.Tensor):
+    """``model.energy_from_embedding`` against the fixed embedding ``z`` (the library's own head)."""
+
+    def energy(actions: torch.Tensor) -> torch.Tensor:  # (B, N, D) -> (B, N)
+        return model.energy_from_embedding(z, actions)
 
     return energy
 
@@ -156,7 +165,7 @@ def main(argv=None) -> int:
 
     # Each decision embeds the observation once (as dfo_policy does), then runs Algorithm 1.
     heads = {
-        "factorised": lambda: lambda a, z=model.embed(obs): model.energy_from_embedding(z, a),
+        "factorised": lambda: factorised_energy_fn(model, model.embed(obs)),
         "plain concatenated": lambda: plain_energy_fn(model, model.embed(obs)),
         "factorised, fused (addmm, in-place ReLU)": lambda: fused_energy_fn(model, model.embed(obs)),
     }
@@ -175,12 +184,13 @@ def main(argv=None) -> int:
     heads["no head (DFO bookkeeping only)"] = lambda: lambda a: a.sum(-1)
 
     print(
-        f"DFO benchmark: {args.samples} samples x {args.iters} iterations, 2-D actions, embedding {args.embed}, "
-        f"head {args.layers} hidden layers of {args.hidden}"
+        f"DFO benchmark: {args.samples} samples x {args.iters} iterations, 2-D actions, "
+        f"embedding {args.embed}, head {args.layers} hidden layers of {args.hidden}"
     )
     print(
-        f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, torch {torch.__version__}, "
-        f"{torch.get_num_threads()} threads, load average before: {os.getloadavg()[0]:.2f}"
+        f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
+        f"torch {torch.__version__}, {torch.get_num_threads()} threads, "
+        f"load average before: {os.getloadavg()[0]:.2f}"
     )
     print(f"factorised, plain and fused heads agree: max |ΔE| = {max_diff:.1e}")
     enc = encoder_flops(encoder)
@@ -190,7 +200,10 @@ def main(argv=None) -> int:
         times = time_decisions(make, experts, weights, config, args.decisions)
         med = statistics.median(times)
         results[name] = med
-        line = f"{name:>42}: {1 / med:7.2f} decisions/s  ({med * 1e3:7.1f} ms per decision, best {min(times) * 1e3:.1f} ms)"
+        line = (
+            f"{name:>42}: {1 / med:7.2f} decisions/s  ({med * 1e3:7.1f} ms per decision, "
+            f"best {min(times) * 1e3:.1f} ms)"
+        )
         if not name.startswith("no head") and "bf16" not in name:
             per_cand, once = head_flops(model, factorised=name != "plain concatenated")
             flops = args.samples * args.iters * per_cand + once + enc

@@ -1,9 +1,17 @@
 #!/usr/bin/env python
 """Where the hour of ``ibc-tutorial replicate`` goes: each stage timed, then the shares of the whole.
 
-    python benchmarks/bench_replicate.py                         # the laptop preset, 1 thread, as one worker runs
+    python benchmarks/bench_replicate.py       # the laptop preset, 1 thread, as one worker runs
     python benchmarks/bench_replicate.py --preset laptop --data book/results/laptop/data/town01.npz
     python benchmarks/bench_replicate.py --train-steps 40 --eval-steps 300
+    python benchmarks/bench_replicate.py --limits --prototypes    # how far from the peak; what speed-ups buy
+
+With ``--limits`` / ``--prototypes`` (``replicate_limits.py`` beside this file, whose docstring says how
+the shares and ratios are measured), the run prints instead, on a rendered sample of the demonstrations
+(``--sample``): for every stage its FLOPs per unit, GFLOP/s and share of the peak of a GEMM and a
+convolution of its own shapes measured in the same run; and, for each candidate speed-up, the ratio of
+the current path's time to the candidate's, timed in alternation in this process. On a shared machine,
+read the ratios and shares, not the times.
 
 Each stage of a replication is timed on a sample of its work in this process, with one torch
 thread (as each of ``replicate --workers 2 --threads 1``'s workers), and scaled to the preset:
@@ -32,6 +40,7 @@ import platform
 import tempfile
 import time
 
+import numpy as np
 import torch
 
 from ibc_tutorial.driving.collect import CollectConfig, collect
@@ -61,6 +70,13 @@ def main() -> None:
     ap.add_argument("--eval-episodes", type=int, default=4, help="batched episodes timed per method")
     ap.add_argument("--eval-steps", type=int, default=200, help="steps of each timed episode")
     ap.add_argument("--workers", type=int, default=2, help="worker processes the wall-time estimate assumes")
+    ap.add_argument("--limits", action="store_true", help="print each stage's share of the machine's peak")
+    ap.add_argument("--prototypes", action="store_true", help="print the candidate speed-ups' ratios")
+    ap.add_argument(
+        "--sample", type=int, default=4096, help="demonstrations rendered for --limits/--prototypes"
+    )
+    ap.add_argument("--stacked-k", default="1,2,5,10", help="agents stacked in prototype (a)")
+    ap.add_argument("--reps", type=int, default=5, help="timing rounds (minimum or median over them)")
     args = ap.parse_args()
     torch.set_num_threads(1)
     os.environ.setdefault("TQDM_DISABLE", "1")
@@ -69,6 +85,9 @@ def main() -> None:
         f"preset {p.name}; {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, torch "
         f"{torch.__version__}, 1 thread; load average before: {os.getloadavg()[0]:.2f}"
     )
+
+    if args.limits or args.prototypes:
+        return limits_and_prototypes(p, args)
 
     rows = []  # (stage, unit, seconds per unit, units, total seconds, parallel)
     if args.data:
@@ -109,7 +128,9 @@ def main() -> None:
         rows.append((f"train {method}", "minibatch", per, n_steps, per * n_steps * len(p.seeds), True))
         agent = Agent(method, net.eval(), p, ds.actions, init_weights=probs if method == "da-ibc" else None)
         _, t = timed(
-            lambda: evaluate_agent(agent, "town02", args.eval_episodes, args.eval_steps, show_progress=False)
+            lambda agent=agent: evaluate_agent(
+                agent, "town02", args.eval_episodes, args.eval_steps, show_progress=False
+            )
         )
         per = t / (args.eval_episodes * args.eval_steps)  # seconds per episode-step, batched
         ep_steps = n_evals * p.eval_episodes * p.eval_steps + p.final_episodes * p.final_steps
@@ -144,10 +165,56 @@ def main() -> None:
             f"{stage:<22}{per * 1000:>10.2f} /{unit[:3]}{units:>12,.0f}{total:>11.0f}{total / serial:>8.1%}"
         )
     print(
-        f"\nserial total {serial / 60:.1f} min ({len(p.seeds)} seeds x {len(METHODS)} methods, {p.epochs} epochs, "
-        f"{n_evals} periodic evaluations); expected wall time with {args.workers} workers: {wall / 60:.1f} min"
+        f"\nserial total {serial / 60:.1f} min ({len(p.seeds)} seeds x {len(METHODS)} methods, "
+        f"{p.epochs} epochs, {n_evals} periodic evaluations); expected wall time with {args.workers} "
+        f"workers: {wall / 60:.1f} min"
     )
     print(f"load average after: {os.getloadavg()[0]:.2f}")
+
+
+def limits_and_prototypes(p, args) -> None:
+    """``--limits`` / ``--prototypes``: on ``--sample`` rendered demonstrations of ``--data`` (or a route)."""
+    import replicate_limits as rl  # beside this file
+
+    if args.data:
+        log = DemoLog.load(args.data)
+    else:
+        cfg = CollectConfig(
+            routes=1, seed=p.collect_seed, min_minutes=p.min_minutes, max_minutes=p.max_minutes
+        )
+        log = collect(cfg, show_progress=False)
+    keep = np.linspace(0, len(log) - 1, min(args.sample, len(log))).astype(int)
+    sub = DemoLog(
+        log.town,
+        **{
+            k: getattr(log, k)[keep]
+            for k in ("pose", "speed", "prev_action", "action", "executed", "lights", "lane")
+        },
+        episode=np.zeros(len(keep), dtype=np.int32),
+        step=np.arange(len(keep), dtype=np.int32),
+        meta=log.meta,
+    )  # one long "episode": the light history rows stay inside it
+    ds = DemoDataset(sub, bev_size=p.bev_size, cache=True, light_encoding=p.light_encoding)
+    probs = inverse_density_weights(ds.actions, p.kde_bandwidth)
+    print(f"{len(ds)} demonstrations rendered at {p.bev_size} px (of {len(log)})")
+    if args.limits:
+        rl.print_limits(rl.limits(p, ds, probs, episodes=p.final_episodes, reps=args.reps))
+    if args.prototypes:
+        print("\nprototypes: ratio = current path's time / candidate's time (> 1: the candidate is faster)")
+        ks = tuple(int(k) for k in args.stacked_k.split(","))
+        rl.stacked_gradient_agreement(p, ds, "ibc")
+        rl.proto_stacked(p, ds, probs, ks, "ibc", rounds=args.reps)
+        rl.proto_stacked(p, ds, probs, (1, 5), "bc", rounds=args.reps)
+        rl.proto_batched_eval(p, ds, probs, k=5, episodes=p.final_episodes, rounds=args.reps)
+        rl.proto_channels_last(p, ds, probs, rounds=args.reps)
+        rl.proto_unpack(p, ds, rounds=args.reps)
+        rl.proto_pool(ds, rounds=args.reps)
+        rl.proto_rollout(p, ds, probs)
+        rl.proto_sim_profile()
+    print(
+        f"load average after: {os.getloadavg()[0]:.2f} (2 cores; above ~1 the times are inflated, "
+        "not the ratios)"
+    )
 
 
 if __name__ == "__main__":

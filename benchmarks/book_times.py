@@ -76,13 +76,15 @@ def main() -> int:
         flag = "  > 90 s" if secs > LIMIT_S else ""
         rows.append((path, secs, status))
         print(
-            f"{str(path.relative_to(ROOT) if path.is_absolute() else path):45s} {secs:7.1f} s  {status}{flag}",
+            f"{str(path.relative_to(ROOT) if path.is_absolute() else path):45s} {secs:7.1f} s  "
+            f"{status}{flag}",
             flush=True,
         )
     cores = os.cpu_count()
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     print(
-        f"{len(rows)} notebooks, {sum(r[1] for r in rows):.1f} s in all; {cores} CPU cores, load average {load:.1f} at the end"
+        f"{len(rows)} notebooks, {sum(r[1] for r in rows):.1f} s in all; {cores} CPU cores, "
+        f"load average {load:.1f} at the end"
     )
     return 1 if any(r[2] != "ok" for r in rows) else 0
 
