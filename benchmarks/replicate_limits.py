@@ -32,6 +32,7 @@ from collections.abc import Callable
 
 import numpy as np
 import torch
+from stacked import StackedNetworks, StackedTrainer
 from torch.nn import functional as F
 from torch.utils.flop_counter import FlopCounterMode
 
@@ -43,7 +44,6 @@ from ibc_tutorial.experiments.agents.train import DemoBatches, objective_for
 from ibc_tutorial.negatives import ExpertSampler, UniformSampler
 from ibc_tutorial.optimizers.dfo import dfo
 from ibc_tutorial.policies.encoders import BEVStateEncoder
-from ibc_tutorial.stacked import StackedNetworks, StackedTrainer
 from ibc_tutorial.training import TrainConfig, Trainer
 
 CONV_OPS = ("convolution", "convolution_backward")

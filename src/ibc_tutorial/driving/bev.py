@@ -36,6 +36,7 @@ import numpy as np
 
 from ibc_tutorial.driving.lanes import ARM_LENGTH, DIRECTIONS, LANE_WIDTH, Lane
 from ibc_tutorial.driving.lights import STOP_LINE_LENGTH, STOP_LINE_THICKNESS
+from ibc_tutorial.driving.pooling import pool_packed
 from ibc_tutorial.driving.towns import TOWNS, Town, get_town
 from ibc_tutorial.utils import check_choice
 
@@ -300,16 +301,9 @@ class BEVRenderer:
         return self._pool(self._lut(lights).take(self.raster.code.ravel().take(self._indices(x, y, yaw))))
 
     def _pool(self, codes: np.ndarray) -> np.ndarray:
-        """(..., 192, 192) packed bytes -> (..., S, S): OR of the road bits, maximum of each light code."""
-        k = self.pool
-        if k == 1:
-            return codes
-        s = self.size
-        b = codes.reshape(*codes.shape[:-2], s, k, s, k)  # (..., S, k, S, k)
-        out = np.bitwise_or.reduce(np.bitwise_or.reduce(b & 3, axis=-1), axis=-2)  # (..., S, S) road bits
-        for shift in LIGHT_SHIFTS:
-            out |= ((b >> shift) & 3).max(axis=(-3, -1)) << shift
-        return out
+        """(..., 192, 192) packed bytes -> (..., S, S): OR of the road bits, maximum of each light code
+        (``driving.pooling.pool_packed``, as strided slices)."""
+        return pool_packed(codes, self.pool)
 
     def unpack(self, packed: np.ndarray) -> np.ndarray:
         """(..., S, S) packed bytes -> (..., 5, S, S) float32 channels: road 0/1, lights 0/0.3/0.6/1."""

@@ -1,7 +1,11 @@
-"""k networks as one stacked model (``ibc_tutorial.stacked``): the same losses, gradients, draws and Adam
-state as k separate ``training.Trainer`` runs, up to the rounding of the batched kernels."""
+"""k networks as one stacked model (``benchmarks/stacked.py``, a prototype that
+``benchmarks/bench_replicate.py --prototypes`` measures; not part of the library): the same
+losses, gradients, draws and Adam state as k separate ``training.Trainer`` runs, up to the
+rounding of the batched kernels."""
 
 import dataclasses
+import sys
+from pathlib import Path
 
 import pytest
 import torch
@@ -10,8 +14,10 @@ from ibc_tutorial.experiments.agents.agent import build_network
 from ibc_tutorial.experiments.agents.presets import TINY
 from ibc_tutorial.experiments.agents.train import objective_for
 from ibc_tutorial.negatives import ExpertSampler, UniformSampler
-from ibc_tutorial.stacked import StackedNetworks, StackedTrainer
 from ibc_tutorial.training import TrainConfig, Trainer, draw_minibatch
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+from stacked import StackedNetworks, StackedTrainer  # noqa: E402
 
 SEEDS = (0, 1, 2)
 
