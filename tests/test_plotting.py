@@ -208,6 +208,42 @@ def test_ingredients_figures():
     assert_labelled(ingredients.plot_populations_2d(e, axis, {"DFO": acts}, title="t"))
 
 
+def test_paired_gains_and_weights_figures():
+    gains = np.array([[0.1, -0.2], [0.3, 0.4], [0.0, 1.5]])  # (S=3, K=2)
+    fig = ingredients.plot_paired_gains(
+        ["a", "b"], gains, seeds=[0, 1, 2], xlabel="x", ylabel="gain", title="t"
+    )
+    ax = fig.axes[0]
+    medians = sorted(float(seg[0][1]) for c in ax.collections for seg in getattr(c, "get_segments", list)())
+    assert np.allclose([m for m in medians if m != 0.0], [0.1, 0.4])  # one median tick per column
+    assert sorted(t.get_text() for t in ax.texts) == [
+        "0",
+        "0",
+        "1",
+        "1",
+        "2",
+        "2",
+    ]  # every dot named by its seed
+    assert_labelled(fig, ylabel=True)
+    with pytest.raises(ValueError, match="gains"):
+        ingredients.plot_paired_gains(["a"], gains, ylabel="gain", title="t")
+    values = np.r_[np.full(10, -1.0), 0.5]  # ten samples in the first bin, one alone in another
+    w = np.r_[np.ones(10), 20.0]
+    fig = ingredients.plot_weights_by_value(
+        values, {"w": w}, edges=np.linspace(-1, 1, 5), xlabel="x", title="t"
+    )
+    ax = fig.axes[0]
+    assert ax.get_yscale() == "log"
+    means = ax.lines[0].get_ydata()
+    assert means[0] == 1.0 and np.isnan(means[3])  # the lone sample is a dot, not a bin's mean
+    assert 20.0 in ax.collections[0].get_offsets()[:, 1]
+    assert_labelled(fig)
+    with pytest.raises(ValueError, match="weights"):
+        ingredients.plot_weights_by_value(
+            values, {"w": w[:3]}, edges=np.linspace(-1, 1, 5), xlabel="x", title="t"
+        )
+
+
 def test_dfo_iteration_figure():
     g = torch.Generator().manual_seed(0)
     samples = [torch.rand(50, 1, generator=g) * 2 - 1 for _ in range(3)]
@@ -331,3 +367,19 @@ def test_agents_figures():
     ):
         with pytest.raises(ValueError):
             agents.plot_crossing_energies(steer=steer, **bad)
+
+
+def test_bev_channels_colour_bar_names_the_light_levels():
+    bev = np.zeros((5, 24, 24), dtype=np.float32)
+    bev[2:, 5, 5:10] = 0.6
+    fig = town.plot_bev_channels(bev, light_levels=(0.3, 0.6, 1.0), level_names=("green", "yellow", "red"))
+    bar = fig.axes[-1].child_axes[0]  # the colour bar beside the last light channel
+    labels = [t.get_text() for t in bar.get_yticklabels()]
+    assert labels == ["no line 0", "green 0.3", "yellow 0.6", "red 1"]
+    plt.close(fig)
+    fig = town.plot_bev_channels(bev)  # by default one level: a one-bit encoding
+    bar = fig.axes[-1].child_axes[0]  # the colour bar beside the last light channel
+    assert [t.get_text() for t in bar.get_yticklabels()] == ["no line 0", "light 1"]
+    plt.close(fig)
+    with pytest.raises(ValueError, match="level_names"):
+        town.plot_bev_channels(bev, light_levels=(0.3, 0.6, 1.0))

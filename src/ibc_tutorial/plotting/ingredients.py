@@ -23,7 +23,7 @@ from ibc_tutorial.plotting.multimodality import RolloutStyle, rollout_figure
 from ibc_tutorial.utils import check_int, check_positive
 
 
-# =========================================================================== chapter 04: DA-IBC counter-examples
+# ======================================================================= chapter 04: DA-IBC counter-examples
 def plot_counter_examples(
     expert_actions,
     situation,
@@ -47,7 +47,7 @@ def plot_counter_examples(
         axes[0].scatter(a[s == k, 0], a[s == k, 1], s=4, alpha=0.6, label=name)
     axes[0].set_title("expert actions")
     axes[0].legend(loc="lower left", fontsize=8, markerscale=3)
-    for ax, (name, neg) in zip(axes[1:], negatives.items()):
+    for ax, (name, neg) in zip(axes[1:], negatives.items(), strict=True):
         neg = as_array(neg)[:max_points]  # (K, 2)
         ax.scatter(a[:, 0], a[:, 1], s=3, color="0.75", label="expert actions")
         ax.scatter(neg[:, 0], neg[:, 1], s=3, color="tab:red", alpha=0.5, label="counter-examples")
@@ -174,7 +174,7 @@ def plot_kde_bandwidths(densities: dict, axis, actions=None, *, max_points: int 
     logs = {h: np.log10(np.maximum(as_array(d, float), 1e-6)) for h, d in densities.items()}
     vmax = max(v.max() for v in logs.values())
     vmin = vmax - 4
-    for ax, (h, v) in zip(axes, logs.items()):
+    for ax, (h, v) in zip(axes, logs.items(), strict=True):
         mesh = ax.pcolormesh(x, x, v.T, cmap="magma", shading="nearest", vmin=vmin, vmax=vmax)
         if actions is not None:
             a = as_array(actions, float)[:max_points]
@@ -237,6 +237,85 @@ def plot_inverse_weights(actions, weights, *, max_points: int = 4000):
     return finish(fig, True)
 
 
+def plot_paired_gains(categories, gains, *, ylabel: str, title: str, xlabel: str = "", seeds=None):
+    """Paired differences per seed: one column of dots per category, a tick at each column's median,
+    and a line at zero (no difference). Paired by seed, the spread between seeds is not mixed in.
+
+    Args:
+        categories: K column labels.
+        gains: (S, K) one difference per seed and category (e.g. NLL of run A - NLL of run B).
+        seeds: optional S seed labels, written over the dots (the dots of one column are spread by seed).
+    """
+    g = as_array(gains, float)
+    if g.ndim != 2 or g.shape[1] != len(categories):
+        raise ValueError(f"gains must be (S, {len(categories)}), one column per category, got {g.shape}")
+    fig, ax = plt.subplots(figsize=(6.4, 3.8))
+    x = np.arange(len(categories))
+    ax.axhline(0.0, color="k", lw=0.8)
+    spread = (np.arange(len(g)) - (len(g) - 1) / 2) * min(0.08, 0.6 / max(len(g), 1))  # (S,) one x per seed
+    for k in range(len(categories)):
+        ax.scatter(x[k] + spread, g[:, k], color=f"C{k}", s=28, zorder=3)
+        if seeds is not None:
+            for dx, s, v in zip(spread, seeds, g[:, k], strict=True):
+                ax.annotate(
+                    str(s), (x[k] + dx, v), xytext=(0, 5), textcoords="offset points", fontsize=7, ha="center"
+                )
+        ax.hlines(
+            np.median(g[:, k]),
+            x[k] - 0.3,
+            x[k] + 0.3,
+            colors="k",
+            lw=2,
+            label="median over seeds" if k == 0 else None,
+        )
+    ax.set_xticks(x)
+    ax.set_xticklabels(categories)
+    ax.set_xlim(-0.5, len(categories) - 0.3)
+    label_axes(ax, xlabel, ylabel, title, legend=True)
+    return finish(fig, True)
+
+
+def plot_weights_by_value(values, weights: dict, *, edges, xlabel: str, title: str, min_count: int = 5):
+    """Per-sample weights against one action component (log scale), with their mean per bin.
+
+    Every sample is a dot, so a single isolated sample shows as one dot, not as a bin's mean; the lines
+    join the bin means only of bins holding at least ``min_count`` samples.
+
+    Args:
+        values: (M,) the action component (e.g. acceleration) of each sample.
+        weights: {label: (M,) M·w per sample}.
+        edges: (B + 1,) bin edges over ``values``.
+    """
+    v = as_array(values, float)
+    e = as_array(edges, float)
+    check_int("min_count", min_count, minimum=1)
+    which = np.clip(np.searchsorted(e, v, side="right") - 1, 0, len(e) - 2)  # (M,) bin of each sample
+    counts = np.bincount(which, minlength=len(e) - 1)
+    centres = (e[:-1] + e[1:]) / 2
+    fig, ax = plt.subplots(figsize=(7.6, 4.0))
+    jitter = np.random.default_rng(0).uniform(-0.3, 0.3, len(v)) * (e[1] - e[0])  # only to spread dots
+    for i, (label, w) in enumerate(weights.items()):
+        w = as_array(w, float)
+        if w.shape != v.shape:
+            raise ValueError(f"weights[{label!r}] must have one value per sample, {v.shape}, got {w.shape}")
+        ax.scatter(v + jitter, w, s=4, alpha=0.25, color=f"C{i}")
+        means = np.array(
+            [w[which == b].mean() if counts[b] >= min_count else np.nan for b in range(len(counts))]
+        )
+        ax.plot(centres, means, marker="o", color=f"C{i}", label=f"{label}: bin mean")
+    ax.set_yscale("log")
+    ax.axhline(1.0, color="k", ls=":", lw=1, label="1 = uniform sampling")
+    label_axes(ax, xlabel, "M·w per sample (log scale)", title, legend=True, fontsize=8)
+    ax.text(
+        0.01,
+        0.02,
+        f"dots: every sample; lines: bins with at least {min_count} samples",
+        transform=ax.transAxes,
+        fontsize=8,
+    )
+    return finish(fig, True)
+
+
 # =========================================================================== chapter 06: DFO inference
 def draw_dfo_iteration(ax, trace, it: int, x, e, bins: int):
     """One iteration ``it`` (1-based) of a 1-D DFO ``trace`` on ``ax``: the population's histogram
@@ -293,7 +372,7 @@ def plot_dfo_iterations(
     fig, axes = plt.subplots(1, n, figsize=(3.0 * n, 3.3), sharey=True, squeeze=False)
     x = as_array(grid, float)
     e = as_array(energy, float)
-    for ax, it in zip(axes[0], its):
+    for ax, it in zip(axes[0], its, strict=True):
         energy_ax = draw_dfo_iteration(ax, trace, it, x, e, bins)
     axes[0, 0].set_ylabel("share of samples per bin")
     energy_ax.set_ylabel("energy E(x, y) (nats, red)", color="C3")
@@ -336,7 +415,7 @@ def plot_populations_2d(
     """
     n = check_panels("populations", populations)
     fig, axes = plt.subplots(1, n, figsize=(4.4 * n, 3.9), sharex=True, sharey=True, squeeze=False)
-    for ax, (label, pop) in zip(axes[0], populations.items()):
+    for ax, (label, pop) in zip(axes[0], populations.items(), strict=True):
         plot_energy_2d(energies, axis, title=label, modes=modes, ax=ax)
         p = as_array(pop, float)[:max_points]  # (N, 2)
         ax.scatter(p[:, 0], p[:, 1], s=4, color="r", alpha=0.5, label="samples")

@@ -73,7 +73,7 @@ def plot_towns(towns, stop_flags: dict | None = None):
     fig, axes = plt.subplots(
         1, len(towns), figsize=(11, 5.0), gridspec_kw={"width_ratios": widths}, squeeze=False
     )
-    for ax, town in zip(axes[0], towns):
+    for ax, town in zip(axes[0], towns, strict=True):
         flags = None if stop_flags is None else stop_flags[town.name]
         w, h = town.size
         n_red = "" if flags is None else f", {int(np.sum(flags))} of {town.n_lights} lights red or yellow"
@@ -158,8 +158,27 @@ def plot_step_and_turn(t, speed, reference, trajectories: dict, *, radii: dict |
     return finish(fig, True)
 
 
-def plot_bev_channels(bev, small=None, *, title: str = "The bird's-eye view of one moment"):
-    """The paper's Fig. 1(b-d): the five channels in colour with the car (and the small view), then each channel."""
+def plot_bev_channels(
+    bev,
+    small=None,
+    *,
+    light_levels=None,
+    level_names=None,
+    title: str = "The bird's-eye view of one moment",
+):
+    """After the paper's Fig. 1(b-d): the five channels in colour with the car (and the small view), then
+    each channel in grey levels, with a colour bar that names the light channels' levels.
+
+    Args:
+        bev: (5, S, S) the view; small: optional (5, s, s) the same field at a smaller size.
+        light_levels: the values the light channels take for a drawn line, e.g. (0.3, 0.6, 1.0); by
+            default one level, 1 (a one-bit encoding).
+        level_names: a name per level, e.g. ("green", "yellow", "red").
+    """
+    if (light_levels is None) != (level_names is None) or (
+        light_levels is not None and len(light_levels) != len(level_names)
+    ):
+        raise ValueError("light_levels and level_names must be given together, one name per level")
     fig = plt.figure(figsize=(11, 7.4))
     gs = fig.add_gridspec(2, 5, height_ratios=[1.75, 1])
     top = fig.add_subplot(gs[0, :3])
@@ -170,12 +189,22 @@ def plot_bev_channels(bev, small=None, *, title: str = "The bird's-eye view of o
         right = fig.add_subplot(gs[0, 3:])
         draw_bev(right, small)
         right.set_title(f"the same field at {small.shape[1]}x{small.shape[2]}", fontsize=10)
+    light_axes = []  # the axes of channels 2-4
     for c in range(5):
         ax = fig.add_subplot(gs[1, c])
-        ax.imshow(bev[c], cmap="gray", vmin=0, vmax=1, interpolation="nearest")
+        image = ax.imshow(bev[c], cmap="gray", vmin=0, vmax=1, interpolation="nearest")
         ax.set_xticks([])
         ax.set_yticks([])
         ax.set_title(f"{c}: {CHANNELS[c]}", fontsize=9)
+        if c >= 2:
+            light_axes.append(ax)
+    # the grey levels of the light channels: which value stands for which light state
+    levels = [0.0, *light_levels] if light_levels is not None else [0.0, 1.0]
+    names = ["no line", *level_names] if level_names is not None else ["no line", "light"]
+    cax = light_axes[-1].inset_axes([1.06, 0.0, 0.07, 1.0])  # beside the last light channel
+    bar = fig.colorbar(image, cax=cax, ticks=levels)
+    bar.ax.set_yticklabels([f"{name} {v:g}" for name, v in zip(names, levels, strict=True)], fontsize=8)
+    bar.set_label("light channels: value", fontsize=8)
     return finish(fig, True, title=title)
 
 
@@ -271,7 +300,7 @@ def plot_action_histograms(actions, *, title: str = "The expert's actions in the
     """Histograms of steering and acceleration (log counts)."""
     actions = as_array(actions)  # (N, 2)
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.5))
-    for ax, k, name in zip(axes, range(2), (STEER_LABEL, ACCEL_LABEL)):
+    for ax, k, name in zip(axes, range(2), (STEER_LABEL, ACCEL_LABEL), strict=True):
         ax.hist(actions[:, k], bins=np.linspace(-1, 1, 81), color=f"C{k}")
         ax.set_yscale("log")
         ax.set_xlabel(name)
@@ -284,19 +313,22 @@ def plot_exit_map(town, counts: dict, *, title: str = "Exits taken at each junct
     exit (L left, S straight, R right); approaches left by two different exits are boxed in red.
 
     ``counts``: ``{approach: {"left": n, "straight": n, "right": n}}`` (``driving.analysis.exit_counts``)."""
-    fig, ax = _map_figure(town, (8.0, 6.8), title)
+    fig, ax = _map_figure(town, (11.0, 9.4), title)
     letters = {"left": "L", "straight": "S", "right": "R"}
     for ap_id, c in counts.items():
         ap = town.approaches[ap_id]
-        back = -ap.direction  # place the label on the approach, 14 m before the junction
-        p = np.asarray(ap.entry) + back * 14.0
+        # place the label 18 m before the junction and 4 m to the right of the approaching lane, so that
+        # the labels of the two lanes of one short road do not cover each other
+        d = np.asarray(ap.direction, dtype=float)
+        p = np.asarray(ap.entry) - d * 18.0 + np.array([d[1], -d[0]]) * 4.0
         text = " ".join(f"{letters[k]}{c[k]}" for k in ("left", "straight", "right") if c.get(k))
         multi = sum(n > 0 for n in c.values()) > 1
         ax.text(
             p[0],
             p[1],
             text,
-            fontsize=6.5,
+            fontsize=9.5,
+            fontweight="bold" if multi else "normal",
             ha="center",
             va="center",
             bbox=dict(
@@ -310,7 +342,7 @@ def plot_bev_samples(bevs, actions, states, *, title: str = "Samples of the Data
     """A row of BEVs (N, 5, S, S) with their state and the expert's action."""
     n = check_panels("bevs", bevs)
     fig, axes = plt.subplots(1, n, figsize=(2.6 * n, 3.4), squeeze=False)
-    for ax, bev, a, s in zip(axes[0], bevs, actions, states):
+    for ax, bev, a, s in zip(axes[0], bevs, actions, states, strict=True):
         draw_bev(ax, bev)
         ax.set_title(f"v {s[0]:.1f} m/s\nsteer {a[0]:+.2f}, acc {a[1]:+.2f}", fontsize=11)
     return finish(fig, True, title=title)
