@@ -19,13 +19,7 @@ import math
 
 import torch
 
-from ibc_tutorial.exercises.core import Feedback, correct, hint, run_check
-
-
-def _close(a: torch.Tensor, b: torch.Tensor, rtol: float = 1e-3, atol: float = 1e-3) -> bool:
-    return bool(torch.isfinite(a).all()) and bool(
-        torch.allclose(a.double(), b.double(), rtol=rtol, atol=atol)
-    )
+from ibc_tutorial.exercises.core import Feedback, close, correct, hint, run_check
 
 
 def _scalar(out, name: str) -> torch.Tensor | Feedback:
@@ -76,7 +70,11 @@ def check_beta_nll(fn) -> Feedback:
                 .sum(1)
                 .mean()
             )
-            if isinstance(out_pos, torch.Tensor) and out_pos.ndim == 0 and _close(out_pos, unscaled):
+            if (
+                isinstance(out_pos, torch.Tensor)
+                and out_pos.ndim == 0
+                and close(out_pos, unscaled, rtol=1e-3, atol=1e-3)
+            ):
                 return hint(
                     "your loss is NaN or infinite for actions inside (-1, 1): the Beta density lives on [0, 1], "
                     "and eq. 1 maps each action to y' = (y + 1)/2 before scoring it."
@@ -84,7 +82,7 @@ def check_beta_nll(fn) -> Feedback:
             return hint(
                 "your loss is NaN or infinite for actions inside (-1, 1): check every log, and that the actions are mapped into [0, 1]."
             )
-        if not _close(out, ref):
+        if not close(out, ref, rtol=1e-3, atol=1e-3):
             mistakes = [
                 (
                     log_f.sum(1).mean(),
@@ -142,7 +140,7 @@ def check_beta_nll(fn) -> Feedback:
                 )
             )
             for value, what in mistakes:
-                if _close(out, value):
+                if close(out, value, rtol=1e-3, atol=1e-3):
                     return hint(f"close, but check {what}")
             return hint(
                 f"your loss is {float(out):.4g} on a random test batch where eq. 1 gives {float(ref):.4g}; compare your formula with the Beta density term by term."
@@ -153,7 +151,7 @@ def check_beta_nll(fn) -> Feedback:
             out2 = _scalar(fn(a2, b2_, y2), "beta_nll")
             if isinstance(out2, Feedback):
                 return out2
-            if not _close(out2, -_beta_log_f(a2, b2_, y2).sum(1).mean()):
+            if not close(out2, -_beta_log_f(a2, b2_, y2).sum(1).mean(), rtol=1e-3, atol=1e-3):
                 return hint(
                     f"correct on a (32, 2) batch but not on a ({len(y2)}, {y2.shape[1]}) one: avoid hard-coding the batch size or the number of action dimensions."
                 )
@@ -210,7 +208,7 @@ def check_mdn_nll(fn) -> Feedback:
         if isinstance(out, Feedback):
             return out
         ref = -_mixture(logits, means, stds).log_prob(actions.double()).mean()
-        if not _close(out, ref):
+        if not close(out, ref, rtol=1e-3, atol=1e-3):
             if not torch.isfinite(out):
                 return hint(
                     "your loss is NaN or infinite on an ordinary batch: check the logs (of the weights, of the densities)."
@@ -272,7 +270,7 @@ def check_mdn_nll(fn) -> Feedback:
                 )
             )
             for value, what in mistakes:
-                if _close(out, value):
+                if close(out, value, rtol=1e-3, atol=1e-3):
                     return hint(f"close, but check {what}")
             return hint(
                 f"your loss is {float(out):.4g} on a random test batch where the mixture gives {float(ref):.4g}; compare your formula with log Σ_k π_k N(y; μ_k, σ_k²) term by term."
@@ -282,7 +280,7 @@ def check_mdn_nll(fn) -> Feedback:
             out2 = _scalar(fn(*args), "mdn_nll")
             if isinstance(out2, Feedback):
                 return out2
-            if not _close(out2, -_mixture(*args[:3]).log_prob(args[3].double()).mean()):
+            if not close(out2, -_mixture(*args[:3]).log_prob(args[3].double()).mean(), rtol=1e-3, atol=1e-3):
                 return hint(
                     f"correct for K = 3 components and D = 2 action dimensions but not for K = {k}, D = {d}: avoid hard-coding the sizes."
                 )
@@ -293,7 +291,7 @@ def check_mdn_nll(fn) -> Feedback:
         if isinstance(out3, Feedback):
             return out3
         ref3 = -_mixture(logits, far_means, stds).log_prob(actions.double()).mean()
-        if not _close(out3, ref3, rtol=1e-3, atol=1e-2):
+        if not close(out3, ref3, rtol=1e-3, atol=1e-2):
             return hint(
                 "right on ordinary inputs, but not when the action is far from every component (at the start of "
                 "training it often is): the densities underflow to 0. Stay in log space (torch.logsumexp)."

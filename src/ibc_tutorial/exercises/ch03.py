@@ -22,18 +22,8 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from ibc_tutorial.exercises.core import Feedback, correct, hint, run_check
+from ibc_tutorial.exercises.core import Feedback, close, correct, hint, run_check
 from ibc_tutorial.toy import TreeConfig, TreeWorld
-
-
-def _close(a, b, rtol: float = 1e-4, atol: float = 1e-4) -> bool:
-    a = torch.as_tensor(a, dtype=torch.float64)
-    b = torch.as_tensor(b, dtype=torch.float64)
-    return (
-        a.shape == b.shape
-        and bool(torch.isfinite(a).all())
-        and bool(torch.allclose(a, b, rtol=rtol, atol=atol))
-    )
 
 
 def _as_scalar(out, name: str) -> torch.Tensor | Feedback:
@@ -76,7 +66,7 @@ def check_info_nce(fn) -> Feedback:
             return out
         terms = _nce_terms(pos, neg)
         ref = terms.mean()
-        if not _close(out, ref):
+        if not close(out, ref):
             flipped = _nce_terms(-pos, -neg)
             logits = torch.cat([-pos[:, None], -neg], 1).double()
             mistakes = [
@@ -99,7 +89,7 @@ def check_info_nce(fn) -> Feedback:
                 ),
             ]
             for value, what in mistakes:
-                if _close(out, value):
+                if close(out, value):
                     return hint(f"close, but check {what}")
             return hint(
                 f"your loss is {float(out):.4g} on a test batch where eqs. 2-3 give {float(ref):.4g}; write −log p̃ for one sample by hand and compare."
@@ -109,12 +99,12 @@ def check_info_nce(fn) -> Feedback:
         if isinstance(out_w, Feedback):
             return out_w
         ref_w = (w.double() * terms).mean()
-        if not _close(out_w, ref_w):
-            if _close(out_w, ref):
+        if not close(out_w, ref_w):
+            if close(out_w, ref):
                 return hint(
                     "your loss ignores `weights`: eq. 5 multiplies each sample's −log p̃ by its weight w_i."
                 )
-            if _close(out_w, (w.double() * terms).sum() / w.double().sum()):
+            if close(out_w, (w.double() * terms).sum() / w.double().sum()):
                 return hint(
                     "with weights, eq. 5 multiplies each term by w_i and then averages over the batch as before; it does not divide by the sum of the weights."
                 )
@@ -126,7 +116,7 @@ def check_info_nce(fn) -> Feedback:
         out2 = _as_scalar(fn(pos2, neg2), "info_nce")
         if isinstance(out2, Feedback):
             return out2
-        if not _close(out2, _nce_terms(pos2, neg2).mean()):
+        if not close(out2, _nce_terms(pos2, neg2).mean()):
             return hint(
                 "correct on a (16, 9) batch but not on a (5, 3) one: avoid hard-coding the batch size or the number of counter-examples."
             )
@@ -137,7 +127,7 @@ def check_info_nce(fn) -> Feedback:
             return hint(
                 "your loss is NaN or infinite when the energies are around 1000: e^(−1000) underflows to 0. Compute log p̃ with a log-sum-exp (torch.logsumexp or log_softmax)."
             )
-        if not _close(out3, _nce_terms(big_pos, big_neg).mean(), rtol=1e-3, atol=1e-2):
+        if not close(out3, _nce_terms(big_pos, big_neg).mean(), rtol=1e-3, atol=1e-2):
             return hint(
                 "your loss is finite but wrong when the energies are around 1000: compute log p̃ with a log-sum-exp instead of exponentiating."
             )
@@ -173,15 +163,15 @@ def check_soft_targets(fn) -> Feedback:
                 f"soft_targets must return one row of K target probabilities per sample, shape (3, 21) here; got {tuple(out.shape)}."
             )
         ref = _soft_ref(cand, gt, t)
-        if not _close(out, ref, rtol=1e-4, atol=1e-6):
+        if not close(out, ref, rtol=1e-4, atol=1e-6):
             sq = ((cand[None, :, :] - gt[:, None, :]) ** 2).sum(-1).double()
-            if _close(out, torch.softmax(sq / t, 1), atol=1e-6):
+            if close(out, torch.softmax(sq / t, 1), atol=1e-6):
                 return hint(
                     "your targets put the most weight on the candidate *farthest* from the ground truth: that is the sign as printed in the transcription. The weight should fall with distance."
                 )
-            if _close(out, torch.softmax(-sq.sqrt() / t, 1), atol=1e-6):
+            if close(out, torch.softmax(-sq.sqrt() / t, 1), atol=1e-6):
                 return hint("eq. 5 uses the *squared* distance (a − a_GT)², not the distance.")
-            if _close(out, torch.softmax(-sq * t, 1), atol=1e-6):
+            if close(out, torch.softmax(-sq * t, 1), atol=1e-6):
                 return hint(
                     "check how the temperature enters: divide by T (a smaller T gives sharper targets)."
                 )
@@ -193,7 +183,7 @@ def check_soft_targets(fn) -> Feedback:
         cand2 = torch.tensor([[0.0, 0.0], [0.5, 0.5], [-0.5, 0.2], [1.0, -1.0]])
         gt2 = torch.tensor([[0.4, 0.4], [0.0, 0.1]])
         out2 = fn(cand2, gt2, 0.5)
-        if not isinstance(out2, torch.Tensor) or not _close(out2, _soft_ref(cand2, gt2, 0.5), atol=1e-6):
+        if not isinstance(out2, torch.Tensor) or not close(out2, _soft_ref(cand2, gt2, 0.5), atol=1e-6):
             return hint(
                 "correct for 1-D actions but not for 2-D ones: for D > 1, (a − a_GT)² is the squared Euclidean distance, summed over the action dimensions."
             )

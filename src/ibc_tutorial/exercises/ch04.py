@@ -19,7 +19,7 @@ import math
 
 import torch
 
-from ibc_tutorial.exercises.core import Feedback, correct, hint, run_check
+from ibc_tutorial.exercises.core import Feedback, close, correct, hint, run_check
 
 _EXPERT = torch.tensor([[0.0, 0.4], [0.1, 0.5], [-0.5, 0.3], [0.4, -0.6], [0.0, 0.45]])
 
@@ -171,7 +171,7 @@ def check_grid_nll(fn) -> Feedback:
         if tuple(out.shape) != (6,):
             return hint(f"grid_nll must return shape (B,) = (6,), got {tuple(out.shape)}.")
         ref = _nll_ref(pos, grid_e, cell)
-        if not _close(out, ref):
+        if not close(out, ref):
             lse = torch.logsumexp(-grid_e.double(), 1)
             mistakes = [
                 (
@@ -196,13 +196,13 @@ def check_grid_nll(fn) -> Feedback:
                 ),
             ]
             for value, what in mistakes:
-                if _close(out, value):
+                if close(out, value):
                     return hint(f"close, but check {what}")
             return hint(
                 f"your NLL of the first sample is {float(out[0]):.4g} where −log p = E + log Σ e^(−E_g) + log ΔA gives {float(ref[0]):.4g}."
             )
         out2 = fn(pos + 1000, grid_e + 1000, cell)
-        if not isinstance(out2, torch.Tensor) or not _close(out2, ref, rtol=1e-3, atol=1e-2):
+        if not isinstance(out2, torch.Tensor) or not close(out2, ref, rtol=1e-3, atol=1e-2):
             return hint(
                 "your NLL breaks down when the energies are around 1000 (e^(−1000) underflows): use torch.logsumexp."
             )
@@ -211,16 +211,6 @@ def check_grid_nll(fn) -> Feedback:
         )
 
     return run_check(check, "`grid_nll`")
-
-
-def _close(a, b, rtol: float = 1e-4, atol: float = 1e-4) -> bool:
-    a = torch.as_tensor(a, dtype=torch.float64)
-    b = torch.as_tensor(b, dtype=torch.float64)
-    return (
-        a.shape == b.shape
-        and bool(torch.isfinite(a).all())
-        and bool(torch.allclose(a, b, rtol=rtol, atol=atol))
-    )
 
 
 # --------------------------------------------------------------------------- the tilt of a DA-IBC landscape
@@ -260,20 +250,20 @@ def check_predicted_shares(fn) -> Feedback:
         if not torch.isfinite(out).all():
             return hint("predicted_shares returned NaN or infinite values.")
         ref = _normalise(1 / _q(modes, actions, 0.1))
-        if not _close(out, ref, rtol=1e-3, atol=1e-4):
-            if _close(out, torch.full((3,), 1 / 3, dtype=torch.float64)):
+        if not close(out, ref, rtol=1e-3, atol=1e-4):
+            if close(out, torch.full((3,), 1 / 3, dtype=torch.float64)):
                 return hint(
                     "one third each is what the expert does, p(y|x). But the model does not learn p(y|x): with counter-examples drawn from q, InfoNCE is best served by e^(−E) ∝ p(y|x) / q(y)."
                 )
-            if _close(out, _normalise(_q(modes, actions, 0.1)), rtol=1e-3, atol=1e-4):
+            if close(out, _normalise(_q(modes, actions, 0.1)), rtol=1e-3, atol=1e-4):
                 return hint(
                     "your shares grow with q: the wrong way round. A counter-example pushes the energy *up* where it lands, so where counter-examples are common the model puts *less* mass."
                 )
-            if _close(out, _normalise(1 / _q(modes, actions, 0.2)), rtol=1e-3, atol=1e-4):
+            if close(out, _normalise(1 / _q(modes, actions, 0.2)), rtol=1e-3, atol=1e-4):
                 return hint(
                     "q is the density of the counter-examples: expert actions plus N(0, σ²I), a KDE with bandwidth σ, not chapter 05's 0.2."
                 )
-            if _close(out / out.sum(), ref, rtol=1e-3, atol=1e-4):
+            if close(out / out.sum(), ref, rtol=1e-3, atol=1e-4):
                 return hint(
                     "the proportions are right; make the shares sum to 1 (they are shares of the mass near the K actions)."
                 )
@@ -281,7 +271,7 @@ def check_predicted_shares(fn) -> Feedback:
                 f"your shares are {[round(v, 3) for v in out.tolist()]}: compute q at each valid action (the expert actions blurred by σ), then share ∝ 1/q."
             )
         out2 = fn(modes.clone(), actions.clone(), 0.3)
-        if not isinstance(out2, torch.Tensor) or not _close(
+        if not isinstance(out2, torch.Tensor) or not close(
             out2.detach().double(), _normalise(1 / _q(modes, actions, 0.3)), rtol=1e-3, atol=1e-4
         ):
             return hint("right for σ = 0.1 but not for σ = 0.3: use the σ you are given.")

@@ -16,7 +16,7 @@ import math
 
 import torch
 
-from ibc_tutorial.exercises.core import Feedback, correct, hint, run_check, tensor_answer
+from ibc_tutorial.exercises.core import Feedback, close, correct, hint, run_check, tensor_answer
 from ibc_tutorial.kde import inverse_density_weights
 
 
@@ -24,10 +24,6 @@ def _tensor(out, name: str, shape: tuple) -> torch.Tensor | Feedback:
     """The answer as float64, or a hint (``core.tensor_answer``)."""
     out = tensor_answer(out, name, shape, " (one value per point)")
     return out if isinstance(out, Feedback) else out.to(torch.float64)
-
-
-def _close(a: torch.Tensor, b: torch.Tensor, rtol: float = 1e-4) -> bool:
-    return bool(torch.allclose(a.double(), b.double(), rtol=rtol, atol=1e-12))
 
 
 # --------------------------------------------------------------------------- eq. 4 by hand
@@ -68,7 +64,7 @@ def check_kde_1d(fn) -> Feedback:
         if isinstance(out, Feedback):
             return out
         ref = _kde_ref(x, data, h)
-        if not _close(out, ref):
+        if not close(out, ref, atol=1e-12):
             mistakes = [
                 (
                     _kde_ref(x, data, h, divide_h=False),
@@ -92,7 +88,7 @@ def check_kde_1d(fn) -> Feedback:
                 ),
             ]
             for value, what in mistakes:
-                if _close(out, value):
+                if close(out, value, atol=1e-12):
                     return hint(f"close, but check {what}")
             i = int((out - ref).abs().argmax())
             return hint(
@@ -103,7 +99,7 @@ def check_kde_1d(fn) -> Feedback:
         out2 = _tensor(fn(x2, data2, 0.5), "kde_1d", (2,))
         if isinstance(out2, Feedback):
             return out2
-        if not _close(out2, _kde_ref(x2, data2, 0.5)):
+        if not close(out2, _kde_ref(x2, data2, 0.5), atol=1e-12):
             return hint(
                 "correct for h = 0.2 and 48 data points, but not for h = 0.5 and 3: avoid hard-coding the bandwidth or the number of points."
             )
@@ -140,16 +136,16 @@ def check_inverse_weights(fn) -> Feedback:
             return out
         g = _density(actions, 0.2)
         ref = (1 / g) / (1 / g).sum()
-        if not _close(out, ref, rtol=1e-3):
+        if not close(out, ref, rtol=1e-3, atol=1e-12):
             if abs(float(out.sum()) - 1) > 1e-3:
-                if _close(out / out.sum(), ref, rtol=1e-3):
+                if close(out / out.sum(), ref, rtol=1e-3, atol=1e-12):
                     return hint(
                         "the weights are proportional to the right values, but they must sum to 1 (they become sampling probabilities)."
                     )
                 return hint(
                     f"your weights sum to {float(out.sum()):.4g}: normalise them so that they sum to 1."
                 )
-            if _close(out, g / g.sum(), rtol=1e-3):
+            if close(out, g / g.sum(), rtol=1e-3, atol=1e-12):
                 return hint(
                     "your weights grow with the density: eq. 5 gives *rare* actions (low density) the large weights."
                 )
@@ -164,7 +160,7 @@ def check_inverse_weights(fn) -> Feedback:
         if isinstance(out2, Feedback):
             return out2
         g2 = _density(actions, 0.5)
-        if not _close(out2, (1 / g2) / (1 / g2).sum(), rtol=1e-3):
+        if not close(out2, (1 / g2) / (1 / g2).sum(), rtol=1e-3, atol=1e-12):
             return hint("correct for h = 0.2 but not for h = 0.5: use the bandwidth you are given.")
         return correct("Your weights are w_i ∝ 1/ĝ(y_i), summing to 1: rare actions weigh more.")
 

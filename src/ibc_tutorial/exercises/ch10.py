@@ -19,12 +19,8 @@ import math
 
 import numpy as np
 
-from ibc_tutorial.exercises.core import Feedback, correct, hint, number_answer, run_check
+from ibc_tutorial.exercises.core import Feedback, close, correct, hint, number_answer, run_check
 from ibc_tutorial.metrics import crashes_per_km, swerve_rate, whiteness
-
-
-def _close(a: float, b: float) -> bool:
-    return math.isclose(a, b, rel_tol=1e-6, abs_tol=1e-9)
 
 
 # --------------------------------------------------------------------------- 1. swerve rate
@@ -74,7 +70,7 @@ def check_swerve_rate(fn) -> Feedback:
             if isinstance(out, Feedback):
                 return out
             ref = swerve_rate(offsets - offsets[:, :1], slight=slight, clear=clear)
-            if _close(out, ref):
+            if close(out, ref, rtol=1e-6, atol=1e-9):
                 continue
             mistakes = {  # a mistake is named only in a case where no other mistake gives the same answer
                 "relative": _swerve_ref(offsets, slight, clear, relative=False),
@@ -82,7 +78,7 @@ def check_swerve_rate(fn) -> Feedback:
                 "peak": _swerve_ref(offsets, slight, clear, peak=False),
                 "half": _swerve_ref(offsets, slight, clear, half=1.0),
             }
-            made = [k for k, v in mistakes.items() if _close(out, v)]
+            made = [k for k, v in mistakes.items() if close(out, v, rtol=1e-6, atol=1e-9)]
             if len(made) == 1:
                 return hint(SWERVE_HINTS[made[0]])
             if not made:
@@ -125,25 +121,27 @@ def check_command_whiteness(fn) -> Feedback:
             if isinstance(out, Feedback):
                 return out
             ref = _w_pooled(segments, dt)
-            if _close(out, ref):
+            if close(out, ref, rtol=1e-6, atol=1e-9):
                 continue
             joined = np.concatenate(segments)
-            if _close(out, whiteness(joined, dt)):
+            if close(out, whiteness(joined, dt), rtol=1e-6, atol=1e-9):
                 return hint(
                     "a restart puts the car somewhere else: the change of command across it is not a change "
                     "the model made. Take differences within each stretch only."
                 )
             per = [whiteness(s, dt) for s in segments if len(s) >= 2]
-            if _close(out, float(np.mean(per))):
+            if close(out, float(np.mean(per)), rtol=1e-6, atol=1e-9):
                 return hint(
                     "the stretches have different lengths: pool their squared rates of change over all the "
                     "changes (eq. 2's D) instead of averaging one W per stretch."
                 )
-            if _close(out, ref * dt) or _close(out, ref * dt * dt):
+            if close(out, ref * dt, rtol=1e-6, atol=1e-9) or close(out, ref * dt * dt, rtol=1e-6, atol=1e-9):
                 return hint("eq. 2 divides each change by the time between decisions, δt.")
-            if _close(out, ref * ref):
+            if close(out, ref * ref, rtol=1e-6, atol=1e-9):
                 return hint("eq. 2 is a root mean square: take the square root.")
-            if _close(out, ref * 250.0) or _close(out, ref * math.degrees(0.6)):
+            if close(out, ref * 250.0, rtol=1e-6, atol=1e-9) or close(
+                out, ref * math.degrees(0.6), rtol=1e-6, atol=1e-9
+            ):
                 return hint(
                     "the exercise asks for the book's unit, steer per second (1/s), not degrees per second."
                 )
@@ -178,16 +176,16 @@ def check_crashes_per_km(fn) -> Feedback:
             c = [r["crashes"] for r in runs]
             d = [r["distance_m"] for r in runs]
             ref = crashes_per_km(c, d)
-            if _close(out, ref):
+            if close(out, ref, rtol=1e-6, atol=1e-9):
                 continue
-            if _close(out, float(np.mean([ci / (di / 1000) for ci, di in zip(c, d)]))):
+            if close(out, float(np.mean([ci / (di / 1000) for ci, di in zip(c, d)])), rtol=1e-6, atol=1e-9):
                 return hint(
                     "a short run would weigh as much as a long one: pool the crashes and the distances of "
                     "all runs first, then divide."
                 )
-            if _close(out, ref / 1000) or _close(out, ref * 1000):
+            if close(out, ref / 1000, rtol=1e-6, atol=1e-9) or close(out, ref * 1000, rtol=1e-6, atol=1e-9):
                 return hint("the distances are in metres; the rate is per kilometre.")
-            if _close(out, float(sum(c))):
+            if close(out, float(sum(c)), rtol=1e-6, atol=1e-9):
                 return hint(
                     "a count alone does not compare routes of different lengths: divide by the distance."
                 )
