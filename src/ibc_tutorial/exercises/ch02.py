@@ -44,6 +44,68 @@ def _beta_inputs(seed: int, b: int = 32, d: int = 2):
     return alpha, beta, actions
 
 
+def _near_bound_inputs():
+    """(8, 2) actions, two of them at ±0.97 (y' = 0.015 or 0.985, inside the bounds), with
+    concentrations in [1.5, 2.5]. A clamp of y' wider than about 0.015 changes the loss by more than
+    the check's 4e-3; a shift log(y' + 1e-4) changes it by less."""
+    gen = torch.Generator().manual_seed(4)
+    alpha = torch.empty(8, 2).uniform_(1.5, 2.5, generator=gen)
+    beta = torch.empty(8, 2).uniform_(1.5, 2.5, generator=gen)
+    actions = torch.empty(8, 2).uniform_(-0.8, 0.8, generator=gen)
+    actions[:2, 0] = torch.tensor([-0.97, 0.97])
+    return alpha, beta, actions
+
+
+def _bound_inputs():
+    """(8, 2) actions, half of the rows with both dimensions at exactly -1 or +1, concentrations in
+    [1.5, 3] (> 1: every term at a bound grows as y' nears it, so the loss rises as the margin shrinks)."""
+    gen = torch.Generator().manual_seed(3)
+    alpha = torch.empty(8, 2).uniform_(1.5, 3.0, generator=gen)
+    beta = torch.empty(8, 2).uniform_(1.5, 3.0, generator=gen)
+    actions = torch.empty(8, 2).uniform_(-0.8, 0.8, generator=gen)
+    actions[:4] = torch.tensor([[-1.0, 1.0], [1.0, -1.0], [-1.0, -1.0], [1.0, 1.0]])
+    return alpha, beta, actions
+
+
+def _bound_range(alpha, beta, actions) -> tuple[float, float]:
+    """The range of eq. 1's loss over clamps of y' to [eps, 1 - eps], eps from 1e-12 to 0.01 (float64)."""
+    y = (actions.double() + 1) / 2
+    dist = torch.distributions.Beta(alpha.double(), beta.double())
+    values = [
+        float(-dist.log_prob(y.clamp(eps, 1 - eps)).sum(1).mean())
+        for eps in torch.logspace(-12, -2, 101, dtype=torch.float64).tolist()
+    ]
+    return min(values), max(values)
+
+
+TOO_WIDE = (
+    "your loss is what eq. 1 gives when y' is clamped (or squeezed) by a margin of more than 0.01, which "
+    "changes ordinary actions too: the margin must only keep y' off exactly 0 and 1."
+)
+"""The hint for a clamp of y' that also changes actions inside the bounds."""
+
+
+def _clamped_too_wide(fn) -> bool:
+    """Whether ``fn`` clamps y' by a margin wider than 0.0105: probed with one action at a time under
+    Beta(2, 1), whose loss -log(2 y') gives back the y' the function scored. A clamp scores every y'
+    below its margin as the margin itself and every y' above it unchanged."""
+    probes = [0.003, 0.006, 0.0125, 0.025, 0.05, 0.1, 0.2]  # y'
+    scored = []
+    try:
+        for z in probes:
+            out = fn(torch.full((1, 1), 2.0), torch.full((1, 1), 1.0), torch.full((1, 1), 2 * z - 1))
+            scored.append(math.exp(-float(torch.as_tensor(out).detach()) - math.log(2.0)))
+    except Exception:  # a function that fails on a (1, 1) batch is judged on the other checks
+        return False
+    raised = [(z, e) for z, e in zip(probes, scored, strict=True) if e > z * 1.001]
+    if not raised:
+        return False
+    margin = max(e for _, e in raised)
+    same = all(abs(e - margin) <= 0.01 * margin for _, e in raised)
+    below = all(e > z * 1.001 for z, e in zip(probes, scored, strict=True) if z < margin * 0.99)
+    return same and below and margin > 0.0105
+
+
 def _beta_log_f(alpha, beta, actions) -> torch.Tensor:
     """(B, D) log f(y'; α, β) of eq. 1, by torch.distributions (the reference)."""
     y = (actions.double() + 1) / 2
@@ -142,8 +204,11 @@ def check_beta_nll(fn) -> Feedback:
             for value, what in mistakes:
                 if close(out, value, rtol=1e-3, atol=1e-3):
                     return hint(f"close, but check {what}")
+            if _clamped_too_wide(fn):
+                return hint(TOO_WIDE)
             return hint(
-                f"your loss is {float(out):.4g} on a random test batch where eq. 1 gives {float(ref):.4g}; compare your formula with the Beta density term by term."
+                f"your loss is {float(out):.4g} on a random test batch where eq. 1 gives {float(ref):.4g}; "
+                "compare your formula with the Beta density term by term."
             )
         # other batch sizes and dimensions, and one dimension at a time
         for seed, (b2, d2) in [(1, (7, 1)), (2, (5, 3))]:
@@ -152,14 +217,27 @@ def check_beta_nll(fn) -> Feedback:
             if isinstance(out2, Feedback):
                 return out2
             if not close(out2, -_beta_log_f(a2, b2_, y2).sum(1).mean(), rtol=1e-3, atol=1e-3):
+                if _clamped_too_wide(fn):
+                    return hint(TOO_WIDE)
                 return hint(
-                    f"correct on a (32, 2) batch but not on a ({len(y2)}, {y2.shape[1]}) one: avoid hard-coding the batch size or the number of action dimensions."
+                    f"correct on a (32, 2) batch but not on a ({len(y2)}, {y2.shape[1]}) one: avoid "
+                    "hard-coding the batch size or the number of action dimensions."
                 )
-        # the bounds: full lock and full brake
-        alpha, beta, _ = _beta_inputs(3, 8, 2)
+        # close to the bounds but inside (y' = 0.015 and 0.985): a clamp wider than ~0.01 changes these
+        alpha, beta, actions = _near_bound_inputs()
+        out = _scalar(fn(alpha.clone(), beta.clone(), actions.clone()), "beta_nll")
+        if isinstance(out, Feedback):
+            return out
+        if not close(out, -_beta_log_f(alpha, beta, actions).sum(1).mean(), rtol=1e-3, atol=4e-3):
+            return hint(
+                "right for actions well inside (-1, 1), wrong for actions close to the bounds but inside them "
+                "(y = ±0.97, y' = 0.015 and 0.985): keeping y' inside (0, 1) must change nothing but the "
+                "actions at exactly ±1, so the margin of your clamp (or shift) is too wide."
+            )
+        # the bounds: full lock and full brake, in a batch with ordinary actions
+        alpha, beta, actions = _bound_inputs()
         alpha.requires_grad_(True)
         beta.requires_grad_(True)
-        actions = torch.tensor([[-1.0, 1.0], [1.0, -1.0]]).repeat(4, 1)
         out = _scalar(fn(alpha, beta, actions), "beta_nll")
         if isinstance(out, Feedback):
             return out
@@ -170,12 +248,25 @@ def check_beta_nll(fn) -> Feedback:
             )
         if not out.requires_grad:
             return hint(
-                "your loss does not depend on alpha and beta through autograd (did you use .item(), numpy or detach?): training needs its gradients."
+                "your loss does not depend on alpha and beta through autograd (did you use .item(), numpy or "
+                "detach?): training needs its gradients."
+            )
+        low, high = _bound_range(alpha.detach(), beta.detach(), actions)
+        value = float(out.detach())
+        if not low - 1e-3 * abs(low) - 1e-3 <= value <= high + 1e-3 * abs(high) + 1e-3:
+            if _clamped_too_wide(fn):
+                return hint(TOO_WIDE)
+            return hint(
+                f"on a batch with actions at exactly ±1 your loss is {value:.4g}, where eq. 1 with y' kept just "
+                f"inside (0, 1) (a margin between 1e-12 and 0.01) gives between {low:.4g} and {high:.4g}: the "
+                "samples at the bounds count like any other, with y' moved just inside (0, 1), not dropped or "
+                "replaced."
             )
         out.backward()
         if not (torch.isfinite(alpha.grad).all() and torch.isfinite(beta.grad).all()):
             return hint(
-                "the loss is finite at actions of exactly ±1 but its gradients are not: keep y' a little inside (0, 1) before taking logs."
+                "the loss is finite at actions of exactly ±1 but its gradients are not: keep y' a little inside "
+                "(0, 1) before taking logs."
             )
         return correct("Your Beta NLL matches eq. 1 and stays finite, with finite gradients, at the bounds.")
 
