@@ -230,6 +230,16 @@ def check_whiteness(fn) -> Feedback:
                     "what is squared: eq. 2 uses the *changes* between consecutive commands, not the commands themselves.",
                 ),
                 (
+                    float(np.std(d / dt, ddof=1)),
+                    "the mean: eq. 2 is the root mean square of the rates, not their spread around their mean "
+                    "(a steady ramp has a rate, and a whiteness, of its own).",
+                ),
+                (
+                    float(np.std(d / dt)),
+                    "the mean: eq. 2 is the root mean square of the rates, not their spread around their mean "
+                    "(a steady ramp has a rate, and a whiteness, of its own).",
+                ),
+                (
                     np.mean(np.abs(d / dt)),
                     "the mean: eq. 2 averages the *squared* rates and then takes the square root.",
                 ),
@@ -240,6 +250,26 @@ def check_whiteness(fn) -> Feedback:
             return hint(f"your whiteness is {out:.4g} on a test sequence where eq. 2 gives {ref:.4g}.")
         if not math.isclose(float(fn(torch.full((30,), 0.4), 0.05)), 0.0, abs_tol=1e-9):
             return hint("a constant command has no changes: its whiteness must be 0.")
+        # a steady ramp, then a ramp with a wiggle: the rates' mean is not 0 here, so their spread
+        # (a standard deviation) is not their root mean square
+        for seq, step in (
+            (np.linspace(-0.5, 0.7, 25), 0.1),
+            (np.linspace(0.0, 0.9, 16) + 0.05 * (-1.0) ** np.arange(16), 0.05),
+        ):
+            got = float(fn(torch.tensor(seq, dtype=torch.float32), step))
+            rates = np.diff(seq) / step
+            want = math.sqrt(np.mean(rates**2))
+            if not math.isclose(got, want, rel_tol=1e-4):
+                if math.isclose(got, float(np.std(rates)), rel_tol=1e-3, abs_tol=1e-6):
+                    return hint(
+                        "a steady ramp changes at a constant, non-zero rate, yet your whiteness of it is "
+                        f"{got:.3g}: eq. 2 is the root mean square of the rates, not their spread around their "
+                        "mean."
+                    )
+                return hint(
+                    f"right on a random sequence, but on a ramp of {len(seq)} commands your whiteness is "
+                    f"{got:.4g} where eq. 2 gives {want:.4g}."
+                )
         return correct("Your whiteness matches eq. 2: the RMS rate of change of the command.")
 
     return run_check(check, "`whiteness`")
