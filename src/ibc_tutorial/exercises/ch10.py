@@ -24,15 +24,20 @@ from ibc_tutorial.metrics import crashes_per_km, swerve_rate, whiteness
 
 
 # --------------------------------------------------------------------------- 1. swerve rate
-def _swerve_ref(offsets, slight, clear, *, relative=True, signed=True, peak=True, half=0.5):
+def _swerve_ref(offsets, slight, clear, *, relative=True, signed=True, peak=True, half=0.5, strict=False):
     x = np.asarray(offsets, dtype=float)
     if relative:
         x = x - x[:, :1]
     if not signed:
         x = np.abs(x)
     m = x.max(axis=1) if peak else x.mean(axis=1)
+    if strict:
+        return float(np.where(m > clear, 1.0, np.where(m > slight, half, 0.0)).mean())
     return float(np.where(m >= clear, 1.0, np.where(m >= slight, half, 0.0)).mean())
 
+
+_PEAKS = 0.025 + 0.05 * np.arange(40)
+"""(40,) the peaks of the last swerve case's passes (m)."""
 
 SWERVE_CASES = [
     # (offsets (P, T), slight, clear); after the first, each case tells one usual mistake from the others
@@ -47,6 +52,13 @@ SWERVE_CASES = [
     (np.array([[0.0, -0.7, -1.2, -0.3], [0.0, 0.2, 0.1, 0.0]]), 0.5, 1.0),  # moved away from the side road
     (np.array([[0.0, 1.1, 1.2, 1.1], [0.0, 0.6, 0.6, 0.6]]), 0.5, 1.0),  # peak, not mean
     (np.array([[0.0, 0.6, 0.7, 0.6], [0.0, 0.2, 0.1, 0.0], [0.0, -0.1, -0.2, 0.0]]), 0.5, 1.0),  # half
+    # peaks exactly at the thresholds (dyadic numbers: the differences are exact): reaching counts
+    (np.array([[0.25, 0.5, 0.75, 0.5], [0.25, 1.25, 0.5, 0.25], [0.0, 0.125, 0.25, 0.125]]), 0.5, 1.0),
+    # other thresholds: the function must use its arguments
+    (np.array([[0.0, 0.6, 0.1, 0.0], [0.0, 0.9, 0.2, 0.0], [0.0, 0.35, 0.3, 0.3]]), 0.3, 0.8),
+    # forty passes peaking every 0.05 m from 0.025 to 1.975 m: thresholds other than the arguments
+    # (by more than 0.05 m) change the count
+    (_PEAKS[:, None] * np.array([0.0, 1.0, 0.5, 0.0]), 0.7, 1.3),
 ]
 
 
@@ -57,6 +69,10 @@ SWERVE_HINTS = {
     "towards the other option.",
     "peak": "a swerve is judged by how far the car went at its farthest, not on average over the pass.",
     "half": "the paper counts a slight swerve as half a swerve.",
+    "strict": "a pass whose peak is exactly at a threshold has reached it: 'reaches' means at or beyond the "
+    "threshold.",
+    "thresholds": "right for the thresholds 0.5 and 1.0 m, wrong for 0.3 and 0.8 m: use the thresholds passed as "
+    "`slight` and `clear`, not the chapter's numbers.",
 }
 
 
@@ -77,7 +93,10 @@ def check_swerve_rate(fn) -> Feedback:
                 "signed": _swerve_ref(offsets, slight, clear, signed=False),
                 "peak": _swerve_ref(offsets, slight, clear, peak=False),
                 "half": _swerve_ref(offsets, slight, clear, half=1.0),
+                "strict": _swerve_ref(offsets, slight, clear, strict=True),
             }
+            if (slight, clear) != (0.5, 1.0):
+                mistakes["thresholds"] = _swerve_ref(offsets, 0.5, 1.0)
             made = [k for k, v in mistakes.items() if close(out, v, rtol=1e-6, atol=1e-9)]
             if len(made) == 1:
                 return hint(SWERVE_HINTS[made[0]])
