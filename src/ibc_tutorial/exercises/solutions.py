@@ -244,6 +244,21 @@ def ch08_recipe(method):
 
 
 # =========================================================================== chapter 09: the replication
+def ch09_bootstrap_difference(scores_a, scores_b, n_resamples, rng):
+    """95 % percentile interval of mean(A) − mean(B) by the two-level bootstrap: for each method
+    independently, A agents drawn with replacement, then E episodes of each drawn agent, averaged."""
+
+    def resampled_means(x):  # (A, E) -> (n_resamples,)
+        a, e = x.shape
+        agents = rng.integers(a, size=(n_resamples, a))  # (R, A) the drawn agents
+        episodes = rng.integers(e, size=(n_resamples, a, e))  # (R, A, E) their drawn episodes
+        return x[agents[:, :, None], episodes].mean(axis=(1, 2))
+
+    diffs = resampled_means(np.asarray(scores_a, float)) - resampled_means(np.asarray(scores_b, float))
+    low, high = np.percentile(diffs, [2.5, 97.5])
+    return float(low), float(high)
+
+
 def ch09_exit_shares(visits, approach):
     """Share of the approach's visits that left by each exit (all three keys, summing to 1)."""
 
@@ -251,6 +266,17 @@ def ch09_exit_shares(visits, approach):
     return {t: turns.count(t) / len(turns) for t in ("left", "straight", "right")}
 
 
+def ch09_verdict(estimate, low, high, threshold):
+    """The interval decides, not the estimate: wholly above the threshold, wholly below, or neither
+    (an end exactly on the threshold is neither)."""
+    if low > threshold:
+        return "holds"
+    if high < threshold:
+        return "does not hold"
+    return "cannot tell at this scale"
+
+
+# =========================================================================== chapter 10: road following
 def ch10_swerve_rate(offsets, slight, clear):
     """Share of passes (P, T) whose farthest offset towards the side road, from where the pass began,
     reaches ``clear`` (a swerve, 1) or ``slight`` (half a swerve)."""
