@@ -182,7 +182,7 @@ def test_predict_mae_side():
         assert fb.status == "hint" and words in fb.message, fb.message
 
 
-# --------------------------------------------------------------------------- holes closed (issue 26): answers that were accepted
+# -------------------------------------------------------- holes closed (issue 26): answers that were accepted
 @settings(max_examples=30, deadline=None)
 @given(
     tx=st.floats(-30, 30, allow_nan=False),

@@ -4,9 +4,9 @@ typical mistakes -> a hint naming the mistake, code that raises -> a hint (never
 import math
 
 import pytest
+import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
-import torch
 
 from ibc_tutorial.exercises import ch02, solutions
 
@@ -122,31 +122,31 @@ def test_mdn_stub_is_not_attempted():
 
 MDN_MISTAKES = {
     "sign": (
-        lambda l, m, s, y: torch.logsumexp(torch.log_softmax(l, 1) + _log_n(m, s, y).sum(2), 1).mean(),
+        lambda lg, m, s, y: torch.logsumexp(torch.log_softmax(lg, 1) + _log_n(m, s, y).sum(2), 1).mean(),
         "sign",
     ),
     "sum of logs": (
-        lambda l, m, s, y: -(torch.log_softmax(l, 1) + _log_n(m, s, y).sum(2)).sum(1).mean(),
+        lambda lg, m, s, y: -(torch.log_softmax(lg, 1) + _log_n(m, s, y).sum(2)).sum(1).mean(),
         "log-sum-exp",
     ),
-    "no softmax": (lambda l, m, s, y: -torch.logsumexp(l + _log_n(m, s, y).sum(2), 1).mean(), "softmax"),
+    "no softmax": (lambda lg, m, s, y: -torch.logsumexp(lg + _log_n(m, s, y).sum(2), 1).mean(), "softmax"),
     "mean over dims": (
-        lambda l, m, s, y: -torch.logsumexp(torch.log_softmax(l, 1) + _log_n(m, s, y).mean(2), 1).mean(),
+        lambda lg, m, s, y: -torch.logsumexp(torch.log_softmax(lg, 1) + _log_n(m, s, y).mean(2), 1).mean(),
         "per-dimension log-densities",
     ),
     "no log sigma": (
-        lambda l, m, s, y: (
-            -torch.logsumexp(torch.log_softmax(l, 1) + (_log_n(m, s, y) + torch.log(s)).sum(2), 1).mean()
+        lambda lg, m, s, y: (
+            -torch.logsumexp(torch.log_softmax(lg, 1) + (_log_n(m, s, y) + torch.log(s)).sum(2), 1).mean()
         ),
         "-log σ",
     ),
     "naive exp": (
-        lambda l, m, s, y: -torch.log((torch.softmax(l, 1) * _log_n(m, s, y).sum(2).exp()).sum(1)).mean(),
+        lambda lg, m, s, y: -torch.log((torch.softmax(lg, 1) * _log_n(m, s, y).sum(2).exp()).sum(1)).mean(),
         "logsumexp",
     ),
     "hard-coded K": (
-        lambda l, m, s, y: (
-            -torch.logsumexp(torch.log_softmax(l[:, :3], 1) + _log_n(m[:, :3], s[:, :3], y).sum(2), 1).mean()
+        lambda lg, m, s, y: (
+            -torch.logsumexp(torch.log_softmax(lg[:, :3], 1) + _log_n(m[:, :3], s[:, :3], y).sum(2), 1).mean()
         ),
         "hard-coding",
     ),

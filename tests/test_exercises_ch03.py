@@ -5,9 +5,9 @@ import math
 
 import numpy as np
 import pytest
+import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
-import torch
 
 from ibc_tutorial.exercises import ch03, solutions
 from ibc_tutorial.losses import info_nce, soft_targets

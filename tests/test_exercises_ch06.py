@@ -4,9 +4,9 @@ typical mistakes -> a hint naming the mistake, code that raises -> a hint (never
 import math
 
 import pytest
+import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
-import torch
 
 from ibc_tutorial.exercises import ch06, solutions
 

@@ -28,7 +28,7 @@ def test_solution_stub_and_crash(check, solution, stub_and_crash):
     stub_and_crash(check)
 
 
-# --------------------------------------------------------------------------- the solutions agree with the library
+# ----------------------------------------------------------------------- the solutions agree with the library
 def test_yaw_rate_solution_is_the_cars():
     import pymunk
 

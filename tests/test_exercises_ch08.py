@@ -22,7 +22,7 @@ def test_solution_stub_and_crash(check, solution, stub_and_crash):
     stub_and_crash(check)
 
 
-# --------------------------------------------------------------------------- the solutions agree with the library
+# ----------------------------------------------------------------------- the solutions agree with the library
 def test_episode_score_solution_is_the_simulators():
     # drive the real simulator and score its log with the solution
     from ibc_tutorial.driving.sim import DrivingSim

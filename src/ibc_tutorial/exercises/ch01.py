@@ -61,30 +61,36 @@ def check_best_constant_mse(fn) -> Feedback:
             ref = float(actions.mean())
             if abs(c - ref) < 1e-4:
                 continue
-            loss = lambda v: float(((actions - v) ** 2).mean())  # noqa: E731
+            loss = lambda v, actions=actions: float(((actions - v) ** 2).mean())  # noqa: E731
             if abs(c - float(actions.median())) < 1e-6 or abs(c - float(torch.quantile(actions, 0.5))) < 1e-6:
                 return hint(
-                    "your constant is a median: it minimises the mean *absolute* error. Which value makes the derivative of the *squared* error zero?"
+                    "your constant is a median: it minimises the mean *absolute* error. Which value makes "
+                    "the derivative of the *squared* error zero?"
                 )
             if abs(c - float(actions.sum())) < 1e-4:
                 return hint(
-                    "your value grows with the number of actions: the best constant should not change if every action were repeated twice."
+                    "your value grows with the number of actions: the best constant should not change if "
+                    "every action were repeated twice."
                 )
             if abs(c) < 1e-9 and abs(ref) > 1e-3:
                 return hint(
-                    "your constant does not depend on the actions (it is 0): the loss here is not symmetric around 0."
+                    "your constant does not depend on the actions (it is 0): the loss here is not "
+                    "symmetric around 0."
                 )
             if any(abs(c - float(a)) < 1e-6 for a in actions):
                 return hint(
-                    f"your constant is one of the actions an expert took, but the loss there ({loss(c):.4f}) is not the smallest: "
+                    "your constant is one of the actions an expert took, but the loss there "
+                    f"({loss(c):.4f}) is not the smallest: "
                     "try c a little to either side. The optimum need not be an action anyone took."
                 )
             if abs(c - ref) < 2e-2:
                 return hint(
-                    "close, but not exact (a search over a grid?): set the derivative of the loss with respect to c to zero and solve."
+                    "close, but not exact (a search over a grid?): set the derivative of the loss with "
+                    "respect to c to zero and solve."
                 )
             return hint(
-                f"for one of the test sets your constant gives a mean squared error of {loss(c):.4f}; a better constant exists. Differentiate the loss with respect to c."
+                f"for one of the test sets your constant gives a mean squared error of {loss(c):.4f}; a "
+                "better constant exists. Differentiate the loss with respect to c."
             )
         return correct("The mean: it lies between the two modes, where no expert steered.")
 
@@ -233,7 +239,8 @@ def check_swerve(fn) -> Feedback:
         if out.shape != ref.shape:
             if out.shape == (y.shape[1],):
                 return hint(
-                    f"return one number per episode (rows, {y.shape[0]} of them), not one per time step: which dimension do you reduce over?"
+                    f"return one number per episode (rows, {y.shape[0]} of them), not one per time step: "
+                    "which dimension do you reduce over?"
                 )
             return hint(f"return one number per episode: shape ({y.shape[0]},), got {tuple(out.shape)}.")
         out = out.detach().to(ref.dtype)
@@ -242,11 +249,13 @@ def check_swerve(fn) -> Feedback:
         low = y.min(dim=1).values
         if torch.allclose(out, (-low).clamp_min(0.0), atol=1e-5) or torch.allclose(out, -low, atol=1e-5):
             return hint(
-                "measure from where each car was at the start (its first offset), not from the centre line: a car driving a little off-centre all along has not swerved."
+                "measure from where each car was at the start (its first offset), not from the centre "
+                "line: a car driving a little off-centre all along has not swerved."
             )
         if torch.allclose(out, y.max(dim=1).values - y[:, 0], atol=1e-5):
             return hint(
-                "that is the largest move to the left (y increasing); the side road branches off to the right, where y decreases."
+                "that is the largest move to the left (y increasing); the side road branches off to the "
+                "right, where y decreases."
             )
         if torch.allclose(out, (y - y[:, :1]).abs().max(dim=1).values, atol=1e-5):
             return hint(
@@ -271,13 +280,14 @@ def check_swerve(fn) -> Feedback:
                 "a swerve is a distance moved towards the side road, at least 0: some of yours are negative."
             )
         return hint(
-            "for some episodes your value differs from the largest move towards the side road (y decreasing) since the first time step."
+            "for some episodes your value differs from the largest move towards the side road (y "
+            "decreasing) since the first time step."
         )
 
     return run_check(check, "swerve")
 
 
-# --------------------------------------------------------------------------- 4. prediction: where the MAE lands
+# ------------------------------------------------------------------------- 4. prediction: where the MAE lands
 MAE_ANSWERS = ("right", "left", "anywhere in the gap")
 
 
@@ -347,7 +357,8 @@ def check_predict_mae_side(fn) -> Feedback:
             )
         return correct(
             "A median: in the bigger mode when the counts differ, anywhere in the gap when they are equal. "
-            "So an MAE policy follows the majority at the side road (straight on), but at the tree's near tie it is arbitrary."
+            "So an MAE policy follows the majority at the side road (straight on), but at the tree's near "
+            "tie it is arbitrary."
         )
 
     return run_check(check, "`predict_mae_side`")

@@ -138,11 +138,13 @@ def check_beta_nll(fn) -> Feedback:
                 and close(out_pos, unscaled, rtol=1e-3, atol=1e-3)
             ):
                 return hint(
-                    "your loss is NaN or infinite for actions inside (-1, 1): the Beta density lives on [0, 1], "
+                    "your loss is NaN or infinite for actions inside (-1, 1): the Beta density lives on "
+                    "[0, 1], "
                     "and eq. 1 maps each action to y' = (y + 1)/2 before scoring it."
                 )
             return hint(
-                "your loss is NaN or infinite for actions inside (-1, 1): check every log, and that the actions are mapped into [0, 1]."
+                "your loss is NaN or infinite for actions inside (-1, 1): check every log, and that the "
+                "actions are mapped into [0, 1]."
             )
         if not close(out, ref, rtol=1e-3, atol=1e-3):
             mistakes = [
@@ -152,7 +154,8 @@ def check_beta_nll(fn) -> Feedback:
                 ),
                 (
                     -log_f.mean(),
-                    "the reduction over action dimensions: eq. 1 *sums* log f over the action dimensions (acceleration + steering) and averages over the samples.",
+                    "the reduction over action dimensions: eq. 1 *sums* log f over the action dimensions "
+                    "(acceleration + steering) and averages over the samples.",
                 ),
                 (
                     -log_f.sum(),
@@ -160,11 +163,13 @@ def check_beta_nll(fn) -> Feedback:
                 ),
                 (
                     ref + d * math.log(2.0),
-                    "the rescaling: eq. 1 scores the density of the rescaled action y' itself, with no change-of-variables term.",
+                    "the rescaling: eq. 1 scores the density of the rescaled action y' itself, with no "
+                    "change-of-variables term.",
                 ),
                 (
                     ref - d * math.log(2.0),
-                    "the rescaling: eq. 1 scores the density of the rescaled action y' itself, with no change-of-variables term.",
+                    "the rescaling: eq. 1 scores the density of the rescaled action y' itself, with no "
+                    "change-of-variables term.",
                 ),
             ]
             log_b = (
@@ -189,7 +194,8 @@ def check_beta_nll(fn) -> Feedback:
             mistakes.append(
                 (
                     -wrong_y.sum(1).mean(),
-                    "the rescaling: actions live in [-1, 1]; eq. 1 maps them to y' = (y + 1)/2 before scoring them.",
+                    "the rescaling: actions live in [-1, 1]; eq. 1 maps them to y' = (y + 1)/2 before "
+                    "scoring them.",
                 )
             )
             swapped = torch.distributions.Beta(beta.double(), alpha.double()).log_prob(
@@ -230,7 +236,8 @@ def check_beta_nll(fn) -> Feedback:
             return out
         if not close(out, -_beta_log_f(alpha, beta, actions).sum(1).mean(), rtol=1e-3, atol=4e-3):
             return hint(
-                "right for actions well inside (-1, 1), wrong for actions close to the bounds but inside them "
+                "right for actions well inside (-1, 1), wrong for actions close to the bounds but inside "
+                "them "
                 "(y = ±0.97, y' = 0.015 and 0.985): keeping y' inside (0, 1) must change nothing but the "
                 "actions at exactly ±1, so the margin of your clamp (or shift) is too wide."
             )
@@ -243,7 +250,8 @@ def check_beta_nll(fn) -> Feedback:
             return out
         if not torch.isfinite(out):
             return hint(
-                "your loss is infinite or NaN for actions exactly at -1 or +1 (full brake, full steering lock: "
+                "your loss is infinite or NaN for actions exactly at -1 or +1 (full brake, full steering "
+                "lock: "
                 "expert data holds them). Keep y' a little inside (0, 1) before taking logs."
             )
         if not out.requires_grad:
@@ -257,15 +265,19 @@ def check_beta_nll(fn) -> Feedback:
             if _clamped_too_wide(fn):
                 return hint(TOO_WIDE)
             return hint(
-                f"on a batch with actions at exactly ±1 your loss is {value:.4g}, where eq. 1 with y' kept just "
-                f"inside (0, 1) (a margin between 1e-12 and 0.01) gives between {low:.4g} and {high:.4g}: the "
-                "samples at the bounds count like any other, with y' moved just inside (0, 1), not dropped or "
+                f"on a batch with actions at exactly ±1 your loss is {value:.4g}, where eq. 1 with y' kept "
+                "just "
+                f"inside (0, 1) (a margin between 1e-12 and 0.01) gives between {low:.4g} and {high:.4g}: "
+                "the "
+                "samples at the bounds count like any other, with y' moved just inside (0, 1), not dropped "
+                "or "
                 "replaced."
             )
         out.backward()
         if not (torch.isfinite(alpha.grad).all() and torch.isfinite(beta.grad).all()):
             return hint(
-                "the loss is finite at actions of exactly ±1 but its gradients are not: keep y' a little inside "
+                "the loss is finite at actions of exactly ±1 but its gradients are not: keep y' a little "
+                "inside "
                 "(0, 1) before taking logs."
             )
         return correct("Your Beta NLL matches eq. 1 and stays finite, with finite gradients, at the bounds.")
@@ -302,7 +314,8 @@ def check_mdn_nll(fn) -> Feedback:
         if not close(out, ref, rtol=1e-3, atol=1e-3):
             if not torch.isfinite(out):
                 return hint(
-                    "your loss is NaN or infinite on an ordinary batch: check the logs (of the weights, of the densities)."
+                    "your loss is NaN or infinite on an ordinary batch: check the logs (of the weights, of "
+                    "the densities)."
                 )
             normal = torch.distributions.Normal(means.double(), stds.double())
             log_comp = normal.log_prob(actions.double()[:, None]).sum(-1)  # (B, K)
@@ -316,23 +329,28 @@ def check_mdn_nll(fn) -> Feedback:
                 ),
                 (
                     -(log_w + log_comp).sum(1).mean(),
-                    "how the components combine: the mixture density is a weighted *sum* of the component densities, so take the log after summing (log-sum-exp), not a sum of logs.",
+                    "how the components combine: the mixture density is a weighted *sum* of the component "
+                    "densities, so take the log after summing (log-sum-exp), not a sum of logs.",
                 ),
                 (
                     -(log_w.exp() * log_comp).sum(1).mean(),
-                    "how the components combine: the mixture density is a weighted *sum* of the component densities; the log of that sum is not the weighted sum of logs.",
+                    "how the components combine: the mixture density is a weighted *sum* of the component "
+                    "densities; the log of that sum is not the weighted sum of logs.",
                 ),
                 (
                     -torch.logsumexp(logits.double() + log_comp, 1).mean(),
-                    "the mixture weights: the logits are not normalised; a softmax over the K components turns them into weights that sum to 1.",
+                    "the mixture weights: the logits are not normalised; a softmax over the K components "
+                    "turns them into weights that sum to 1.",
                 ),
                 (
                     -torch.logsumexp(torch.log(w_raw) + log_comp, 1).mean(),
-                    "the mixture weights: the logits are not probabilities; a softmax over the K components turns them into weights that sum to 1.",
+                    "the mixture weights: the logits are not probabilities; a softmax over the K "
+                    "components turns them into weights that sum to 1.",
                 ),
                 (
                     -torch.logsumexp(log_w + normal.log_prob(actions.double()[:, None]).mean(-1), 1).mean(),
-                    "the action dimensions: a diagonal Gaussian's log-density *sums* the per-dimension log-densities.",
+                    "the action dimensions: a diagonal Gaussian's log-density *sums* the per-dimension "
+                    "log-densities.",
                 ),
                 (
                     -torch.logsumexp(
@@ -348,7 +366,8 @@ def check_mdn_nll(fn) -> Feedback:
                         + (normal.log_prob(actions.double()[:, None]) - torch.log(stds.double())).sum(-1),
                         1,
                     ).mean(),
-                    "the Gaussian's normalisation: its log-density has -log σ, not -2 log σ (σ is a standard deviation, not a variance).",
+                    "the Gaussian's normalisation: its log-density has -log σ, not -2 log σ (σ is a "
+                    "standard deviation, not a variance).",
                 ),
             ]
             var_normal = torch.distributions.Normal(means.double(), stds.double().sqrt())
@@ -364,7 +383,8 @@ def check_mdn_nll(fn) -> Feedback:
                 if close(out, value, rtol=1e-3, atol=1e-3):
                     return hint(f"close, but check {what}")
             return hint(
-                f"your loss is {float(out):.4g} on a random test batch where the mixture gives {float(ref):.4g}; compare your formula with log Σ_k π_k N(y; μ_k, σ_k²) term by term."
+                f"your loss is {float(out):.4g} on a random test batch where the mixture gives "
+                f"{float(ref):.4g}; compare your formula with log Σ_k π_k N(y; μ_k, σ_k²) term by term."
             )
         for seed, (b, k, d) in [(1, (6, 1, 1)), (2, (9, 5, 3))]:
             args = _mdn_inputs(seed, b, k, d)
@@ -373,7 +393,8 @@ def check_mdn_nll(fn) -> Feedback:
                 return out2
             if not close(out2, -_mixture(*args[:3]).log_prob(args[3].double()).mean(), rtol=1e-3, atol=1e-3):
                 return hint(
-                    f"correct for K = 3 components and D = 2 action dimensions but not for K = {k}, D = {d}: avoid hard-coding the sizes."
+                    f"correct for K = 3 components and D = 2 action dimensions but not for K = {k}, D = "
+                    f"{d}: avoid hard-coding the sizes."
                 )
         # far from every component: a naive exp underflows to 0 and log(0) = -inf
         logits, means, stds, actions = _mdn_inputs(3, 8, 3, 1)
@@ -384,7 +405,8 @@ def check_mdn_nll(fn) -> Feedback:
         ref3 = -_mixture(logits, far_means, stds).log_prob(actions.double()).mean()
         if not close(out3, ref3, rtol=1e-3, atol=1e-2):
             return hint(
-                "right on ordinary inputs, but not when the action is far from every component (at the start of "
+                "right on ordinary inputs, but not when the action is far from every component (at the "
+                "start of "
                 "training it often is): the densities underflow to 0. Stay in log space (torch.logsumexp)."
             )
         return correct(
@@ -394,7 +416,7 @@ def check_mdn_nll(fn) -> Feedback:
     return run_check(check, "`mdn_nll`")
 
 
-# --------------------------------------------------------------------------- 3. prediction: what a Beta can represent
+# ------------------------------------------------------------------- 3. prediction: what a Beta can represent
 BETA_SHAPES = ("flat", "one peak inside", "peaks at both ends", "two peaks inside")
 
 
@@ -432,7 +454,8 @@ def check_beta_can_represent(fn) -> Feedback:
                 continue
             if shape == "two peaks inside":
                 return hint(
-                    "look at the second derivative of log f in the chapter: can log f be concave near one point and "
+                    "look at the second derivative of log f in the chapter: can log f be concave near one "
+                    "point and "
                     "have a dip in between two peaks, with alpha and beta fixed?"
                 )
             if shape == "peaks at both ends":
@@ -441,7 +464,8 @@ def check_beta_can_represent(fn) -> Feedback:
                 return hint("evaluate the density for alpha = beta = 1.")
             return hint("try alpha = beta = 2: where is the density highest?")
         return correct(
-            "A Beta has at most one peak inside the interval; its 'two modes' can only be the two walls of a U, "
+            "A Beta has at most one peak inside the interval; its 'two modes' can only be the two walls of "
+            "a U, "
             "at full lock. That is why the chapter's Beta policy is flat or U-shaped at the tree."
         )
 

@@ -105,7 +105,8 @@ def _clip_check(fn, n: int) -> Feedback | None:
     at_low = float((out == low).double().mean())
     if min(at_high, at_low) < 0.15:
         return hint(
-            "samples the noise pushes past a bound should be clamped onto it (Algorithm 1 line 10: clip), not "
+            "samples the noise pushes past a bound should be clamped onto it (Algorithm 1 line 10: clip), "
+            "not "
             "redrawn, reflected or dropped."
         )
     return None
@@ -113,7 +114,8 @@ def _clip_check(fn, n: int) -> Feedback | None:
 
 # --------------------------------------------------------------------------- one DFO iteration
 def check_dfo_step(fn) -> Feedback:
-    """Check ``fn(samples, energies, sigma, low, high, generator)``: softmax of −E, resample, add noise, clip."""
+    """Check ``fn(samples, energies, sigma, low, high, generator)``: softmax of −E, resample, add noise,
+    clip."""
 
     def check() -> Feedback:
         n = 20000
@@ -130,20 +132,24 @@ def check_dfo_step(fn) -> Feedback:
         values = set(torch.unique(out).tolist())
         if not values <= {0.0, 0.5}:
             return hint(
-                "with sigma = 0 every new sample must be a copy of an old one (resampling with replacement, then zero noise); yours are not."
+                "with sigma = 0 every new sample must be a copy of an old one (resampling with "
+                "replacement, then zero noise); yours are not."
             )
         share = float((out == 0.0).float().mean())  # expected 0.75
         if abs(share - 0.25) < 0.03:
             return hint(
-                "your resampling favours the *high*-energy samples: the probabilities are a softmax of −E (line 5), low energy = likely."
+                "your resampling favours the *high*-energy samples: the probabilities are a softmax of −E "
+                "(line 5), low energy = likely."
             )
         if abs(share - 0.5) < 0.03:
             return hint(
-                "your new population has the old proportions: resample with replacement in proportion to the softmax probabilities p̃_i (lines 7-8)."
+                "your new population has the old proportions: resample with replacement in proportion to "
+                "the softmax probabilities p̃_i (lines 7-8)."
             )
         if abs(share - 0.75) > 0.03:
             return hint(
-                f"after resampling, {share:.0%} of the samples should be copies of the low-energy value where p̃ gives 75 %: check lines 5 and 7-8."
+                f"after resampling, {share:.0%} of the samples should be copies of the low-energy value "
+                "where p̃ gives 75 %: check lines 5 and 7-8."
             )
         # 2. reproducible with the generator, whatever the global generator does, and with noise
         fb = _generator_check(fn, samples, energies)
@@ -171,22 +177,26 @@ def check_dfo_step(fn) -> Feedback:
             )
         if float((resid[:, 0] - resid[:, 1]).abs().max()) < 1e-9:  # the same draw in both coordinates
             return hint(
-                "the coordinates of a sample move together: draw an independent N(0, σ) for each coordinate (line 9)."
+                "the coordinates of a sample move together: draw an independent N(0, σ) for each "
+                "coordinate (line 9)."
             )
         share = torch.bincount(nearest, minlength=3).float() / n
         if (share - torch.tensor([4.0, 2.0, 1.0]) / 7).abs().max() > 0.03:
             return hint(
-                f"with σ = 0.1 the new samples sit around the three old values in shares {[round(float(x), 2) for x in share]}, "
+                "with σ = 0.1 the new samples sit around the three old values in shares "
+                f"{[round(float(x), 2) for x in share]}, "
                 "where p̃ gives 0.57, 0.29, 0.14: resample by p̃ first (lines 5, 7-8), then add the noise."
             )
         std = float(resid.std())
         if abs(std - 0.01) < 0.003:
             return hint(
-                "your noise has standard deviation σ², not σ: the paper's N(0, σ) takes σ as the standard deviation."
+                "your noise has standard deviation σ², not σ: the paper's N(0, σ) takes σ as the standard "
+                "deviation."
             )
         if abs(std - 0.1) > 0.01:
             return hint(
-                f"with σ = 0.1 the new samples spread with standard deviation {std:.3g}; line 9 adds N(0, σ) to each coordinate."
+                f"with σ = 0.1 the new samples spread with standard deviation {std:.3g}; line 9 adds N(0, "
+                "σ) to each coordinate."
             )
         fb = _gaussian_check(resid.reshape(-1) / 0.1)
         if fb is not None:
@@ -196,7 +206,8 @@ def check_dfo_step(fn) -> Feedback:
         if fb is not None:
             return fb
         return correct(
-            "Your step resamples by softmax(−E), adds N(0, σ) and clips, exactly lines 5 and 7-10 of Algorithm 1."
+            "Your step resamples by softmax(−E), adds N(0, σ) and clips, exactly lines 5 and 7-10 of "
+            "Algorithm 1."
         )
 
     return run_check(check, "`dfo_step`")
@@ -252,7 +263,8 @@ def _select_generator_check(fn) -> Feedback | None:
         )
     if torch.equal(runs[0], runs[2]):
         return hint(
-            "runs with differently seeded generators drew the same actions: draw from the `generator` argument, "
+            "runs with differently seeded generators drew the same actions: draw from the `generator` "
+            "argument, "
             "not from a generator of your own."
         )
     return None
@@ -276,7 +288,8 @@ def check_select_action(fn) -> Feedback:
             )
         if not torch.equal(a, SELECT_SAMPLES[int(SELECT_ENERGIES.argmin())]):
             return hint(
-                'with select = "argmax" return the sample with the highest probability p̃ (one of the samples, '
+                'with select = "argmax" return the sample with the highest probability p̃ (one of the '
+                "samples, "
                 "unchanged)."
             )
         share = _draw_shares(fn, torch.Generator().manual_seed(1))
@@ -284,7 +297,8 @@ def check_select_action(fn) -> Feedback:
             return share
         expected = p.float()
         # Pearson's chi-square over the five candidates (4 degrees of freedom): above 30 happens for a
-        # correct draw about once in 200,000 checks; a softmax at temperature 1.1 gives about 60, at 0.9 about 75
+        # correct draw about once in 200,000 checks; a softmax at temperature 1.1 gives about 60, at 0.9
+        # about 75
         chi2 = float((SELECT_DRAWS * (share - expected) ** 2 / expected).sum())
         if chi2 > 30:
             shown = ", ".join(f"{float(x):.3f}" for x in share)
@@ -297,17 +311,20 @@ def check_select_action(fn) -> Feedback:
                 )
             if float(share.max()) > 0.97:
                 return hint(
-                    'with select = "sample" the action must be *drawn* from p̃, not always the most probable one.'
+                    'with select = "sample" the action must be *drawn* from p̃, not always the most '
+                    "probable one."
                 )
             return hint(
-                f"over {SELECT_DRAWS} draws your shares of the five samples are ({shown}) where p̃ is ({want}): "
+                f"over {SELECT_DRAWS} draws your shares of the five samples are ({shown}) where p̃ is "
+                f"({want}): "
                 "more than chance explains. p̃ is exactly softmax(−E), with no temperature or other change."
             )
         fb = _select_generator_check(fn)
         if fb is not None:
             return fb
         return correct(
-            "Line 14 of Algorithm 1: you draw ŷ with probabilities p̃ (and the argmax picks the lowest energy)."
+            "Line 14 of Algorithm 1: you draw ŷ with probabilities p̃ (and the argmax picks the lowest "
+            "energy)."
         )
 
     return run_check(check, "`select_action`")
@@ -360,31 +377,38 @@ def check_shallow_share(fn) -> Feedback:
                 "a share lies between 0 and 1: normalise over the two valleys (shallow / (shallow + deep))."
             )
         want = [expected(*c) for c in cases]
-        if all(abs(g - w) < 1e-6 for g, w in zip(got, want)):
+        if all(abs(g - w) < 1e-6 for g, w in zip(got, want, strict=False)):
             m = _measured_shallow_share(0.5, 5)
             return correct(
-                f"Each round multiplies by p(y|x) once more. The library's DFO agrees: Δ = 0.5, k = 5 rounds, "
-                f"2000 calls from a uniform start end in the shallow valley {m:.2f} of the time; you predicted {want[1]:.2f}."
+                "Each round multiplies by p(y|x) once more. The library's DFO agrees: Δ = 0.5, k = 5 "
+                "rounds, "
+                f"2000 calls from a uniform start end in the shallow valley {m:.2f} of the time; you "
+                f"predicted {want[1]:.2f}."
             )
-        if all(abs(g - (1 - w)) < 1e-6 for g, w in zip(got, want)):
+        if all(abs(g - (1 - w)) < 1e-6 for g, w in zip(got, want, strict=False)):
             return hint(
-                "that is the share of the *deeper* valley: the shallow one, with the higher floor, gets the smaller share."
+                "that is the share of the *deeper* valley: the shallow one, with the higher floor, gets "
+                "the smaller share."
             )
-        if all(abs(g - expected(d, 1, r)) < 1e-6 for g, (d, k, r) in zip(got, cases)):
+        if all(abs(g - expected(d, 1, r)) < 1e-6 for g, (d, k, r) in zip(got, cases, strict=False)):
             return hint(
-                "your share does not change with k: each of the k rounds multiplies the population by p(y|x) once more."
+                "your share does not change with k: each of the k rounds multiplies the population by "
+                "p(y|x) once more."
             )
-        if all(abs(g - expected(d, k, 1.0)) < 1e-6 for g, (d, k, r) in zip(got, cases)):
+        if all(abs(g - expected(d, k, 1.0)) < 1e-6 for g, (d, k, r) in zip(got, cases, strict=False)):
             return hint(
-                "your share ignores r: the initial samples' share multiplies in (the initialisation is a prior over the valleys)."
+                "your share ignores r: the initial samples' share multiplies in (the initialisation is a "
+                "prior over the valleys)."
             )
-        if all(abs(g - r * math.exp(-k * d)) < 1e-6 for g, (d, k, r) in zip(got, cases)):
+        if all(abs(g - r * math.exp(-k * d)) < 1e-6 for g, (d, k, r) in zip(got, cases, strict=False)):
             return hint(
-                "normalise over the two valleys: the share is shallow / (shallow + deep), with the deep valley's weight 1."
+                "normalise over the two valleys: the share is shallow / (shallow + deep), with the deep "
+                "valley's weight 1."
             )
         if all(abs(g - expected(d, k, 1.0 / r)) < 1e-6 for g, (d, k, r) in zip(got, cases, strict=True)):
             return hint(
-                "r is the *shallow* valley's share of the initial samples over the deep one's: it multiplies the "
+                "r is the *shallow* valley's share of the initial samples over the deep one's: it "
+                "multiplies the "
                 "shallow valley's weight, not the deep one's."
             )
         # the first case the prediction gets wrong (never one it got right)

@@ -65,7 +65,8 @@ def check_yaw_rate(fn) -> Feedback:
             if math.isclose(abs(out), abs(math.tan(DELTA_MAX * s) / L), rel_tol=1e-6):
                 return hint("the yaw rate grows with speed: a car at rest does not turn.")
             return hint(
-                f"for speed {v} m/s and steer {s} your yaw rate is {out:.4f} rad/s, which is not the kinematic "
+                f"for speed {v} m/s and steer {s} your yaw rate is {out:.4f} rad/s, which is not the "
+                "kinematic "
                 "bicycle's: check the formula term by term (speed, wheel angle, wheelbase, sign)."
             )
         return correct(
@@ -177,7 +178,8 @@ def _red_light_lane(ask, entry, d, name) -> Feedback | None:
     answers = {k: ask(*v, RED) for k, v in wrong_way.items()}
     if any(answers.values()) and name != "north":
         return hint(
-            f"right for a lane heading north, wrong for one heading {name}: measure the rear's position along "
+            f"right for a lane heading north, wrong for one heading {name}: measure the rear's position "
+            "along "
             "`direction`, not along the y axis."
         )
     if answers["already past"]:
@@ -195,8 +197,10 @@ def _red_light_lane(ask, entry, d, name) -> Feedback | None:
         if ask(cross[0] + side * right, cross[1] + side * right, RED):
             where = "in another lane" if abs(side) > 3 else "just outside the 4 m lane"
             return hint(
-                f"a crossing {abs(side)} m to the {'right' if side > 0 else 'left'} of the lane's centre line is "
-                f"{where}: only a crossing within the lane (half a lane width, 2 m, from its centre line) counts."
+                f"a crossing {abs(side)} m to the {'right' if side > 0 else 'left'} of the lane's centre "
+                "line is "
+                f"{where}: only a crossing within the lane (half a lane width, 2 m, from its centre line) "
+                "counts."
                 + (
                     ""
                     if name == "north"
@@ -206,7 +210,8 @@ def _red_light_lane(ask, entry, d, name) -> Feedback | None:
     for side in (1.5, -1.99, 1.99):
         if not ask(cross[0] + side * right, cross[1] + side * right, RED):
             return hint(
-                f"a crossing {abs(side)} m to the {'right' if side > 0 else 'left'} of the centre line is still "
+                f"a crossing {abs(side)} m to the {'right' if side > 0 else 'left'} of the centre line is "
+                "still "
                 "within the 4 m lane and counts."
                 + (
                     ""
@@ -276,7 +281,8 @@ def check_world_to_bev(fn) -> Feedback:
                 )
             if np.allclose((row, col), (304 - ref[0], ref[1]), atol=1e-6):
                 return hint(
-                    "ahead must be up: image rows grow downwards, so a point ahead of the car has a smaller row."
+                    "ahead must be up: image rows grow downwards, so a point ahead of the car has a "
+                    "smaller row."
                 )
             noturn = (152 - 5 * (x - cx), 96 - 5 * (y - cy))
             if np.allclose((row, col), noturn, atol=1e-6) and yaw != 0:
@@ -288,11 +294,13 @@ def check_world_to_bev(fn) -> Feedback:
                 return hint("the scale: the view has 5 pixels per metre.")
             if np.isclose(col, ref[1], atol=1e-6):
                 return hint(
-                    "the column is right but not the row: the car sits 40 px above the bottom edge of the 192 px view."
+                    "the column is right but not the row: the car sits 40 px above the bottom edge of the "
+                    "192 px view."
                 )
             return hint(
                 f"the point ({x}, {y}) seen from a car at ({cx}, {cy}) heading {yaw:.2f} rad lands at "
-                f"({row:.1f}, {col:.1f}) in your view: check the offset's projection, the scale and the car's pixel."
+                f"({row:.1f}, {col:.1f}) in your view: check the offset's projection, the scale and the "
+                "car's pixel."
             )
         return correct("That is the BEV's geometry: the renderer applies it to all 36,864 pixels at once.")
 
@@ -335,21 +343,26 @@ def check_expert_stops(fn) -> Feedback:
                 return hint(f"expert_stops must return True or False, got {type(out).__name__}.")
             answers.append(bool(out))
         truth = [stops_for_light(*c, config) for c in STOP_CASES]
-        wrong = [c for c, a, t in zip(STOP_CASES, answers, truth) if a != t]
+        wrong = [c for c, a, t in zip(STOP_CASES, answers, truth, strict=False) if a != t]
         if not wrong:
             return correct(
-                "That is the expert's rule. A one-bit 'must stop' flag draws a yellow line like a red one, yet "
-                "at (yellow, 3 m, 6 m/s) the expert drives on: there the flag contradicts the expert's label. "
-                "The intensity encoding draws yellow at its own level, 0.6, and lets distance and speed decide."
+                "That is the expert's rule. A one-bit 'must stop' flag draws a yellow line like a red one, "
+                "yet "
+                "at (yellow, 3 m, 6 m/s) the expert drives on: there the flag contradicts the expert's "
+                "label. "
+                "The intensity encoding draws yellow at its own level, 0.6, and lets distance and speed "
+                "decide."
             )
         if any(s == 2 and g > config.stop_distance_m for s, g, _ in wrong):
             return hint(
-                f"distance: the expert considers its light only within {config.stop_distance_m} m of the line; "
+                f"distance: the expert considers its light only within {config.stop_distance_m} m of the "
+                "line; "
                 "a red light further away does not stop it yet."
             )
         if any(s == 2 and g <= config.stop_distance_m for s, g, _ in wrong):
             return hint(
-                f"distance: the expert considers its light within {config.stop_distance_m} m of the line, and a "
+                f"distance: the expert considers its light within {config.stop_distance_m} m of the line, "
+                "and a "
                 "red light within that distance always stops it."
             )
         yellow = [c for c in wrong if c[0] == 1]

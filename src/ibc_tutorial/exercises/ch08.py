@@ -290,7 +290,8 @@ def check_recipe(fn) -> Feedback:
                 "original IBC, so that IBC and DA-IBC differ in DFO's start and end."
             )
         return correct(
-            f"{shared} Ending the book's IBC with the argmax is the book's reading (the paper does not say which "
+            f"{shared} Ending the book's IBC with the argmax is the book's reading (the paper does not say "
+            "which "
             "ending its IBC baseline used); an IBC ending with a draw is accepted too."
         )
 

@@ -63,15 +63,18 @@ SWERVE_CASES = [
 
 
 SWERVE_HINTS = {
-    "relative": "a car that enters the section already off the centre line has not swerved: measure each pass's "
+    "relative": "a car that enters the section already off the centre line has not swerved: measure each "
+    "pass's "
     "offsets from where the car was when the section began.",
-    "signed": "only movement towards the side road is a swerve: a car that moves away from it has not been pulled "
+    "signed": "only movement towards the side road is a swerve: a car that moves away from it has not been "
+    "pulled "
     "towards the other option.",
     "peak": "a swerve is judged by how far the car went at its farthest, not on average over the pass.",
     "half": "the paper counts a slight swerve as half a swerve.",
     "strict": "a pass whose peak is exactly at a threshold has reached it: 'reaches' means at or beyond the "
     "threshold.",
-    "thresholds": "right for the thresholds 0.5 and 1.0 m, wrong for 0.3 and 0.8 m: use the thresholds passed as "
+    "thresholds": "right for the thresholds 0.5 and 1.0 m, wrong for 0.3 and 0.8 m: use the thresholds "
+    "passed as "
     "`slight` and `clear`, not the chapter's numbers.",
 }
 
@@ -197,7 +200,12 @@ def check_crashes_per_km(fn) -> Feedback:
             ref = crashes_per_km(c, d)
             if close(out, ref, rtol=1e-6, atol=1e-9):
                 continue
-            if close(out, float(np.mean([ci / (di / 1000) for ci, di in zip(c, d)])), rtol=1e-6, atol=1e-9):
+            if close(
+                out,
+                float(np.mean([ci / (di / 1000) for ci, di in zip(c, d, strict=False)])),
+                rtol=1e-6,
+                atol=1e-9,
+            ):
                 return hint(
                     "a short run would weigh as much as a long one: pool the crashes and the distances of "
                     "all runs first, then divide."
