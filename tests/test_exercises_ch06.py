@@ -256,3 +256,14 @@ def test_shallow_share_hint_names_a_case_the_prediction_gets_wrong(i, factor):
     for other in cases:
         if other != wrong_case and other[:2] != wrong_case[:2]:
             assert f"Δ = {other[0]}, k = {other[1]} rounds" not in fb.message
+
+
+@pytest.mark.parametrize("scale", [0.96, 1.05, 1.1])
+def test_dfo_step_noise_a_few_percent_off_gets_a_hint_about_the_spread(scale):
+    """σ off by 4 % or more is named as the spread, not as the shape."""
+
+    def fn(samples, energies, sigma, low, high, generator):
+        return solutions.ch06_dfo_step(samples, energies, scale * sigma, low, high, generator)
+
+    fb = ch06.check_dfo_step(fn)
+    assert fb.status == "hint" and "standard deviation" in fb.message, fb.message
