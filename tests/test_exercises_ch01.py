@@ -3,6 +3,8 @@ typical mistakes -> a hint naming the mistake, code that raises -> a hint (never
 
 import pytest
 import torch
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from ibc_tutorial.exercises import ch01, solutions
 from ibc_tutorial.toy import TreeWorld
@@ -129,7 +131,7 @@ def test_touching_is_no_collision_in_the_checker_nor_the_library():
 @pytest.mark.parametrize(
     "wrong, words",
     [
-        (lambda y: y[:, 0] - y.max(dim=1).values, "differs"),
+        (lambda y: y[:, 0] - y.max(dim=1).values, "negative"),
         (lambda y: y.max(dim=1).values - y[:, 0], "to the right"),  # towards +y: the left
         (lambda y: y.min(dim=1).values - y[:, 0], "sign"),
         (lambda y: (-y.min(dim=1).values).clamp_min(0.0), "from where each car was"),
@@ -163,18 +165,111 @@ def test_predict_mae_side():
     assert check(solutions.ch01_predict_mae_side).status == "correct"
     assert check(stub).status == "not attempted"
     mistakes = {
-        "the mean": (lambda r, l: "anywhere in the gap", "like the mean"),
+        "the mean": (lambda r, n: "anywhere in the gap", "like the mean"),
         "smaller mode": (
-            lambda r, l: "right" if r < l else ("left" if l < r else "anywhere in the gap"),
+            lambda r, n: "right" if r < n else ("left" if n < r else "anywhere in the gap"),
             "smaller mode",
         ),
-        "no tie": (lambda r, l: "right" if r >= l else "left", "samples above and below"),
+        "no tie": (lambda r, n: "right" if r >= n else "left", "samples above and below"),
         "tie too wide": (
-            lambda r, l: "right" if r - l > 5 else ("left" if l - r > 5 else "anywhere in the gap"),
+            lambda r, n: "right" if r - n > 5 else ("left" if n - r > 5 else "anywhere in the gap"),
             "breaks the tie",
         ),
-        "not an answer": (lambda r, l: "straight", "answer with one of"),
+        "not an answer": (lambda r, n: "straight", "answer with one of"),
     }
     for fn, words in mistakes.values():
         fb = check(fn)
         assert fb.status == "hint" and words in fb.message, fb.message
+
+
+# -------------------------------------------------------- holes closed (issue 26): answers that were accepted
+@settings(max_examples=30, deadline=None)
+@given(
+    tx=st.floats(-30, 30, allow_nan=False),
+    ty=st.floats(-30, 30, allow_nan=False),
+    r=st.floats(0.5, 5.0, allow_nan=False),
+)
+def test_hits_tree_that_ignores_its_arguments_is_not_correct(tx, ty, r):
+    """Any tree position and radius sum hard-coded into the function, instead of read from the
+    arguments, gets a hint: the checker asks about trees and radii other than the chapter's."""
+    tree = torch.tensor([tx, ty])
+
+    def hard_coded(xy, t, rc, rt):
+        return (xy - tree).norm(dim=1) < r
+
+    assert ch01.check_hits_tree(hard_coded).status == "hint"
+
+
+@pytest.mark.parametrize(
+    "wrong, words",
+    [
+        (lambda xy, t, rc, rt: (xy - torch.tensor([20.0, 0.0])).norm(dim=1) < rc + rt, "`tree_xy`"),
+        (lambda xy, t, rc, rt: (xy - torch.tensor([20.0, 0.0])).norm(dim=1) < 2.5, "`tree_xy`"),
+        (lambda xy, t, rc, rt: (xy - t).norm(dim=1) < 2.5, "`car_radius`"),
+        (lambda xy, t, rc, rt: xy.norm(dim=1) < rc + rt, "from the tree's centre"),
+    ],
+)
+def test_hits_tree_hard_coded_numbers_are_named(wrong, words):
+    fb = ch01.check_hits_tree(wrong)
+    assert fb.status == "hint" and words in fb.message, fb.message
+
+
+def test_hits_tree_scenes_touch_exactly():
+    """Every scene has positions exactly r_car + r_tree from its tree: strictness is tested in each."""
+    for xy, tree, rc, rt in ch01._hits_scenes():
+        assert int(((xy - tree).norm(dim=1) == rc + rt).sum()) >= 4
+
+
+@pytest.mark.parametrize(
+    "wrong, words",
+    [
+        (lambda y: y[:, 0] - y[:, 1:].min(dim=1).values, "t = 0"),  # skips t = 0
+        (lambda y: (y[:, :1] - y[:, 1:]).max(dim=1).values, "t = 0"),  # the same, written otherwise
+        (lambda y: (y[:, 0] - y.min(dim=1).values) - 0.01 * (y[:, -1] > y[:, 0]), "negative"),
+    ],
+)
+def test_swerve_that_skips_t0_or_goes_negative_is_not_correct(wrong, words):
+    fb = ch01.check_swerve(wrong)
+    assert fb.status == "hint" and words in fb.message, fb.message
+
+
+@settings(max_examples=20, deadline=None)
+@given(k=st.integers(1, 10))
+def test_swerve_from_a_later_step_is_not_correct(k):
+    """Starting the max at any t = k >= 1 (an off-by-one in a loop) gets a hint."""
+    assert ch01.check_swerve(lambda y: y[:, 0] - y[:, k:].min(dim=1).values).status == "hint"
+
+
+def test_swerve_cases_include_episodes_without_a_swerve():
+    y = ch01._swerve_cases()
+    assert int((solutions.ch01_swerve(y) == 0).sum()) >= 2
+    assert bool((y[:, 1:] > y[:, :1]).all(dim=1).any())  # one episode only ever moves left
+
+
+@settings(max_examples=20, deadline=None)
+@given(margin=st.integers(1, 30))
+def test_predict_mae_side_tie_with_a_margin_is_not_correct(margin):
+    """ "A tie when the counts differ by at most `margin`" gets a hint for every margin >= 1."""
+
+    def fn(r, n):
+        if abs(r - n) <= margin:
+            return "anywhere in the gap"
+        return "right" if r > n else "left"
+
+    fb = ch01.check_predict_mae_side(fn)
+    assert fb.status == "hint" and "breaks the tie" in fb.message, fb.message
+
+
+@settings(max_examples=20, deadline=None)
+@given(share=st.floats(0.505, 0.9))
+def test_predict_mae_side_by_a_share_above_half_is_not_correct(share):
+    """ "Right only if more than `share` of the samples are right", for any share above 50.5 %."""
+
+    def fn(r, n):
+        if r > share * (r + n):
+            return "right"
+        if n > share * (r + n):
+            return "left"
+        return "anywhere in the gap"
+
+    assert ch01.check_predict_mae_side(fn).status == "hint"

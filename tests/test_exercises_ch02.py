@@ -5,6 +5,8 @@ import math
 
 import pytest
 import torch
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from ibc_tutorial.exercises import ch02, solutions
 
@@ -120,31 +122,31 @@ def test_mdn_stub_is_not_attempted():
 
 MDN_MISTAKES = {
     "sign": (
-        lambda l, m, s, y: torch.logsumexp(torch.log_softmax(l, 1) + _log_n(m, s, y).sum(2), 1).mean(),
+        lambda lg, m, s, y: torch.logsumexp(torch.log_softmax(lg, 1) + _log_n(m, s, y).sum(2), 1).mean(),
         "sign",
     ),
     "sum of logs": (
-        lambda l, m, s, y: -(torch.log_softmax(l, 1) + _log_n(m, s, y).sum(2)).sum(1).mean(),
+        lambda lg, m, s, y: -(torch.log_softmax(lg, 1) + _log_n(m, s, y).sum(2)).sum(1).mean(),
         "log-sum-exp",
     ),
-    "no softmax": (lambda l, m, s, y: -torch.logsumexp(l + _log_n(m, s, y).sum(2), 1).mean(), "softmax"),
+    "no softmax": (lambda lg, m, s, y: -torch.logsumexp(lg + _log_n(m, s, y).sum(2), 1).mean(), "softmax"),
     "mean over dims": (
-        lambda l, m, s, y: -torch.logsumexp(torch.log_softmax(l, 1) + _log_n(m, s, y).mean(2), 1).mean(),
+        lambda lg, m, s, y: -torch.logsumexp(torch.log_softmax(lg, 1) + _log_n(m, s, y).mean(2), 1).mean(),
         "per-dimension log-densities",
     ),
     "no log sigma": (
-        lambda l, m, s, y: (
-            -torch.logsumexp(torch.log_softmax(l, 1) + (_log_n(m, s, y) + torch.log(s)).sum(2), 1).mean()
+        lambda lg, m, s, y: (
+            -torch.logsumexp(torch.log_softmax(lg, 1) + (_log_n(m, s, y) + torch.log(s)).sum(2), 1).mean()
         ),
         "-log σ",
     ),
     "naive exp": (
-        lambda l, m, s, y: -torch.log((torch.softmax(l, 1) * _log_n(m, s, y).sum(2).exp()).sum(1)).mean(),
+        lambda lg, m, s, y: -torch.log((torch.softmax(lg, 1) * _log_n(m, s, y).sum(2).exp()).sum(1)).mean(),
         "logsumexp",
     ),
     "hard-coded K": (
-        lambda l, m, s, y: (
-            -torch.logsumexp(torch.log_softmax(l[:, :3], 1) + _log_n(m[:, :3], s[:, :3], y).sum(2), 1).mean()
+        lambda lg, m, s, y: (
+            -torch.logsumexp(torch.log_softmax(lg[:, :3], 1) + _log_n(m[:, :3], s[:, :3], y).sum(2), 1).mean()
         ),
         "hard-coding",
     ),
@@ -185,3 +187,59 @@ def test_beta_can_represent():
     for fn, words in mistakes.values():
         fb = check(fn)
         assert fb.status == "hint" and words in fb.message, fb.message
+
+
+# --------------------------------------------------------------------------- holes closed (issue 26)
+def _clamped(eps):
+    def fn(a, b, y):
+        return -_beta_log_f(a, b, y, eps=eps).sum(1).mean()
+
+    return fn
+
+
+@settings(max_examples=8, deadline=None)
+@given(log_eps=st.floats(-7.0, -2.0))
+def test_beta_any_clamp_up_to_one_percent_is_correct(log_eps):
+    assert ch02.check_beta_nll(_clamped(10.0**log_eps)).status == "correct"
+
+
+@settings(max_examples=8, deadline=None)
+@given(eps=st.floats(0.016, 0.45))
+def test_beta_a_clamp_that_changes_ordinary_actions_gets_a_hint_about_the_margin(eps):
+    """A clamp of 0.03 used to pass, and at 0.05 the hint blamed a hard-coded batch size."""
+    fb = ch02.check_beta_nll(_clamped(eps))
+    assert fb.status == "hint" and "margin" in fb.message and "hard-coding" not in fb.message, fb.message
+
+
+def _dropping_the_bounds(how):
+    def fn(a, b, y):
+        inside = y.abs() < 1  # (B, D)
+        yp = torch.where(inside, (y + 1) / 2, torch.full_like(y, 0.5))
+        log_f = _beta_log_f(a, b, 2 * yp - 1, eps=1e-6)
+        if how == "zero":  # the bound terms replaced by 0
+            return -torch.where(inside, log_f, torch.zeros_like(log_f)).sum(1).mean()
+        if how == "rows":  # the samples at a bound left out of the mean
+            keep = inside.all(1)
+            return -log_f[keep].sum(1).mean()
+        return -(log_f * inside).sum() / inside.sum() * y.shape[1]  # "mean over the valid terms"
+
+    return fn
+
+
+@pytest.mark.parametrize("how", ["zero", "rows", "valid terms"])
+def test_beta_dropping_the_terms_at_the_bounds_gets_a_hint(how):
+    fb = ch02.check_beta_nll(_dropping_the_bounds(how))
+    assert fb.status == "hint" and "not dropped" in fb.message, fb.message
+
+
+def test_beta_nan_to_num_at_the_bounds_gets_a_hint():
+    def fn(a, b, y):
+        yp = (y + 1) / 2
+        log_f = (
+            (a - 1) * torch.log(yp)
+            + (b - 1) * torch.log(1 - yp)
+            - (torch.lgamma(a) + torch.lgamma(b) - torch.lgamma(a + b))
+        )
+        return -torch.nan_to_num(log_f, neginf=-30.0).sum(1).mean()
+
+    assert ch02.check_beta_nll(fn).status == "hint"

@@ -6,6 +6,8 @@ import math
 import numpy as np
 import pytest
 import torch
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from ibc_tutorial.exercises import ch03, solutions
 from ibc_tutorial.losses import info_nce, soft_targets
@@ -180,3 +182,28 @@ def test_decision_prediction_mistakes_get_a_hint_naming_them(name):
 def test_decision_prediction_wrong_keys():
     fb = ch03.check_decision_prediction(lambda: {"mse": 0.35})
     assert fb.status == "hint" and "keys" in fb.message
+
+
+# --------------------------------------------------------------------------- holes closed (issue 26)
+@pytest.mark.parametrize(
+    "wrong",
+    [
+        lambda x, dt: float(np.std(np.diff(np.asarray(x)) / dt)),  # 0 for any steady ramp
+        lambda x, dt: float((torch.diff(torch.as_tensor(x)) / dt).std()),  # the same, unbiased
+    ],
+)
+def test_whiteness_as_the_spread_of_the_rates_gets_a_hint(wrong):
+    fb = ch03.check_whiteness(wrong)
+    assert fb.status == "hint" and "spread" in fb.message, fb.message
+
+
+@settings(max_examples=20, deadline=None)
+@given(rate=st.floats(-5.0, 5.0).filter(lambda r: abs(r) > 0.05), n=st.integers(3, 40))
+def test_whiteness_of_a_ramp_is_its_rate(rate, n):
+    """The property the checker now tests: a steady ramp's whiteness is |its rate| (the solution and
+    the library agree), while the rates' standard deviation is 0."""
+    dt = 0.1
+    x = rate * dt * np.arange(n)
+    assert math.isclose(solutions.ch03_whiteness(torch.tensor(x), dt), abs(rate), rel_tol=1e-9)
+    assert math.isclose(whiteness(x, dt), abs(rate), rel_tol=1e-6)
+    assert float(np.std(np.diff(x) / dt)) < 1e-9 * max(1.0, abs(rate))

@@ -88,7 +88,7 @@ def test_inverse_weights_mistakes_get_a_hint_naming_them(name):
     assert words in fb.message, (name, fb.message)
 
 
-# --------------------------------------------------------------------------- choosing a bandwidth by effective sample size
+# -------------------------------------------------------------- choosing a bandwidth by effective sample size
 def _table(actions, rare, candidates):
     out = {}
     for h in candidates:

@@ -5,6 +5,8 @@ import math
 
 import pytest
 import torch
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from ibc_tutorial.exercises import ch06, solutions
 
@@ -18,7 +20,16 @@ def test_dfo_step_solution_is_correct():
     assert ch06.check_dfo_step(solutions.ch06_dfo_step).status == "correct"
 
 
-def _step(sign=-1.0, resample=True, noise="sigma", clip="clamp", use_gen=True, order="after", shape="full"):
+def _step(
+    sign=-1.0,
+    resample=True,
+    noise="sigma",
+    clip="clamp",
+    use_gen=True,
+    order="after",
+    shape="full",
+    law="normal",
+):
     def fn(samples, energies, sigma, low, high, generator):
         gen = generator if use_gen else None
         p = torch.softmax(sign * energies, dim=0)
@@ -29,12 +40,25 @@ def _step(sign=-1.0, resample=True, noise="sigma", clip="clamp", use_gen=True, o
         )
         scale = {"sigma": sigma, "sigma2": sigma**2, "none": 0.0}[noise]
         n_shape = {"full": samples.shape, "per_sample": (len(samples), 1), "one": (1, 1)}[shape]
+        if law == "normal":
+            z = torch.randn(n_shape, generator=gen)
+        elif law == "uniform":  # the same standard deviation as N(0, 1)
+            z = (2 * torch.rand(n_shape, generator=gen) - 1) * math.sqrt(3.0)
+        else:  # Laplace with standard deviation 1
+            u = torch.rand(n_shape, generator=gen) - 0.5
+            z = -torch.sign(u) * torch.log1p(-2 * u.abs()) / math.sqrt(2.0)
         if order == "before":  # noise first, then resampling: copies of noisy samples
-            new = (samples + scale * torch.randn(n_shape, generator=gen))[idx]
+            new = (samples + scale * z)[idx]
         else:
-            new = samples[idx] + scale * torch.randn(n_shape, generator=gen)
+            new = samples[idx] + scale * z
         if clip == "clamp":
             return new.clamp(low, high)
+        if clip == "upper":
+            return new.clamp(max=high)
+        if clip == "lower":
+            return new.clamp(min=low)
+        if clip == "unit box":
+            return new.clamp(-1.0, 1.0)
         if clip == "redraw":  # reflect out-of-bounds samples back inside
             new = torch.where(new > high, 2 * high - new, new)
             return torch.where(new < low, 2 * low - new, new)
@@ -121,7 +145,7 @@ SHARE_MISTAKES = {
     "no r": (lambda d, k, r: solutions.ch06_shallow_share(d, k, 1.0), "ignores r"),
     "not normalised": (lambda d, k, r: r * math.exp(-k * d), "normalise"),
     "p(y|x)^(1/k)": (lambda d, k, r: solutions.ch06_shallow_share(d / k, 1, r), "measures"),
-    "exponent k·Δ but linear": (lambda d, k, r: max(0.0, 0.5 - 0.1 * k * d), "importance sampler"),
+    "exponent k·Δ but linear": (lambda d, k, r: max(0.0, 0.5 - 0.1 * k * d), "one round"),
     "a string": (lambda d, k, r: "0.3", "one number"),
     "above 1": (lambda d, k, r: 2.0, "between 0 and 1"),
 }
@@ -141,3 +165,105 @@ def test_shallow_share_wrong_only_for_many_rounds_quotes_the_measurement():
 
     fb = ch06.check_shallow_share(fn)
     assert fb.status == "hint" and "measures" in fb.message
+
+
+# --------------------------------------------------------------------------- holes closed (issue 26)
+HOLES_STEP = {
+    "uniform noise": (_step(law="uniform"), "shape of a Gaussian"),
+    "Laplace noise": (_step(law="Laplace"), "shape of a Gaussian"),
+    "clip the upper bound only": (_step(clip="upper"), "both ends"),
+    "clip the lower bound only": (_step(clip="lower"), "both ends"),
+    "clip to [-1, 1] whatever the bounds": (_step(clip="unit box"), "arguments"),
+}
+
+
+@pytest.mark.parametrize("name", list(HOLES_STEP))
+def test_dfo_step_holes_are_closed(name):
+    fn, words = HOLES_STEP[name]
+    fb = ch06.check_dfo_step(fn)
+    assert fb.status == "hint" and words in fb.message, (name, fb.message)
+
+
+def test_dfo_step_noise_from_the_global_generator_gets_a_hint():
+    """The resampling from `generator`, the noise from torch's global generator: caught only with σ > 0."""
+
+    def fn(samples, energies, sigma, low, high, generator):
+        idx = torch.multinomial(
+            torch.softmax(-energies, 0), len(samples), replacement=True, generator=generator
+        )
+        return (samples[idx] + sigma * torch.randn(samples.shape)).clamp(low, high)
+
+    fb = ch06.check_dfo_step(fn)
+    assert fb.status == "hint" and "generator" in fb.message, fb.message
+
+
+def test_dfo_step_own_generator_gets_a_hint_and_the_global_state_is_kept():
+    def fn(samples, energies, sigma, low, high, generator):
+        return solutions.ch06_dfo_step(samples, energies, sigma, low, high, torch.Generator().manual_seed(0))
+
+    torch.manual_seed(123)
+    before = torch.random.get_rng_state()
+    fb = ch06.check_dfo_step(fn)
+    assert fb.status == "hint" and "generator" in fb.message, fb.message
+    assert torch.equal(torch.random.get_rng_state(), before)
+
+
+@settings(max_examples=6, deadline=None)
+@given(temperature=st.one_of(st.floats(0.5, 0.9), st.floats(1.1, 2.0)))
+def test_select_action_at_another_temperature_gets_a_hint(temperature):
+    """A softmax of −E / T for T away from 1 by 10 % or more (1.1 used to pass)."""
+
+    def fn(samples, energies, select, generator):
+        p = torch.softmax(-energies / temperature, dim=0)
+        if select == "argmax":
+            return samples[int(p.argmax())]
+        return samples[int(torch.multinomial(p, 1, generator=generator))]
+
+    assert ch06.check_select_action(fn).status == "hint"
+
+
+def test_select_action_ignoring_the_generator_gets_a_hint():
+    def fn(samples, energies, select, generator):
+        p = torch.softmax(-energies, dim=0)
+        if select == "argmax":
+            return samples[int(p.argmax())]
+        return samples[int(torch.multinomial(p, 1))]  # torch's global generator
+
+    fb = ch06.check_select_action(fn)
+    assert fb.status == "hint" and "generator" in fb.message, fb.message
+
+
+def test_select_action_always_the_first_sample_for_argmax_gets_a_hint():
+    fb = ch06.check_select_action(lambda s, e, sel, g: s[0])
+    assert fb.status == "hint"
+
+
+@settings(max_examples=25, deadline=None)
+@given(i=st.integers(0, 5), factor=st.floats(0.3, 3.0).filter(lambda f: abs(f - 1) > 0.01))
+def test_shallow_share_hint_names_a_case_the_prediction_gets_wrong(i, factor):
+    """Wrong in one case only (any of the six): the hint names that case, never one it got right."""
+    cases = [(0.5, 1, 1.0), (0.5, 5, 1.0), (1.0, 3, 1.0), (0.5, 2, 3.0), (0.2, 4, 0.5), (2.0, 1, 1.0)]
+    wrong_case = cases[i]
+
+    def fn(d, k, r):
+        v = solutions.ch06_shallow_share(d, k, r)
+        return min(1.0, v * factor) if (d, k, r) == wrong_case else v
+
+    fb = ch06.check_shallow_share(fn)
+    assert fb.status == "hint"
+    d, k, r = wrong_case
+    assert f"Δ = {d}" in fb.message, fb.message
+    for other in cases:
+        if other != wrong_case and other[:2] != wrong_case[:2]:
+            assert f"Δ = {other[0]}, k = {other[1]} rounds" not in fb.message
+
+
+@pytest.mark.parametrize("scale", [0.96, 1.05, 1.1])
+def test_dfo_step_noise_a_few_percent_off_gets_a_hint_about_the_spread(scale):
+    """σ off by 4 % or more is named as the spread, not as the shape."""
+
+    def fn(samples, energies, sigma, low, high, generator):
+        return solutions.ch06_dfo_step(samples, energies, scale * sigma, low, high, generator)
+
+    fb = ch06.check_dfo_step(fn)
+    assert fb.status == "hint" and "standard deviation" in fb.message, fb.message

@@ -5,6 +5,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from ibc_tutorial.driving import get_renderer
 from ibc_tutorial.driving.lights import RED, YELLOW, RedLightMonitor
@@ -26,7 +28,7 @@ def test_solution_stub_and_crash(check, solution, stub_and_crash):
     stub_and_crash(check)
 
 
-# --------------------------------------------------------------------------- the solutions agree with the library
+# ----------------------------------------------------------------------- the solutions agree with the library
 def test_yaw_rate_solution_is_the_cars():
     import pymunk
 
@@ -140,7 +142,7 @@ RED_MISTAKES = {
     "any lane": (_rule(no_lateral=True), "another lane"),
     "already past counts": (_rule(any_past=True), "already past"),
     "backwards counts": (_rule(backwards=True), "backwards"),
-    "lane too narrow": (_rule(narrow=True), "1.5 m to the side"),
+    "lane too narrow": (_rule(narrow=True), "1.5 m to the right"),
     "always false": (_rule(returns=False), "is an infraction"),
     "returns a number": (_rule(returns=1), "True or False"),
 }
@@ -216,3 +218,79 @@ def test_expert_stops_mistakes(name):
     fn, words = STOP_MISTAKES[name]
     fb = ch07.check_expert_stops(fn)
     assert fb.status == "hint" and words in fb.message, fb.message
+
+
+# --------------------------------------------------------------------------- holes closed (issue 26)
+def _ignores_direction(before, after, entry, direction, state):
+    """Every lane taken as northbound: y along the lane, x across it."""
+    return bool(state == 2 and before[1] < entry[1] <= after[1] and abs(after[0] - entry[0]) <= 2.0)
+
+
+def test_red_light_ignoring_direction_gets_a_hint():
+    fb = ch07.check_ran_red_light(_ignores_direction)
+    assert fb.status == "hint" and "`direction`" in fb.message, fb.message
+
+
+@settings(max_examples=25, deadline=None)
+@given(half_width=st.one_of(st.floats(0.2, 1.98), st.floats(2.02, 6.0)))
+def test_red_light_with_another_lateral_tolerance_gets_a_hint(half_width):
+    """Any tolerance across the lane other than 2 m (± 0.02): 3.9 m used to pass."""
+
+    def fn(before, after, entry, direction, state):
+        right = np.array([direction[1], -direction[0]])
+        s0, s1 = (before - entry) @ direction, (after - entry) @ direction
+        return bool(state == 2 and s0 < 0 <= s1 and abs((after - entry) @ right) <= half_width)
+
+    fb = ch07.check_ran_red_light(fn)
+    assert fb.status == "hint" and "m to the" in fb.message, fb.message
+
+
+@settings(max_examples=20, deadline=None)
+@given(
+    angle=st.floats(0.0, 2 * math.pi),
+    ex=st.floats(-100, 100),
+    ey=st.floats(-100, 100),
+    along=st.tuples(st.floats(-3, 3), st.floats(-3, 3)).filter(lambda p: min(map(abs, p)) > 1e-6),
+    across=st.floats(-5, 5).filter(lambda a: abs(abs(a) - 2.0) > 1e-6),
+    state=st.sampled_from([0, 1, 2]),
+)
+def test_red_light_solution_is_the_monitor_on_any_lane(angle, ex, ey, along, across, state):
+    """The reference the checker's lanes come from agrees with ``RedLightMonitor`` for a lane of any
+    heading: the checker's four headings are samples of a rule that holds for all."""
+    from types import SimpleNamespace
+
+    d = np.array([math.cos(angle), math.sin(angle)])
+    right = np.array([d[1], -d[0]])
+    entry = np.array([ex, ey])
+    before = entry + along[0] * d + across * right
+    after = entry + along[1] * d + across * right
+    monitor = RedLightMonitor([SimpleNamespace(entry=tuple(entry), direction=tuple(d))])
+    expected = state == 2 and 0 in monitor.crossed(before, after)
+    assert solutions.ch07_ran_red_light(before, after, entry, d, state) == expected
+
+
+@settings(max_examples=20, deadline=None)
+@given(horizon=st.one_of(st.floats(5.0, 9.25), st.floats(9.75, 20.0)))
+def test_expert_stops_with_another_horizon_gets_a_hint(horizon):
+    """Any horizon other than 9.5 m (± 0.25): 10 m used to pass."""
+
+    def fn(state, gap, speed):
+        if gap > horizon or state == 0:
+            return False
+        return state == 2 or (gap > 0 and speed * speed / (2 * gap) <= 4.0)
+
+    fb = ch07.check_expert_stops(fn)
+    assert fb.status == "hint" and "distance" in fb.message, fb.message
+
+
+def test_exercise_5_text_matches_the_chapter():
+    """The BEV's default encoding draws yellow at its own level; only the one-bit flag draws it like red."""
+    import json
+    from pathlib import Path
+
+    from ibc_tutorial.driving.bev import LIGHT_LEVELS
+
+    nb = json.loads(Path(__file__).parents[1].joinpath("exercises/07_car_and_town.ipynb").read_text())
+    text = next("".join(c["source"]) for c in nb["cells"] if "".join(c["source"]).startswith("## Exercise 5"))
+    assert "flag, which draws a yellow line exactly like a red one" in text
+    assert "yellow 0.6" in text and abs(float(LIGHT_LEVELS[1]) - 0.6) < 1e-9

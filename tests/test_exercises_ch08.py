@@ -22,7 +22,7 @@ def test_solution_stub_and_crash(check, solution, stub_and_crash):
     stub_and_crash(check)
 
 
-# --------------------------------------------------------------------------- the solutions agree with the library
+# ----------------------------------------------------------------------- the solutions agree with the library
 def test_episode_score_solution_is_the_simulators():
     # drive the real simulator and score its log with the solution
     from ibc_tutorial.driving.sim import DrivingSim
@@ -180,3 +180,35 @@ def test_recipe_accepts_other_capitals():
         return {k: v.upper() if isinstance(v, str) else v for k, v in solutions.ch08_recipe(method).items()}
 
     assert ch08.check_recipe(shout).status == "correct"
+
+
+# --------------------------------------------------------------------------- issue 26: the paper's conclusion
+def test_recipe_accepts_ibc_ending_with_a_draw():
+    """The paper's conclusion names the counter-examples and the DFO's initialisation; an IBC that ends
+    with Algorithm 1's draw is a defensible reading, accepted and told apart from the book's."""
+    fb = ch08.check_recipe(_recipe(ibc={"dfo_select": "sample"}))
+    assert fb.status == "correct" and "does not say" in fb.message, fb.message
+    fb = ch08.check_recipe(solutions.ch08_recipe)
+    assert fb.status == "correct" and "book's reading" in fb.message, fb.message
+    for message in (fb.message, ch08.check_recipe(_recipe(ibc={"dfo_select": "sample"})).message):
+        assert "as the paper's conclusion says" not in message
+        assert "initialis" in message
+
+
+def test_recipe_other_readings_do_not_open_other_holes():
+    """Only IBC's ending has a second reading: DA-IBC's argmax and IBC without DFO stay wrong."""
+    assert ch08.check_recipe(_recipe(**{"da-ibc": {"dfo_select": "argmax"}})).status == "hint"
+    fb = ch08.check_recipe(_recipe(ibc={"dfo_select": None}))
+    assert fb.status == "hint" and "runs DFO too" in fb.message, fb.message
+    fb = ch08.check_recipe(_recipe(ibc={"dfo_init": None, "dfo_select": None}))
+    assert fb.status == "hint"
+
+
+def test_exercise_1_says_the_score_is_the_papers_own():
+    import json
+    from pathlib import Path
+
+    nb = json.loads(Path(__file__).parents[1].joinpath("exercises/08_training_agents.ipynb").read_text())
+    text = next("".join(c["source"]) for c in nb["cells"] if "".join(c["source"]).startswith("## Exercise 1"))
+    assert "as CARLA's leaderboard does" not in text
+    assert "its own score" in text and "route completion" in text

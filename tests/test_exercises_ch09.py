@@ -28,7 +28,9 @@ def looped_difference(a, b, n_resamples, rng):
 
 CHECKS = [
     (ch09.check_bootstrap_difference, library_difference),
+    (ch09.check_bootstrap_difference, solutions.ch09_bootstrap_difference),
     (ch09.check_exit_shares, solutions.ch09_exit_shares),
+    (ch09.check_verdict, solutions.ch09_verdict),
 ]
 
 

@@ -7,6 +7,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
 
 from ibc_tutorial.exercises import ch10
 from ibc_tutorial.exercises.solutions import ch10_command_whiteness, ch10_crashes_per_km, ch10_swerve_rate
@@ -90,3 +92,45 @@ def test_the_checks_agree_with_the_library():
     assert math.isclose(
         ch10_crashes_per_km([{"crashes": 3, "distance_m": 1500.0}]), crashes_per_km(3, 1500.0)
     )
+
+
+# --------------------------------------------------------------------------- holes closed (issue 26)
+def _rate(peak_of, slight, clear, strict=False):
+    peak = np.asarray(peak_of)
+    if strict:
+        return float(np.where(peak > clear, 1.0, np.where(peak > slight, 0.5, 0.0)).mean())
+    return float(np.where(peak >= clear, 1.0, np.where(peak >= slight, 0.5, 0.0)).mean())
+
+
+def test_swerve_rate_with_strict_thresholds_gets_a_hint():
+    def strict(x, s, c):
+        x = np.asarray(x, dtype=float)
+        return _rate((x - x[:, :1]).max(1), s, c, strict=True)
+
+    fb = ch10.check_swerve_rate(strict)
+    assert fb.status == "hint" and "exactly at a threshold" in fb.message, fb.message
+
+
+@settings(max_examples=25, deadline=None)
+@given(slight=st.floats(0.1, 1.5), gap=st.floats(0.05, 1.5))
+def test_swerve_rate_with_hard_coded_thresholds_gets_a_hint(slight, gap):
+    """Thresholds written into the function instead of read from its arguments: any pair more than
+    0.05 m from the checker's last case's (0.7, 1.3) m, whose passes peak every 0.05 m."""
+    clear = slight + gap
+    assume(abs(slight - 0.7) > 0.05 or abs(clear - 1.3) > 0.05)
+
+    def hard_coded(x, s, c):
+        x = np.asarray(x, dtype=float)
+        return _rate((x - x[:, :1]).max(1), slight, clear)
+
+    assert ch10.check_swerve_rate(hard_coded).status == "hint"
+
+
+def test_exercise_text_gives_the_papers_decision_rate():
+    """The steering-EBM paper's stack decides at about 12 Hz; 33 ms is its frame spacing."""
+    import json
+    from pathlib import Path
+
+    nb = json.loads(Path(__file__).parents[1].joinpath("exercises/10_road_following.ipynb").read_text())
+    text = "".join("".join(c["source"]) for c in nb["cells"] if c["cell_type"] == "markdown")
+    assert "decides every 33 ms" not in text and "12 Hz" in text

@@ -61,30 +61,36 @@ def check_best_constant_mse(fn) -> Feedback:
             ref = float(actions.mean())
             if abs(c - ref) < 1e-4:
                 continue
-            loss = lambda v: float(((actions - v) ** 2).mean())  # noqa: E731
+            loss = lambda v, actions=actions: float(((actions - v) ** 2).mean())  # noqa: E731
             if abs(c - float(actions.median())) < 1e-6 or abs(c - float(torch.quantile(actions, 0.5))) < 1e-6:
                 return hint(
-                    "your constant is a median: it minimises the mean *absolute* error. Which value makes the derivative of the *squared* error zero?"
+                    "your constant is a median: it minimises the mean *absolute* error. Which value makes "
+                    "the derivative of the *squared* error zero?"
                 )
             if abs(c - float(actions.sum())) < 1e-4:
                 return hint(
-                    "your value grows with the number of actions: the best constant should not change if every action were repeated twice."
+                    "your value grows with the number of actions: the best constant should not change if "
+                    "every action were repeated twice."
                 )
             if abs(c) < 1e-9 and abs(ref) > 1e-3:
                 return hint(
-                    "your constant does not depend on the actions (it is 0): the loss here is not symmetric around 0."
+                    "your constant does not depend on the actions (it is 0): the loss here is not "
+                    "symmetric around 0."
                 )
             if any(abs(c - float(a)) < 1e-6 for a in actions):
                 return hint(
-                    f"your constant is one of the actions an expert took, but the loss there ({loss(c):.4f}) is not the smallest: "
+                    "your constant is one of the actions an expert took, but the loss there "
+                    f"({loss(c):.4f}) is not the smallest: "
                     "try c a little to either side. The optimum need not be an action anyone took."
                 )
             if abs(c - ref) < 2e-2:
                 return hint(
-                    "close, but not exact (a search over a grid?): set the derivative of the loss with respect to c to zero and solve."
+                    "close, but not exact (a search over a grid?): set the derivative of the loss with "
+                    "respect to c to zero and solve."
                 )
             return hint(
-                f"for one of the test sets your constant gives a mean squared error of {loss(c):.4f}; a better constant exists. Differentiate the loss with respect to c."
+                f"for one of the test sets your constant gives a mean squared error of {loss(c):.4f}; a "
+                "better constant exists. Differentiate the loss with respect to c."
             )
         return correct("The mean: it lies between the two modes, where no expert steered.")
 
@@ -93,6 +99,7 @@ def check_best_constant_mse(fn) -> Feedback:
 
 # --------------------------------------------------------------------------- 2. collision check
 def _hits_cases():
+    """The chapter's scene: the tree at (20, 0), radii 1 (car) and 1.5 (tree)."""
     gen = torch.Generator().manual_seed(3)
     tree = torch.tensor([20.0, 0.0])
     # random points around the tree, plus hand-picked ones near the boundary (distance 2.5)
@@ -116,69 +123,112 @@ def _hits_cases():
     return torch.cat([pts, special, touching]), tree, 1.0, 1.5
 
 
+def _hits_scenes():
+    """The chapter's scene, then two others (another tree, other radii), so that an answer which
+    hard-codes the chapter's numbers instead of using its arguments is told apart. Every scene has
+    points exactly r_car + r_tree from the tree (dyadic numbers: exact in float32)."""
+    scenes = [_hits_cases()]
+    gen = torch.Generator().manual_seed(4)
+    for tree, rc, rt in ((torch.tensor([-3.5, 7.25]), 0.75, 2.0), (torch.tensor([6.0, -12.5]), 1.25, 0.5)):
+        r = rc + rt
+        pts = tree + torch.empty(150, 2).uniform_(-2.2 * r, 2.2 * r, generator=gen)
+        touching = tree + torch.tensor([[r, 0.0], [-r, 0.0], [0.0, r], [0.0, -r]])
+        scenes.append((torch.cat([pts, touching]), tree, rc, rt))
+    return scenes
+
+
+def _hits_diagnose(got, xy, tree, rc, rt, ref) -> Feedback:
+    """The hint for an answer ``got`` that differs from ``ref`` on one scene."""
+    dist = (xy - tree).norm(dim=1)
+    if torch.equal(got, dist <= rc + rt) or torch.equal(got, ((xy - tree) ** 2).sum(1) <= (rc + rt) ** 2):
+        return hint(
+            "right everywhere except where the two discs only touch (centres exactly r_car + r_tree "
+            "apart): touching is not overlapping, so that comparison must be strict."
+        )
+    if torch.equal(got, dist < rt) or torch.equal(got, dist <= rt):
+        return hint(
+            "a car whose centre stays outside the tree's disc can still touch it: the car has a size too."
+        )
+    if torch.equal(got, dist < rc) or torch.equal(got, dist <= rc):
+        return hint("the tree has a size too, not only the car.")
+    if torch.equal(got, dist < 2 * (rc + rt)):
+        return hint("you flag collisions too far from the tree: are you using diameters where radii belong?")
+    if torch.equal(got, dist**2 < rc + rt) or torch.equal(got, dist < (rc + rt) ** 2):
+        return hint(
+            "compare like with like: a squared distance with a squared length, or a distance with a length."
+        )
+    if torch.equal(got, (xy[:, 0] - tree[0]).abs() < rc + rt) or torch.equal(
+        got, (xy[:, 1] - tree[1]).abs() < rc + rt
+    ):
+        return hint("the distance between the centres depends on both coordinates, x and y.")
+    if torch.equal(got, ~(dist < rc + rt)):
+        return hint("your answer is the opposite: True should mean the discs overlap.")
+    if torch.equal(got, xy.norm(dim=1) < rc + rt):
+        return hint("measure the distance from the tree's centre, `tree_xy`, not from the origin.")
+    _, tree0, rc0, rt0 = _hits_cases()
+    if not torch.equal(tree, tree0) and (
+        torch.equal(got, (xy - tree0).norm(dim=1) < rc + rt)
+        or torch.equal(got, (xy - tree0).norm(dim=1) < rc0 + rt0)
+    ):
+        return hint(
+            f"right for the chapter's tree at {tree0.tolist()}, wrong for a tree at {tree.tolist()}: use the "
+            "argument `tree_xy`, not the chapter's numbers."
+        )
+    if (rc, rt) != (rc0, rt0) and torch.equal(got, dist < rc0 + rt0):
+        return hint(
+            f"right for the chapter's radii ({rc0} and {rt0} m), wrong for radii {rc} and {rt} m: use the "
+            "arguments `car_radius` and `tree_radius`, not the chapter's numbers."
+        )
+    wrong = int((got != ref).sum())
+    first = xy[(got != ref).nonzero()[0, 0]].tolist()
+    return hint(
+        f"{wrong} of {len(xy)} positions get the wrong answer; for instance a car at {first} (tree at "
+        f"{tree.tolist()}, radii {rc} and {rt})."
+    )
+
+
 def check_hits_tree(fn) -> Feedback:
-    """Check ``fn(car_xy, tree_xy, car_radius, tree_radius) -> (B,) bool`` (discs overlap)."""
+    """Check ``fn(car_xy, tree_xy, car_radius, tree_radius) -> (B,) bool`` (discs overlap) on three
+    scenes: the chapter's tree and radii, and two others."""
 
     def check() -> Feedback:
-        xy, tree, rc, rt = _hits_cases()
-        out = fn(xy.clone(), tree.clone(), rc, rt)
-        if not isinstance(out, torch.Tensor):
-            return hint(f"return a torch.Tensor of booleans, one per car position, got {type(out).__name__}.")
-        if out.shape != (len(xy),):
-            return hint(
-                f"return one answer per car position: shape ({len(xy)},) for {len(xy)} positions, got {tuple(out.shape)}."
-            )
-        got = out.bool() if out.dtype == torch.bool else out != 0
-        dist = (xy - tree).norm(dim=1)
-        ref = dist < rc + rt
-        if torch.equal(got, ref):
-            return correct("Two discs overlap when their centres are closer than the sum of their radii.")
-        if torch.equal(got, dist <= rc + rt) or torch.equal(got, ((xy - tree) ** 2).sum(1) <= (rc + rt) ** 2):
-            return hint(
-                "right everywhere except where the two discs only touch (centres exactly r_car + r_tree apart): touching is not overlapping, so that comparison must be strict."
-            )
-        if torch.equal(got, dist < rt) or torch.equal(got, dist <= rt):
-            return hint(
-                "a car whose centre stays outside the tree's disc can still touch it: the car has a size too."
-            )
-        if torch.equal(got, dist < rc) or torch.equal(got, dist <= rc):
-            return hint("the tree has a size too, not only the car.")
-        if torch.equal(got, dist < 2 * (rc + rt)) or torch.equal(got, dist < 2 * rt + 2 * rc):
-            return hint(
-                "you flag collisions too far from the tree: are you using diameters where radii belong?"
-            )
-        if torch.equal(got, dist**2 < rc + rt) or torch.equal(got, dist < (rc + rt) ** 2):
-            return hint(
-                "compare like with like: a squared distance with a squared length, or a distance with a length."
-            )
-        if torch.equal(got, (xy[:, 0] - tree[0]).abs() < rc + rt) or torch.equal(
-            got, (xy[:, 1] - tree[1]).abs() < rc + rt
-        ):
-            return hint("the distance between the centres depends on both coordinates, x and y.")
-        if torch.equal(got, ~ref):
-            return hint("your answer is the opposite: True should mean the discs overlap.")
-        wrong = int((got != ref).sum())
-        return hint(
-            f"{wrong} of {len(xy)} positions get the wrong answer; for instance a car at {xy[(got != ref).nonzero()[0, 0]].tolist()} (tree at {tree.tolist()}, radii {rc} and {rt})."
-        )
+        for xy, tree, rc, rt in _hits_scenes():
+            out = fn(xy.clone(), tree.clone(), rc, rt)
+            if not isinstance(out, torch.Tensor):
+                return hint(
+                    f"return a torch.Tensor of booleans, one per car position, got {type(out).__name__}."
+                )
+            if out.shape != (len(xy),):
+                return hint(
+                    f"return one answer per car position: shape ({len(xy)},) for {len(xy)} positions, "
+                    f"got {tuple(out.shape)}."
+                )
+            got = out.detach().bool() if out.dtype == torch.bool else out.detach() != 0
+            ref = (xy - tree).norm(dim=1) < rc + rt
+            if not torch.equal(got, ref):
+                return _hits_diagnose(got, xy, tree, rc, rt, ref)
+        return correct("Two discs overlap when their centres are closer than the sum of their radii.")
 
     return run_check(check, "hits_tree")
 
 
 # --------------------------------------------------------------------------- 3. swerve
 def _swerve_cases() -> torch.Tensor:
+    """(E=8, T=30) lateral offsets: most bumps to the right (-y); the last two episodes never move
+    right of where they started (one drifts steadily left, one holds its line), so their swerve is 0."""
     gen = torch.Generator().manual_seed(5)
     t = torch.linspace(0, 1, 30)
     start = torch.empty(6, 1).uniform_(-0.3, 0.3, generator=gen)
     bump = torch.tensor([[0.8], [0.0], [-0.5], [0.3], [1.2], [0.05]]) * torch.sin(torch.pi * t)[None, :]
     drift = torch.tensor([[0.0], [0.2], [0.0], [-0.4], [0.0], [0.0]]) * t[None, :]
-    return -(
-        start + bump + drift + 0.01 * torch.randn(6, 30, generator=gen)
-    )  # (E=6, T=30): most bumps to the right (-y)
+    moving = -(start + bump + drift + 0.01 * torch.randn(6, 30, generator=gen))
+    away = 0.2 + 0.5 * t[None, :]  # only ever moves left (y increasing): no swerve
+    steady = torch.full((1, 30), -0.15)  # holds its line: no swerve
+    return torch.cat([moving, away, steady])
 
 
 def check_swerve(fn) -> Feedback:
-    """Check ``fn(y) -> (E,)``: max over t of (y_t - y_0) for each episode (row)."""
+    """Check ``fn(y) -> (E,)``: max over t of (y_0 - y_t) for each episode (row), t = 0 included."""
 
     def check() -> Feedback:
         y = _swerve_cases()
@@ -189,7 +239,8 @@ def check_swerve(fn) -> Feedback:
         if out.shape != ref.shape:
             if out.shape == (y.shape[1],):
                 return hint(
-                    f"return one number per episode (rows, {y.shape[0]} of them), not one per time step: which dimension do you reduce over?"
+                    f"return one number per episode (rows, {y.shape[0]} of them), not one per time step: "
+                    "which dimension do you reduce over?"
                 )
             return hint(f"return one number per episode: shape ({y.shape[0]},), got {tuple(out.shape)}.")
         out = out.detach().to(ref.dtype)
@@ -198,11 +249,13 @@ def check_swerve(fn) -> Feedback:
         low = y.min(dim=1).values
         if torch.allclose(out, (-low).clamp_min(0.0), atol=1e-5) or torch.allclose(out, -low, atol=1e-5):
             return hint(
-                "measure from where each car was at the start (its first offset), not from the centre line: a car driving a little off-centre all along has not swerved."
+                "measure from where each car was at the start (its first offset), not from the centre "
+                "line: a car driving a little off-centre all along has not swerved."
             )
         if torch.allclose(out, y.max(dim=1).values - y[:, 0], atol=1e-5):
             return hint(
-                "that is the largest move to the left (y increasing); the side road branches off to the right, where y decreases."
+                "that is the largest move to the left (y increasing); the side road branches off to the "
+                "right, where y decreases."
             )
         if torch.allclose(out, (y - y[:, :1]).abs().max(dim=1).values, atol=1e-5):
             return hint(
@@ -214,16 +267,27 @@ def check_swerve(fn) -> Feedback:
             )
         if torch.allclose(out, low - y[:, 0], atol=1e-5):
             return hint(
-                "check the sign: a swerve is a distance moved, at least 0, so subtract the smallest y from the first one."
+                "check the sign: a swerve is a distance moved, at least 0, so count the moves towards -y."
+            )
+        later = y[:, 0] - y[:, 1:].min(dim=1).values  # the largest move over t >= 1 only
+        if torch.allclose(out, later, atol=1e-5):
+            return hint(
+                "a car that never moves right of where it started (it drifts left, or holds its line) has "
+                "swerved 0, not a negative amount: t = 0 is one of the t in the max."
+            )
+        if (out < -1e-6).any():
+            return hint(
+                "a swerve is a distance moved towards the side road, at least 0: some of yours are negative."
             )
         return hint(
-            "for some episodes your value differs from the largest move towards the side road (y decreasing) since the first time step."
+            "for some episodes your value differs from the largest move towards the side road (y "
+            "decreasing) since the first time step."
         )
 
     return run_check(check, "swerve")
 
 
-# --------------------------------------------------------------------------- 4. prediction: where the MAE lands
+# ------------------------------------------------------------------------- 4. prediction: where the MAE lands
 MAE_ANSWERS = ("right", "left", "anywhere in the gap")
 
 
@@ -246,36 +310,55 @@ def check_predict_mae_side(fn) -> Feedback:
     left about -0.7) with ``n_right`` and ``n_left`` samples, against the minimum on a grid."""
 
     def check() -> Feedback:
-        cases = [(60, 40), (30, 70), (50, 50), (51, 49), (10, 90), (80, 80)]
+        # counts one apart (51 : 50, 40 : 41, 3 : 2): a tie "when the counts are close" is told apart
+        cases = [
+            (60, 40),
+            (30, 70),
+            (50, 50),
+            (51, 49),
+            (10, 90),
+            (80, 80),
+            (51, 50),
+            (40, 41),
+            (3, 2),
+            (7, 7),
+        ]
+        wrong = []  # (n_right, n_left, answer, truth) for every case answered wrongly
         for n_right, n_left in cases:
             answer = fn(n_right, n_left)
             if answer not in MAE_ANSWERS:
                 return hint(f"answer with one of {MAE_ANSWERS}, got {answer!r}.")
             truth = _mae_optimal_side(n_right, n_left)
-            if answer == truth:
-                continue
+            if answer != truth:
+                wrong.append((n_right, n_left, answer, truth))
+        if wrong:
+            n_right, n_left, answer, truth = wrong[0]
             if truth == "anywhere in the gap":
                 return hint(
-                    f"with {n_right} actions on each side, count the samples above and below a constant in the gap: "
-                    "does moving it within the gap change the mean absolute error?"
+                    f"with {n_right} actions on each side, count the samples above and below a constant in "
+                    "the gap: does moving it within the gap change the mean absolute error?"
                 )
             if answer == "anywhere in the gap":
-                if abs(n_right - n_left) <= 2:
+                sided = [c for c in cases if _mae_optimal_side(*c) != "anywhere in the gap"]
+                some_sided_right = any(fn(*c) == _mae_optimal_side(*c) for c in sided)
+                if some_sided_right and all(w[2] == "anywhere in the gap" for w in wrong):
+                    r, n = min(((w[0], w[1]) for w in wrong), key=lambda c: abs(c[0] - c[1]))
                     return hint(
-                        f"for {n_right} right and {n_left} left: even one sample more on one side breaks the tie. "
-                        "The MAE's slope is (#below - #above)/N; where is it zero?"
+                        f"for {r} right and {n} left: even one sample more on one side breaks the tie. "
+                        "Where is the MAE's slope, (#below - #above)/N, zero?"
                     )
                 return hint(
                     "you answer like the mean (the MSE's optimum) or as if the counts did not matter. "
                     f"For {n_right} right and {n_left} left, which value has half the samples on each side?"
                 )
             return hint(
-                f"for {n_right} right and {n_left} left you picked the smaller mode: the median lies in the mode "
-                "that holds more than half of the samples."
+                f"for {n_right} right and {n_left} left you picked the smaller mode: the median lies in the "
+                "mode that holds more than half of the samples."
             )
         return correct(
             "A median: in the bigger mode when the counts differ, anywhere in the gap when they are equal. "
-            "So an MAE policy follows the majority at the side road (straight on), but at the tree's near tie it is arbitrary."
+            "So an MAE policy follows the majority at the side road (straight on), but at the tree's near "
+            "tie it is arbitrary."
         )
 
     return run_check(check, "`predict_mae_side`")

@@ -19,13 +19,7 @@ import math
 
 import torch
 
-from ibc_tutorial.exercises.core import Feedback, correct, hint, run_check
-
-
-def _close(a: torch.Tensor, b: torch.Tensor, rtol: float = 1e-3, atol: float = 1e-3) -> bool:
-    return bool(torch.isfinite(a).all()) and bool(
-        torch.allclose(a.double(), b.double(), rtol=rtol, atol=atol)
-    )
+from ibc_tutorial.exercises.core import Feedback, close, correct, hint, run_check
 
 
 def _scalar(out, name: str) -> torch.Tensor | Feedback:
@@ -48,6 +42,68 @@ def _beta_inputs(seed: int, b: int = 32, d: int = 2):
         -0.98, 0.98, generator=gen
     )  # y' in [0.01, 0.99]: any clamp up to 0.01 is fine
     return alpha, beta, actions
+
+
+def _near_bound_inputs():
+    """(8, 2) actions, two of them at ±0.97 (y' = 0.015 or 0.985, inside the bounds), with
+    concentrations in [1.5, 2.5]. A clamp of y' wider than about 0.015 changes the loss by more than
+    the check's 4e-3; a shift log(y' + 1e-4) changes it by less."""
+    gen = torch.Generator().manual_seed(4)
+    alpha = torch.empty(8, 2).uniform_(1.5, 2.5, generator=gen)
+    beta = torch.empty(8, 2).uniform_(1.5, 2.5, generator=gen)
+    actions = torch.empty(8, 2).uniform_(-0.8, 0.8, generator=gen)
+    actions[:2, 0] = torch.tensor([-0.97, 0.97])
+    return alpha, beta, actions
+
+
+def _bound_inputs():
+    """(8, 2) actions, half of the rows with both dimensions at exactly -1 or +1, concentrations in
+    [1.5, 3] (> 1: every term at a bound grows as y' nears it, so the loss rises as the margin shrinks)."""
+    gen = torch.Generator().manual_seed(3)
+    alpha = torch.empty(8, 2).uniform_(1.5, 3.0, generator=gen)
+    beta = torch.empty(8, 2).uniform_(1.5, 3.0, generator=gen)
+    actions = torch.empty(8, 2).uniform_(-0.8, 0.8, generator=gen)
+    actions[:4] = torch.tensor([[-1.0, 1.0], [1.0, -1.0], [-1.0, -1.0], [1.0, 1.0]])
+    return alpha, beta, actions
+
+
+def _bound_range(alpha, beta, actions) -> tuple[float, float]:
+    """The range of eq. 1's loss over clamps of y' to [eps, 1 - eps], eps from 1e-12 to 0.01 (float64)."""
+    y = (actions.double() + 1) / 2
+    dist = torch.distributions.Beta(alpha.double(), beta.double())
+    values = [
+        float(-dist.log_prob(y.clamp(eps, 1 - eps)).sum(1).mean())
+        for eps in torch.logspace(-12, -2, 101, dtype=torch.float64).tolist()
+    ]
+    return min(values), max(values)
+
+
+TOO_WIDE = (
+    "your loss is what eq. 1 gives when y' is clamped (or squeezed) by a margin of more than 0.01, which "
+    "changes ordinary actions too: the margin must only keep y' off exactly 0 and 1."
+)
+"""The hint for a clamp of y' that also changes actions inside the bounds."""
+
+
+def _clamped_too_wide(fn) -> bool:
+    """Whether ``fn`` clamps y' by a margin wider than 0.0105: probed with one action at a time under
+    Beta(2, 1), whose loss -log(2 y') gives back the y' the function scored. A clamp scores every y'
+    below its margin as the margin itself and every y' above it unchanged."""
+    probes = [0.003, 0.006, 0.0125, 0.025, 0.05, 0.1, 0.2]  # y'
+    scored = []
+    try:
+        for z in probes:
+            out = fn(torch.full((1, 1), 2.0), torch.full((1, 1), 1.0), torch.full((1, 1), 2 * z - 1))
+            scored.append(math.exp(-float(torch.as_tensor(out).detach()) - math.log(2.0)))
+    except Exception:  # a function that fails on a (1, 1) batch is judged on the other checks
+        return False
+    raised = [(z, e) for z, e in zip(probes, scored, strict=True) if e > z * 1.001]
+    if not raised:
+        return False
+    margin = max(e for _, e in raised)
+    same = all(abs(e - margin) <= 0.01 * margin for _, e in raised)
+    below = all(e > z * 1.001 for z, e in zip(probes, scored, strict=True) if z < margin * 0.99)
+    return same and below and margin > 0.0105
 
 
 def _beta_log_f(alpha, beta, actions) -> torch.Tensor:
@@ -76,15 +132,21 @@ def check_beta_nll(fn) -> Feedback:
                 .sum(1)
                 .mean()
             )
-            if isinstance(out_pos, torch.Tensor) and out_pos.ndim == 0 and _close(out_pos, unscaled):
+            if (
+                isinstance(out_pos, torch.Tensor)
+                and out_pos.ndim == 0
+                and close(out_pos, unscaled, rtol=1e-3, atol=1e-3)
+            ):
                 return hint(
-                    "your loss is NaN or infinite for actions inside (-1, 1): the Beta density lives on [0, 1], "
+                    "your loss is NaN or infinite for actions inside (-1, 1): the Beta density lives on "
+                    "[0, 1], "
                     "and eq. 1 maps each action to y' = (y + 1)/2 before scoring it."
                 )
             return hint(
-                "your loss is NaN or infinite for actions inside (-1, 1): check every log, and that the actions are mapped into [0, 1]."
+                "your loss is NaN or infinite for actions inside (-1, 1): check every log, and that the "
+                "actions are mapped into [0, 1]."
             )
-        if not _close(out, ref):
+        if not close(out, ref, rtol=1e-3, atol=1e-3):
             mistakes = [
                 (
                     log_f.sum(1).mean(),
@@ -92,7 +154,8 @@ def check_beta_nll(fn) -> Feedback:
                 ),
                 (
                     -log_f.mean(),
-                    "the reduction over action dimensions: eq. 1 *sums* log f over the action dimensions (acceleration + steering) and averages over the samples.",
+                    "the reduction over action dimensions: eq. 1 *sums* log f over the action dimensions "
+                    "(acceleration + steering) and averages over the samples.",
                 ),
                 (
                     -log_f.sum(),
@@ -100,11 +163,13 @@ def check_beta_nll(fn) -> Feedback:
                 ),
                 (
                     ref + d * math.log(2.0),
-                    "the rescaling: eq. 1 scores the density of the rescaled action y' itself, with no change-of-variables term.",
+                    "the rescaling: eq. 1 scores the density of the rescaled action y' itself, with no "
+                    "change-of-variables term.",
                 ),
                 (
                     ref - d * math.log(2.0),
-                    "the rescaling: eq. 1 scores the density of the rescaled action y' itself, with no change-of-variables term.",
+                    "the rescaling: eq. 1 scores the density of the rescaled action y' itself, with no "
+                    "change-of-variables term.",
                 ),
             ]
             log_b = (
@@ -129,7 +194,8 @@ def check_beta_nll(fn) -> Feedback:
             mistakes.append(
                 (
                     -wrong_y.sum(1).mean(),
-                    "the rescaling: actions live in [-1, 1]; eq. 1 maps them to y' = (y + 1)/2 before scoring them.",
+                    "the rescaling: actions live in [-1, 1]; eq. 1 maps them to y' = (y + 1)/2 before "
+                    "scoring them.",
                 )
             )
             swapped = torch.distributions.Beta(beta.double(), alpha.double()).log_prob(
@@ -142,10 +208,13 @@ def check_beta_nll(fn) -> Feedback:
                 )
             )
             for value, what in mistakes:
-                if _close(out, value):
+                if close(out, value, rtol=1e-3, atol=1e-3):
                     return hint(f"close, but check {what}")
+            if _clamped_too_wide(fn):
+                return hint(TOO_WIDE)
             return hint(
-                f"your loss is {float(out):.4g} on a random test batch where eq. 1 gives {float(ref):.4g}; compare your formula with the Beta density term by term."
+                f"your loss is {float(out):.4g} on a random test batch where eq. 1 gives {float(ref):.4g}; "
+                "compare your formula with the Beta density term by term."
             )
         # other batch sizes and dimensions, and one dimension at a time
         for seed, (b2, d2) in [(1, (7, 1)), (2, (5, 3))]:
@@ -153,31 +222,63 @@ def check_beta_nll(fn) -> Feedback:
             out2 = _scalar(fn(a2, b2_, y2), "beta_nll")
             if isinstance(out2, Feedback):
                 return out2
-            if not _close(out2, -_beta_log_f(a2, b2_, y2).sum(1).mean()):
+            if not close(out2, -_beta_log_f(a2, b2_, y2).sum(1).mean(), rtol=1e-3, atol=1e-3):
+                if _clamped_too_wide(fn):
+                    return hint(TOO_WIDE)
                 return hint(
-                    f"correct on a (32, 2) batch but not on a ({len(y2)}, {y2.shape[1]}) one: avoid hard-coding the batch size or the number of action dimensions."
+                    f"correct on a (32, 2) batch but not on a ({len(y2)}, {y2.shape[1]}) one: avoid "
+                    "hard-coding the batch size or the number of action dimensions."
                 )
-        # the bounds: full lock and full brake
-        alpha, beta, _ = _beta_inputs(3, 8, 2)
+        # close to the bounds but inside (y' = 0.015 and 0.985): a clamp wider than ~0.01 changes these
+        alpha, beta, actions = _near_bound_inputs()
+        out = _scalar(fn(alpha.clone(), beta.clone(), actions.clone()), "beta_nll")
+        if isinstance(out, Feedback):
+            return out
+        if not close(out, -_beta_log_f(alpha, beta, actions).sum(1).mean(), rtol=1e-3, atol=4e-3):
+            return hint(
+                "right for actions well inside (-1, 1), wrong for actions close to the bounds but inside "
+                "them "
+                "(y = ±0.97, y' = 0.015 and 0.985): keeping y' inside (0, 1) must change nothing but the "
+                "actions at exactly ±1, so the margin of your clamp (or shift) is too wide."
+            )
+        # the bounds: full lock and full brake, in a batch with ordinary actions
+        alpha, beta, actions = _bound_inputs()
         alpha.requires_grad_(True)
         beta.requires_grad_(True)
-        actions = torch.tensor([[-1.0, 1.0], [1.0, -1.0]]).repeat(4, 1)
         out = _scalar(fn(alpha, beta, actions), "beta_nll")
         if isinstance(out, Feedback):
             return out
         if not torch.isfinite(out):
             return hint(
-                "your loss is infinite or NaN for actions exactly at -1 or +1 (full brake, full steering lock: "
+                "your loss is infinite or NaN for actions exactly at -1 or +1 (full brake, full steering "
+                "lock: "
                 "expert data holds them). Keep y' a little inside (0, 1) before taking logs."
             )
         if not out.requires_grad:
             return hint(
-                "your loss does not depend on alpha and beta through autograd (did you use .item(), numpy or detach?): training needs its gradients."
+                "your loss does not depend on alpha and beta through autograd (did you use .item(), numpy or "
+                "detach?): training needs its gradients."
+            )
+        low, high = _bound_range(alpha.detach(), beta.detach(), actions)
+        value = float(out.detach())
+        if not low - 1e-3 * abs(low) - 1e-3 <= value <= high + 1e-3 * abs(high) + 1e-3:
+            if _clamped_too_wide(fn):
+                return hint(TOO_WIDE)
+            return hint(
+                f"on a batch with actions at exactly ±1 your loss is {value:.4g}, where eq. 1 with y' kept "
+                "just "
+                f"inside (0, 1) (a margin between 1e-12 and 0.01) gives between {low:.4g} and {high:.4g}: "
+                "the "
+                "samples at the bounds count like any other, with y' moved just inside (0, 1), not dropped "
+                "or "
+                "replaced."
             )
         out.backward()
         if not (torch.isfinite(alpha.grad).all() and torch.isfinite(beta.grad).all()):
             return hint(
-                "the loss is finite at actions of exactly ±1 but its gradients are not: keep y' a little inside (0, 1) before taking logs."
+                "the loss is finite at actions of exactly ±1 but its gradients are not: keep y' a little "
+                "inside "
+                "(0, 1) before taking logs."
             )
         return correct("Your Beta NLL matches eq. 1 and stays finite, with finite gradients, at the bounds.")
 
@@ -210,10 +311,11 @@ def check_mdn_nll(fn) -> Feedback:
         if isinstance(out, Feedback):
             return out
         ref = -_mixture(logits, means, stds).log_prob(actions.double()).mean()
-        if not _close(out, ref):
+        if not close(out, ref, rtol=1e-3, atol=1e-3):
             if not torch.isfinite(out):
                 return hint(
-                    "your loss is NaN or infinite on an ordinary batch: check the logs (of the weights, of the densities)."
+                    "your loss is NaN or infinite on an ordinary batch: check the logs (of the weights, of "
+                    "the densities)."
                 )
             normal = torch.distributions.Normal(means.double(), stds.double())
             log_comp = normal.log_prob(actions.double()[:, None]).sum(-1)  # (B, K)
@@ -227,23 +329,28 @@ def check_mdn_nll(fn) -> Feedback:
                 ),
                 (
                     -(log_w + log_comp).sum(1).mean(),
-                    "how the components combine: the mixture density is a weighted *sum* of the component densities, so take the log after summing (log-sum-exp), not a sum of logs.",
+                    "how the components combine: the mixture density is a weighted *sum* of the component "
+                    "densities, so take the log after summing (log-sum-exp), not a sum of logs.",
                 ),
                 (
                     -(log_w.exp() * log_comp).sum(1).mean(),
-                    "how the components combine: the mixture density is a weighted *sum* of the component densities; the log of that sum is not the weighted sum of logs.",
+                    "how the components combine: the mixture density is a weighted *sum* of the component "
+                    "densities; the log of that sum is not the weighted sum of logs.",
                 ),
                 (
                     -torch.logsumexp(logits.double() + log_comp, 1).mean(),
-                    "the mixture weights: the logits are not normalised; a softmax over the K components turns them into weights that sum to 1.",
+                    "the mixture weights: the logits are not normalised; a softmax over the K components "
+                    "turns them into weights that sum to 1.",
                 ),
                 (
                     -torch.logsumexp(torch.log(w_raw) + log_comp, 1).mean(),
-                    "the mixture weights: the logits are not probabilities; a softmax over the K components turns them into weights that sum to 1.",
+                    "the mixture weights: the logits are not probabilities; a softmax over the K "
+                    "components turns them into weights that sum to 1.",
                 ),
                 (
                     -torch.logsumexp(log_w + normal.log_prob(actions.double()[:, None]).mean(-1), 1).mean(),
-                    "the action dimensions: a diagonal Gaussian's log-density *sums* the per-dimension log-densities.",
+                    "the action dimensions: a diagonal Gaussian's log-density *sums* the per-dimension "
+                    "log-densities.",
                 ),
                 (
                     -torch.logsumexp(
@@ -259,7 +366,8 @@ def check_mdn_nll(fn) -> Feedback:
                         + (normal.log_prob(actions.double()[:, None]) - torch.log(stds.double())).sum(-1),
                         1,
                     ).mean(),
-                    "the Gaussian's normalisation: its log-density has -log σ, not -2 log σ (σ is a standard deviation, not a variance).",
+                    "the Gaussian's normalisation: its log-density has -log σ, not -2 log σ (σ is a "
+                    "standard deviation, not a variance).",
                 ),
             ]
             var_normal = torch.distributions.Normal(means.double(), stds.double().sqrt())
@@ -272,19 +380,21 @@ def check_mdn_nll(fn) -> Feedback:
                 )
             )
             for value, what in mistakes:
-                if _close(out, value):
+                if close(out, value, rtol=1e-3, atol=1e-3):
                     return hint(f"close, but check {what}")
             return hint(
-                f"your loss is {float(out):.4g} on a random test batch where the mixture gives {float(ref):.4g}; compare your formula with log Σ_k π_k N(y; μ_k, σ_k²) term by term."
+                f"your loss is {float(out):.4g} on a random test batch where the mixture gives "
+                f"{float(ref):.4g}; compare your formula with log Σ_k π_k N(y; μ_k, σ_k²) term by term."
             )
         for seed, (b, k, d) in [(1, (6, 1, 1)), (2, (9, 5, 3))]:
             args = _mdn_inputs(seed, b, k, d)
             out2 = _scalar(fn(*args), "mdn_nll")
             if isinstance(out2, Feedback):
                 return out2
-            if not _close(out2, -_mixture(*args[:3]).log_prob(args[3].double()).mean()):
+            if not close(out2, -_mixture(*args[:3]).log_prob(args[3].double()).mean(), rtol=1e-3, atol=1e-3):
                 return hint(
-                    f"correct for K = 3 components and D = 2 action dimensions but not for K = {k}, D = {d}: avoid hard-coding the sizes."
+                    f"correct for K = 3 components and D = 2 action dimensions but not for K = {k}, D = "
+                    f"{d}: avoid hard-coding the sizes."
                 )
         # far from every component: a naive exp underflows to 0 and log(0) = -inf
         logits, means, stds, actions = _mdn_inputs(3, 8, 3, 1)
@@ -293,9 +403,10 @@ def check_mdn_nll(fn) -> Feedback:
         if isinstance(out3, Feedback):
             return out3
         ref3 = -_mixture(logits, far_means, stds).log_prob(actions.double()).mean()
-        if not _close(out3, ref3, rtol=1e-3, atol=1e-2):
+        if not close(out3, ref3, rtol=1e-3, atol=1e-2):
             return hint(
-                "right on ordinary inputs, but not when the action is far from every component (at the start of "
+                "right on ordinary inputs, but not when the action is far from every component (at the "
+                "start of "
                 "training it often is): the densities underflow to 0. Stay in log space (torch.logsumexp)."
             )
         return correct(
@@ -305,7 +416,7 @@ def check_mdn_nll(fn) -> Feedback:
     return run_check(check, "`mdn_nll`")
 
 
-# --------------------------------------------------------------------------- 3. prediction: what a Beta can represent
+# ------------------------------------------------------------------- 3. prediction: what a Beta can represent
 BETA_SHAPES = ("flat", "one peak inside", "peaks at both ends", "two peaks inside")
 
 
@@ -343,7 +454,8 @@ def check_beta_can_represent(fn) -> Feedback:
                 continue
             if shape == "two peaks inside":
                 return hint(
-                    "look at the second derivative of log f in the chapter: can log f be concave near one point and "
+                    "look at the second derivative of log f in the chapter: can log f be concave near one "
+                    "point and "
                     "have a dip in between two peaks, with alpha and beta fixed?"
                 )
             if shape == "peaks at both ends":
@@ -352,7 +464,8 @@ def check_beta_can_represent(fn) -> Feedback:
                 return hint("evaluate the density for alpha = beta = 1.")
             return hint("try alpha = beta = 2: where is the density highest?")
         return correct(
-            "A Beta has at most one peak inside the interval; its 'two modes' can only be the two walls of a U, "
+            "A Beta has at most one peak inside the interval; its 'two modes' can only be the two walls of "
+            "a U, "
             "at full lock. That is why the chapter's Beta policy is flat or U-shaped at the tree."
         )
 

@@ -22,30 +22,22 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from ibc_tutorial.exercises.core import Feedback, correct, hint, run_check
+from ibc_tutorial.exercises.core import Feedback, close, correct, hint, run_check
 from ibc_tutorial.toy import TreeConfig, TreeWorld
-
-
-def _close(a, b, rtol: float = 1e-4, atol: float = 1e-4) -> bool:
-    a = torch.as_tensor(a, dtype=torch.float64)
-    b = torch.as_tensor(b, dtype=torch.float64)
-    return (
-        a.shape == b.shape
-        and bool(torch.isfinite(a).all())
-        and bool(torch.allclose(a, b, rtol=rtol, atol=atol))
-    )
 
 
 def _as_scalar(out, name: str) -> torch.Tensor | Feedback:
     if isinstance(out, (float, int)) and not isinstance(out, bool):
         return hint(
-            f"{name} returned a Python number: return a torch.Tensor (a scalar) so that training can back-propagate through it."
+            f"{name} returned a Python number: return a torch.Tensor (a scalar) so that training can "
+            "back-propagate through it."
         )
     if not isinstance(out, torch.Tensor):
         return hint(f"{name} must return a torch.Tensor (a scalar), got {type(out).__name__}.")
     if out.ndim != 0:
         return hint(
-            f"{name} must return a scalar (0-dimensional tensor), got shape {tuple(out.shape)}: average the per-sample terms over the batch."
+            f"{name} must return a scalar (0-dimensional tensor), got shape {tuple(out.shape)}: average the "
+            "per-sample terms over the batch."
         )
     return out
 
@@ -76,7 +68,7 @@ def check_info_nce(fn) -> Feedback:
             return out
         terms = _nce_terms(pos, neg)
         ref = terms.mean()
-        if not _close(out, ref):
+        if not close(out, ref):
             flipped = _nce_terms(-pos, -neg)
             logits = torch.cat([-pos[:, None], -neg], 1).double()
             mistakes = [
@@ -90,69 +82,78 @@ def check_info_nce(fn) -> Feedback:
                 ),
                 (
                     terms.sum(),
-                    "the reduction: average the per-sample terms over the batch (the mean, so the learning rate does not depend on the batch size).",
+                    "the reduction: average the per-sample terms over the batch (the mean, so the learning "
+                    "rate does not depend on the batch size).",
                 ),
                 (-terms.mean(), "the overall sign: the loss is −log p̃, which training minimises."),
                 (
                     -torch.log_softmax(logits, 1)[:, 1:].mean(),
-                    "which candidate is the expert's: p̃ is read at the expert's action (the positive), not at the counter-examples.",
+                    "which candidate is the expert's: p̃ is read at the expert's action (the positive), "
+                    "not at the counter-examples.",
                 ),
             ]
             for value, what in mistakes:
-                if _close(out, value):
+                if close(out, value):
                     return hint(f"close, but check {what}")
             return hint(
-                f"your loss is {float(out):.4g} on a test batch where eqs. 2-3 give {float(ref):.4g}; write −log p̃ for one sample by hand and compare."
+                f"your loss is {float(out):.4g} on a test batch where eqs. 2-3 give {float(ref):.4g}; write "
+                "−log p̃ for one sample by hand and compare."
             )
         # weights (eq. 5)
         out_w = _as_scalar(fn(pos.clone(), neg.clone(), w.clone()), "info_nce with weights")
         if isinstance(out_w, Feedback):
             return out_w
         ref_w = (w.double() * terms).mean()
-        if not _close(out_w, ref_w):
-            if _close(out_w, ref):
+        if not close(out_w, ref_w):
+            if close(out_w, ref):
                 return hint(
                     "your loss ignores `weights`: eq. 5 multiplies each sample's −log p̃ by its weight w_i."
                 )
-            if _close(out_w, (w.double() * terms).sum() / w.double().sum()):
+            if close(out_w, (w.double() * terms).sum() / w.double().sum()):
                 return hint(
-                    "with weights, eq. 5 multiplies each term by w_i and then averages over the batch as before; it does not divide by the sum of the weights."
+                    "with weights, eq. 5 multiplies each term by w_i and then averages over the batch as "
+                    "before; it does not divide by the sum of the weights."
                 )
             return hint(
-                f"with weights your loss is {float(out_w):.4g} where eq. 5 (mean over the batch of w_i · (−log p̃_i)) gives {float(ref_w):.4g}."
+                f"with weights your loss is {float(out_w):.4g} where eq. 5 (mean over the batch of w_i · "
+                f"(−log p̃_i)) gives {float(ref_w):.4g}."
             )
         # other shapes
         pos2, neg2, _ = _nce_inputs(1, b=5, n=3)
         out2 = _as_scalar(fn(pos2, neg2), "info_nce")
         if isinstance(out2, Feedback):
             return out2
-        if not _close(out2, _nce_terms(pos2, neg2).mean()):
+        if not close(out2, _nce_terms(pos2, neg2).mean()):
             return hint(
-                "correct on a (16, 9) batch but not on a (5, 3) one: avoid hard-coding the batch size or the number of counter-examples."
+                "correct on a (16, 9) batch but not on a (5, 3) one: avoid hard-coding the batch size or "
+                "the number of counter-examples."
             )
         # large energies
         big_pos, big_neg = 1000.0 + pos * 20, 1000.0 + neg * 20
         out3 = fn(big_pos, big_neg)
         if not isinstance(out3, torch.Tensor) or not torch.isfinite(out3).all():
             return hint(
-                "your loss is NaN or infinite when the energies are around 1000: e^(−1000) underflows to 0. Compute log p̃ with a log-sum-exp (torch.logsumexp or log_softmax)."
+                "your loss is NaN or infinite when the energies are around 1000: e^(−1000) underflows to "
+                "0. Compute log p̃ with a log-sum-exp (torch.logsumexp or log_softmax)."
             )
-        if not _close(out3, _nce_terms(big_pos, big_neg).mean(), rtol=1e-3, atol=1e-2):
+        if not close(out3, _nce_terms(big_pos, big_neg).mean(), rtol=1e-3, atol=1e-2):
             return hint(
-                "your loss is finite but wrong when the energies are around 1000: compute log p̃ with a log-sum-exp instead of exponentiating."
+                "your loss is finite but wrong when the energies are around 1000: compute log p̃ with a "
+                "log-sum-exp instead of exponentiating."
             )
         p = pos.clone().requires_grad_(True)
         out4 = fn(p, neg.clone())
         if not isinstance(out4, torch.Tensor) or not out4.requires_grad:
             return hint(
-                "your loss does not depend on the energies through autograd (did you use .item(), numpy or detach?): training needs its gradients."
+                "your loss does not depend on the energies through autograd (did you use .item(), numpy or "
+                "detach?): training needs its gradients."
             )
         return correct("Your InfoNCE matches eqs. 2-3 and 5, and stays exact for energies in the thousands.")
 
     return run_check(check, "`info_nce`")
 
 
-# --------------------------------------------------------------------------- soft targets (eq. 5 of the steering-EBM paper)
+# ------------------------------------------------------------- soft targets (eq. 5 of the steering-EBM paper)
 def _soft_ref(candidates, actions, t) -> torch.Tensor:
     sq = ((candidates[None, :, :].double() - actions[:, None, :].double()) ** 2).sum(-1)  # (B, K)
     return torch.softmax(-sq / t, dim=1)
@@ -170,41 +171,47 @@ def check_soft_targets(fn) -> Feedback:
             return hint(f"soft_targets must return a torch.Tensor of shape (B, K), got {type(out).__name__}.")
         if tuple(out.shape) != (3, 21):
             return hint(
-                f"soft_targets must return one row of K target probabilities per sample, shape (3, 21) here; got {tuple(out.shape)}."
+                "soft_targets must return one row of K target probabilities per sample, shape (3, 21) "
+                f"here; got {tuple(out.shape)}."
             )
         ref = _soft_ref(cand, gt, t)
-        if not _close(out, ref, rtol=1e-4, atol=1e-6):
+        if not close(out, ref, rtol=1e-4, atol=1e-6):
             sq = ((cand[None, :, :] - gt[:, None, :]) ** 2).sum(-1).double()
-            if _close(out, torch.softmax(sq / t, 1), atol=1e-6):
+            if close(out, torch.softmax(sq / t, 1), atol=1e-6):
                 return hint(
-                    "your targets put the most weight on the candidate *farthest* from the ground truth: that is the sign as printed in the transcription. The weight should fall with distance."
+                    "your targets put the most weight on the candidate *farthest* from the ground truth: "
+                    "that is the sign as printed in the transcription. The weight should fall with "
+                    "distance."
                 )
-            if _close(out, torch.softmax(-sq.sqrt() / t, 1), atol=1e-6):
+            if close(out, torch.softmax(-sq.sqrt() / t, 1), atol=1e-6):
                 return hint("eq. 5 uses the *squared* distance (a − a_GT)², not the distance.")
-            if _close(out, torch.softmax(-sq * t, 1), atol=1e-6):
+            if close(out, torch.softmax(-sq * t, 1), atol=1e-6):
                 return hint(
                     "check how the temperature enters: divide by T (a smaller T gives sharper targets)."
                 )
             if not torch.allclose(out.double().sum(1), torch.ones(3, dtype=torch.float64), atol=1e-4):
                 return hint(
-                    "each row of targets must sum to 1 over the K candidates: take the softmax over the candidate dimension."
+                    "each row of targets must sum to 1 over the K candidates: take the softmax over the "
+                    "candidate dimension."
                 )
             return hint("your targets differ from p* = softmax(−(a − a_GT)² / T); compare one row by hand.")
         cand2 = torch.tensor([[0.0, 0.0], [0.5, 0.5], [-0.5, 0.2], [1.0, -1.0]])
         gt2 = torch.tensor([[0.4, 0.4], [0.0, 0.1]])
         out2 = fn(cand2, gt2, 0.5)
-        if not isinstance(out2, torch.Tensor) or not _close(out2, _soft_ref(cand2, gt2, 0.5), atol=1e-6):
+        if not isinstance(out2, torch.Tensor) or not close(out2, _soft_ref(cand2, gt2, 0.5), atol=1e-6):
             return hint(
-                "correct for 1-D actions but not for 2-D ones: for D > 1, (a − a_GT)² is the squared Euclidean distance, summed over the action dimensions."
+                "correct for 1-D actions but not for 2-D ones: for D > 1, (a − a_GT)² is the squared "
+                "Euclidean distance, summed over the action dimensions."
             )
         return correct(
-            "Your soft targets fall with the distance from the ground truth, as the steering-EBM paper intends."
+            "Your soft targets fall with the distance from the ground truth, as the steering-EBM paper "
+            "intends."
         )
 
     return run_check(check, "`soft_targets`")
 
 
-# --------------------------------------------------------------------------- whiteness (eq. 2 of the steering-EBM paper)
+# ---------------------------------------------------------------- whiteness (eq. 2 of the steering-EBM paper)
 def check_whiteness(fn) -> Feedback:
     """Check ``fn(commands (T,), dt) -> float`` against eq. 2 of the steering-EBM paper."""
 
@@ -233,11 +240,25 @@ def check_whiteness(fn) -> Feedback:
                 ),
                 (
                     np.std(x) / dt,
-                    "what is squared: eq. 2 uses the *changes* between consecutive commands, not the commands themselves.",
+                    "what is squared: eq. 2 uses the *changes* between consecutive commands, not the "
+                    "commands themselves.",
                 ),
                 (
                     math.sqrt(np.mean(x**2)) / dt,
-                    "what is squared: eq. 2 uses the *changes* between consecutive commands, not the commands themselves.",
+                    "what is squared: eq. 2 uses the *changes* between consecutive commands, not the "
+                    "commands themselves.",
+                ),
+                (
+                    float(np.std(d / dt, ddof=1)),
+                    "the mean: eq. 2 is the root mean square of the rates, not their spread around their "
+                    "mean "
+                    "(a steady ramp has a rate, and a whiteness, of its own).",
+                ),
+                (
+                    float(np.std(d / dt)),
+                    "the mean: eq. 2 is the root mean square of the rates, not their spread around their "
+                    "mean "
+                    "(a steady ramp has a rate, and a whiteness, of its own).",
                 ),
                 (
                     np.mean(np.abs(d / dt)),
@@ -250,6 +271,27 @@ def check_whiteness(fn) -> Feedback:
             return hint(f"your whiteness is {out:.4g} on a test sequence where eq. 2 gives {ref:.4g}.")
         if not math.isclose(float(fn(torch.full((30,), 0.4), 0.05)), 0.0, abs_tol=1e-9):
             return hint("a constant command has no changes: its whiteness must be 0.")
+        # a steady ramp, then a ramp with a wiggle: the rates' mean is not 0 here, so their spread
+        # (a standard deviation) is not their root mean square
+        for seq, step in (
+            (np.linspace(-0.5, 0.7, 25), 0.1),
+            (np.linspace(0.0, 0.9, 16) + 0.05 * (-1.0) ** np.arange(16), 0.05),
+        ):
+            got = float(fn(torch.tensor(seq, dtype=torch.float32), step))
+            rates = np.diff(seq) / step
+            want = math.sqrt(np.mean(rates**2))
+            if not math.isclose(got, want, rel_tol=1e-4):
+                if math.isclose(got, float(np.std(rates)), rel_tol=1e-3, abs_tol=1e-6):
+                    return hint(
+                        "a steady ramp changes at a constant, non-zero rate, yet your whiteness of it is "
+                        f"{got:.3g}: eq. 2 is the root mean square of the rates, not their spread around "
+                        "their "
+                        "mean."
+                    )
+                return hint(
+                    f"right on a random sequence, but on a ramp of {len(seq)} commands your whiteness is "
+                    f"{got:.4g} where eq. 2 gives {want:.4g}."
+                )
         return correct("Your whiteness matches eq. 2: the RMS rate of change of the command.")
 
     return run_check(check, "`whiteness`")
@@ -304,40 +346,49 @@ def check_decision_prediction(fn) -> Feedback:
             mse, mae, share = (float(prediction[k]) for k in ("mse", "mae", "sample_right"))
         except (TypeError, ValueError):
             return hint(
-                '"mse" and "mae" are steering commands in [-1, 1] and "sample_right" a share in [0, 1]: give numbers.'
+                '"mse" and "mae" are steering commands in [-1, 1] and "sample_right" a share in [0, 1]: '
+                "give numbers."
             )
         if abs(mse - ref["mse"]) > 0.15:
             if abs(mse) < 0.1:
                 return hint(
-                    "MSE regression averages the two modes, but weighted by how often each occurs: 70 % of the experts steer right, so the average is not 0."
+                    "MSE regression averages the two modes, but weighted by how often each occurs: 70 % of "
+                    "the experts steer right, so the average is not 0."
                 )
             if abs(mse - ref["mae"]) <= 0.15 or abs(mse) > 0.7:
                 return hint(
-                    "the minimiser of the squared error is the *mean* of the actions: a mixture of +0.9 (70 %) and −0.9 (30 %) averages to a command between the modes, on neither of them."
+                    "the minimiser of the squared error is the *mean* of the actions: a mixture of +0.9 "
+                    "(70 %) and −0.9 (30 %) averages to a command between the modes, on neither of them."
                 )
             return hint(
-                "MSE regression commands the mean of the experts' actions there; weigh the two modes (about ±0.9 in this window) by their shares."
+                "MSE regression commands the mean of the experts' actions there; weigh the two modes "
+                "(about ±0.9 in this window) by their shares."
             )
         if abs(mae - ref["mae"]) > 0.15:
             if abs(mae - ref["mse"]) <= 0.15:
                 return hint(
-                    "the minimiser of the absolute error is not the mean but the *median*: with 70 % of the actions in the right mode, where does the middle one lie?"
+                    "the minimiser of the absolute error is not the mean but the *median*: with 70 % of "
+                    "the actions in the right mode, where does the middle one lie?"
                 )
             if mae < 0:
                 return hint(
-                    "the median lies in the mode that holds more than half of the actions: here the right one (+)."
+                    "the median lies in the mode that holds more than half of the actions: here the right "
+                    "one (+)."
                 )
             return hint(
-                "MAE regression commands the median of the experts' actions: the middle one of a set where 70 % sit near +0.9."
+                "MAE regression commands the median of the experts' actions: the middle one of a set where "
+                "70 % sit near +0.9."
             )
         if side != ref["argmin"]:
             return hint(
-                "the energy is −log p(y | x) up to a constant, so the deepest valley is the *most probable* action: on the side most experts take."
+                "the energy is −log p(y | x) up to a constant, so the deepest valley is the *most "
+                "probable* action: on the side most experts take."
             )
         if abs(share - ref["sample_right"]) > 0.1:
             if share > 0.95:
                 return hint(
-                    "a draw from p(y | x) does not always take the deeper valley: it takes each side as often as the experts did."
+                    "a draw from p(y | x) does not always take the deeper valley: it takes each side as "
+                    "often as the experts did."
                 )
             return hint(
                 "drawing from p(y | x) reproduces the experts' shares: how often do they pass on the right?"

@@ -19,7 +19,7 @@ import math
 
 import torch
 
-from ibc_tutorial.exercises.core import Feedback, correct, hint, run_check
+from ibc_tutorial.exercises.core import Feedback, close, correct, hint, run_check
 
 _EXPERT = torch.tensor([[0.0, 0.4], [0.1, 0.5], [-0.5, 0.3], [0.4, -0.6], [0.0, 0.45]])
 
@@ -31,7 +31,8 @@ def _gen(seed: int) -> torch.Generator:
 def _shape_feedback(out, want: tuple) -> Feedback | None:
     if not isinstance(out, torch.Tensor):
         return hint(
-            f"expert_negatives must return a torch.Tensor of shape (batch_size, n_neg, D), got {type(out).__name__}."
+            "expert_negatives must return a torch.Tensor of shape (batch_size, n_neg, D), got "
+            f"{type(out).__name__}."
         )
     if tuple(out.shape) != want:
         return hint(
@@ -55,7 +56,8 @@ def check_expert_negatives(fn) -> Feedback:
             many = fn(_EXPERT[:3].clone(), 2, 50, 0.0, _gen(2))
         except Exception as exc:  # e.g. randperm / sampling without replacement
             return hint(
-                f"drawing 50 counter-examples from 3 expert actions failed ({type(exc).__name__}): the paper samples *with replacement*."
+                f"drawing 50 counter-examples from 3 expert actions failed ({type(exc).__name__}): the "
+                "paper samples *with replacement*."
             )
         bad = _shape_feedback(many, (2, 50, 2))
         if bad:
@@ -68,7 +70,8 @@ def check_expert_negatives(fn) -> Feedback:
         match = (copies.reshape(-1, 1, 2) == _EXPERT[None]).all(-1).any(-1)  # (B*N,)
         if not match.all():
             return hint(
-                "with sigma = 0 every counter-example should be exactly one of the expert actions you were given: draw rows of `expert_actions` (then add the noise)."
+                "with sigma = 0 every counter-example should be exactly one of the expert actions you were "
+                "given: draw rows of `expert_actions` (then add the noise)."
             )
         # uniform over the set, independently per sample
         pool = torch.linspace(-1, 1, 4)[:, None]  # (4, 1)
@@ -83,7 +86,8 @@ def check_expert_negatives(fn) -> Feedback:
         freq = torch.stack([(draws == v).float().mean() for v in pool[:, 0]])
         if (freq - 0.25).abs().max() > 0.03:
             return hint(
-                "some expert actions are drawn far more often than others: draw each one with equal probability (uniformly over the M rows)."
+                "some expert actions are drawn far more often than others: draw each one with equal "
+                "probability (uniformly over the M rows)."
             )
         # the noise: mean and variance = expert set's + sigma^2
         sigma = 0.1
@@ -102,10 +106,12 @@ def check_expert_negatives(fn) -> Feedback:
                 (var - (var0 + sigma)).abs() / (var0 + sigma) < 0.05
             ).all():
                 return hint(
-                    "the noise has the wrong scale: σ is the standard deviation of N(0, σ²I), so multiply standard-normal draws by σ."
+                    "the noise has the wrong scale: σ is the standard deviation of N(0, σ²I), so multiply "
+                    "standard-normal draws by σ."
                 )
             return hint(
-                f"the counter-examples' variance per dimension is {var.tolist()} but should be the expert set's plus σ² = {(var0 + sigma**2).tolist()}."
+                f"the counter-examples' variance per dimension is {var.tolist()} but should be the expert "
+                f"set's plus σ² = {(var0 + sigma**2).tolist()}."
             )
         # the noise's shape: Gaussian and independent per coordinate (one action, many draws)
         one = torch.tensor([[0.2, -0.3]])
@@ -117,19 +123,23 @@ def check_expert_negatives(fn) -> Feedback:
         kurtosis = float((noise**4).mean() / (noise**2).mean() ** 2)  # N(0, 1): 3
         if abs(within1 - 0.6827) > 0.01 or abs(within2 - 0.9545) > 0.01 or abs(kurtosis - 3) > 0.15:
             return hint(
-                f"the noise has the right variance but not the Gaussian shape: {within1:.0%} of it lies within one σ, "
-                f"where N(0, σ²) puts 68 % (its kurtosis is {kurtosis:.2f}, a Gaussian's 3). Draw it with torch.randn, times σ."
+                f"the noise has the right variance but not the Gaussian shape: {within1:.0%} of it lies "
+                "within one σ, "
+                f"where N(0, σ²) puts 68 % (its kurtosis is {kurtosis:.2f}, a Gaussian's 3). Draw it with "
+                "torch.randn, times σ."
             )
         if abs(float(torch.corrcoef(noise.T)[0, 1])) > 0.02:
             return hint(
-                "the noise of the two coordinates is correlated: N(0, σ²I) draws every coordinate independently."
+                "the noise of the two coordinates is correlated: N(0, σ²I) draws every coordinate "
+                "independently."
             )
         # no clipping: near the edge of the box, some counter-examples must fall outside it
         edge = torch.tensor([[0.95, -0.95], [1.0, -1.0]])
         near = fn(edge.clone(), 100, 50, 0.3, _gen(6)).double()  # (100, 50, 2)
         if not (near.abs() > 1).any() or (near.abs() == 1).double().mean() > 0.01:
             return hint(
-                "your counter-examples stay inside [-1, 1] (or pile up on its edges): do not clip them. The chapter explains why: "
+                "your counter-examples stay inside [-1, 1] (or pile up on its edges): do not clip them. "
+                "The chapter explains why: "
                 "clipping stacks counter-examples exactly on the bounds, where the expert itself often acts."
             )
         # reproducible with the generator
@@ -137,10 +147,12 @@ def check_expert_negatives(fn) -> Feedback:
         b = fn(_EXPERT.clone(), 3, 5, 0.2, _gen(7))
         if not torch.equal(a, b):
             return hint(
-                "two calls with equally seeded generators gave different counter-examples: pass `generator=generator` to every random draw."
+                "two calls with equally seeded generators gave different counter-examples: pass "
+                "`generator=generator` to every random draw."
             )
         return correct(
-            "Your sampler draws expert actions with replacement, per sample, and adds N(0, σ²I): DA-IBC's counter-examples."
+            "Your sampler draws expert actions with replacement, per sample, and adds N(0, σ²I): DA-IBC's "
+            "counter-examples."
         )
 
     return run_check(check, "`expert_negatives`")
@@ -152,7 +164,8 @@ def _nll_ref(pos, grid_e, cell) -> torch.Tensor:
 
 
 def check_grid_nll(fn) -> Feedback:
-    """Check ``fn(pos_energy (B,), grid_energy (B, G), cell_volume) -> (B,)`` against the chapter's formula."""
+    """Check ``fn(pos_energy (B,), grid_energy (B, G), cell_volume) -> (B,)`` against the chapter's
+    formula."""
 
     def check() -> Feedback:
         g = _gen(0)
@@ -171,12 +184,13 @@ def check_grid_nll(fn) -> Feedback:
         if tuple(out.shape) != (6,):
             return hint(f"grid_nll must return shape (B,) = (6,), got {tuple(out.shape)}.")
         ref = _nll_ref(pos, grid_e, cell)
-        if not _close(out, ref):
+        if not close(out, ref):
             lse = torch.logsumexp(-grid_e.double(), 1)
             mistakes = [
                 (
                     pos.double() + lse,
-                    "the cell area: Z(x) is an integral over the box, so each grid point stands for its cell's area ΔA.",
+                    "the cell area: Z(x) is an integral over the box, so each grid point stands for its "
+                    "cell's area ΔA.",
                 ),
                 (
                     pos.double() + lse - math.log(cell),
@@ -196,31 +210,23 @@ def check_grid_nll(fn) -> Feedback:
                 ),
             ]
             for value, what in mistakes:
-                if _close(out, value):
+                if close(out, value):
                     return hint(f"close, but check {what}")
             return hint(
-                f"your NLL of the first sample is {float(out[0]):.4g} where −log p = E + log Σ e^(−E_g) + log ΔA gives {float(ref[0]):.4g}."
+                f"your NLL of the first sample is {float(out[0]):.4g} where −log p = E + log Σ e^(−E_g) + "
+                f"log ΔA gives {float(ref[0]):.4g}."
             )
         out2 = fn(pos + 1000, grid_e + 1000, cell)
-        if not isinstance(out2, torch.Tensor) or not _close(out2, ref, rtol=1e-3, atol=1e-2):
+        if not isinstance(out2, torch.Tensor) or not close(out2, ref, rtol=1e-3, atol=1e-2):
             return hint(
-                "your NLL breaks down when the energies are around 1000 (e^(−1000) underflows): use torch.logsumexp."
+                "your NLL breaks down when the energies are around 1000 (e^(−1000) underflows): use "
+                "torch.logsumexp."
             )
         return correct(
             "Your grid NLL is the model's normalised density at the expert's action, Z computed on the grid."
         )
 
     return run_check(check, "`grid_nll`")
-
-
-def _close(a, b, rtol: float = 1e-4, atol: float = 1e-4) -> bool:
-    a = torch.as_tensor(a, dtype=torch.float64)
-    b = torch.as_tensor(b, dtype=torch.float64)
-    return (
-        a.shape == b.shape
-        and bool(torch.isfinite(a).all())
-        and bool(torch.allclose(a, b, rtol=rtol, atol=atol))
-    )
 
 
 # --------------------------------------------------------------------------- the tilt of a DA-IBC landscape
@@ -254,41 +260,49 @@ def check_predicted_shares(fn) -> Feedback:
         out = fn(modes.clone(), actions.clone(), 0.1)
         if not isinstance(out, torch.Tensor) or tuple(out.shape) != (3,):
             return hint(
-                f"predicted_shares must return a torch.Tensor of shape (K,) = (3,), one share per valid action, got {getattr(out, 'shape', type(out).__name__)}."
+                "predicted_shares must return a torch.Tensor of shape (K,) = (3,), one share per valid "
+                f"action, got {getattr(out, 'shape', type(out).__name__)}."
             )
         out = out.detach().double()
         if not torch.isfinite(out).all():
             return hint("predicted_shares returned NaN or infinite values.")
         ref = _normalise(1 / _q(modes, actions, 0.1))
-        if not _close(out, ref, rtol=1e-3, atol=1e-4):
-            if _close(out, torch.full((3,), 1 / 3, dtype=torch.float64)):
+        if not close(out, ref, rtol=1e-3, atol=1e-4):
+            if close(out, torch.full((3,), 1 / 3, dtype=torch.float64)):
                 return hint(
-                    "one third each is what the expert does, p(y|x). But the model does not learn p(y|x): with counter-examples drawn from q, InfoNCE is best served by e^(−E) ∝ p(y|x) / q(y)."
+                    "one third each is what the expert does, p(y|x). But the model does not learn p(y|x): "
+                    "with counter-examples drawn from q, InfoNCE is best served by e^(−E) ∝ p(y|x) / q(y)."
                 )
-            if _close(out, _normalise(_q(modes, actions, 0.1)), rtol=1e-3, atol=1e-4):
+            if close(out, _normalise(_q(modes, actions, 0.1)), rtol=1e-3, atol=1e-4):
                 return hint(
-                    "your shares grow with q: the wrong way round. A counter-example pushes the energy *up* where it lands, so where counter-examples are common the model puts *less* mass."
+                    "your shares grow with q: the wrong way round. A counter-example pushes the energy "
+                    "*up* where it lands, so where counter-examples are common the model puts *less* mass."
                 )
-            if _close(out, _normalise(1 / _q(modes, actions, 0.2)), rtol=1e-3, atol=1e-4):
+            if close(out, _normalise(1 / _q(modes, actions, 0.2)), rtol=1e-3, atol=1e-4):
                 return hint(
-                    "q is the density of the counter-examples: expert actions plus N(0, σ²I), a KDE with bandwidth σ, not chapter 05's 0.2."
+                    "q is the density of the counter-examples: expert actions plus N(0, σ²I), a KDE with "
+                    "bandwidth σ, not chapter 05's 0.2."
                 )
-            if _close(out / out.sum(), ref, rtol=1e-3, atol=1e-4):
+            if close(out / out.sum(), ref, rtol=1e-3, atol=1e-4):
                 return hint(
-                    "the proportions are right; make the shares sum to 1 (they are shares of the mass near the K actions)."
+                    "the proportions are right; make the shares sum to 1 (they are shares of the mass near "
+                    "the K actions)."
                 )
             return hint(
-                f"your shares are {[round(v, 3) for v in out.tolist()]}: compute q at each valid action (the expert actions blurred by σ), then share ∝ 1/q."
+                f"your shares are {[round(v, 3) for v in out.tolist()]}: compute q at each valid action "
+                "(the expert actions blurred by σ), then share ∝ 1/q."
             )
         out2 = fn(modes.clone(), actions.clone(), 0.3)
-        if not isinstance(out2, torch.Tensor) or not _close(
+        if not isinstance(out2, torch.Tensor) or not close(
             out2.detach().double(), _normalise(1 / _q(modes, actions, 0.3)), rtol=1e-3, atol=1e-4
         ):
             return hint("right for σ = 0.1 but not for σ = 0.3: use the σ you are given.")
         straight = float(ref[1])
         return correct(
-            f"Right: with these actions a DA-IBC model should put only {straight:.0%} of the mass near 'straight' on it, "
-            "against the expert's 1/3, because straight on looks like cruising, where the counter-examples crowd."
+            f"Right: with these actions a DA-IBC model should put only {straight:.0%} of the mass near "
+            "'straight' on it, "
+            "against the expert's 1/3, because straight on looks like cruising, where the counter-examples "
+            "crowd."
         )
 
     return run_check(check, "`predicted_shares`")

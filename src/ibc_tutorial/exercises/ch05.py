@@ -16,7 +16,7 @@ import math
 
 import torch
 
-from ibc_tutorial.exercises.core import Feedback, correct, hint, run_check, tensor_answer
+from ibc_tutorial.exercises.core import Feedback, close, correct, hint, run_check, tensor_answer
 from ibc_tutorial.kde import inverse_density_weights
 
 
@@ -24,10 +24,6 @@ def _tensor(out, name: str, shape: tuple) -> torch.Tensor | Feedback:
     """The answer as float64, or a hint (``core.tensor_answer``)."""
     out = tensor_answer(out, name, shape, " (one value per point)")
     return out if isinstance(out, Feedback) else out.to(torch.float64)
-
-
-def _close(a: torch.Tensor, b: torch.Tensor, rtol: float = 1e-4) -> bool:
-    return bool(torch.allclose(a.double(), b.double(), rtol=rtol, atol=1e-12))
 
 
 # --------------------------------------------------------------------------- eq. 4 by hand
@@ -68,15 +64,17 @@ def check_kde_1d(fn) -> Feedback:
         if isinstance(out, Feedback):
             return out
         ref = _kde_ref(x, data, h)
-        if not _close(out, ref):
+        if not close(out, ref, atol=1e-12):
             mistakes = [
                 (
                     _kde_ref(x, data, h, divide_h=False),
-                    "the factor 1/(N h) of eq. 4: the 1/h is missing, so the estimate does not integrate to 1.",
+                    "the factor 1/(N h) of eq. 4: the 1/h is missing, so the estimate does not integrate "
+                    "to 1.",
                 ),
                 (
                     _kde_ref(x, data, h, divide_m=False),
-                    "the factor 1/(N h) of eq. 4: divide by the number of data points N too (ĝ is an average of kernels).",
+                    "the factor 1/(N h) of eq. 4: divide by the number of data points N too (ĝ is an "
+                    "average of kernels).",
                 ),
                 (
                     _kde_ref(x, data, h, kernel_const=False),
@@ -92,20 +90,22 @@ def check_kde_1d(fn) -> Feedback:
                 ),
             ]
             for value, what in mistakes:
-                if _close(out, value):
+                if close(out, value, atol=1e-12):
                     return hint(f"close, but check {what}")
             i = int((out - ref).abs().argmax())
             return hint(
-                f"at x = {float(x[i]):.2f} your density is {float(out[i]):.4g} where eq. 4 gives {float(ref[i]):.4g}; compute one value by hand and compare."
+                f"at x = {float(x[i]):.2f} your density is {float(out[i]):.4g} where eq. 4 gives "
+                f"{float(ref[i]):.4g}; compute one value by hand and compare."
             )
         # another bandwidth and sizes: nothing hard-coded
         data2, x2 = torch.tensor([-0.3, 0.1, 0.2]), torch.tensor([0.0, 0.5])
         out2 = _tensor(fn(x2, data2, 0.5), "kde_1d", (2,))
         if isinstance(out2, Feedback):
             return out2
-        if not _close(out2, _kde_ref(x2, data2, 0.5)):
+        if not close(out2, _kde_ref(x2, data2, 0.5), atol=1e-12):
             return hint(
-                "correct for h = 0.2 and 48 data points, but not for h = 0.5 and 3: avoid hard-coding the bandwidth or the number of points."
+                "correct for h = 0.2 and 48 data points, but not for h = 0.5 and 3: avoid hard-coding the "
+                "bandwidth or the number of points."
             )
         return correct(
             "Your density matches eq. 4: an average of Gaussian bumps of width h, each of area 1/N."
@@ -140,38 +140,41 @@ def check_inverse_weights(fn) -> Feedback:
             return out
         g = _density(actions, 0.2)
         ref = (1 / g) / (1 / g).sum()
-        if not _close(out, ref, rtol=1e-3):
+        if not close(out, ref, rtol=1e-3, atol=1e-12):
             if abs(float(out.sum()) - 1) > 1e-3:
-                if _close(out / out.sum(), ref, rtol=1e-3):
+                if close(out / out.sum(), ref, rtol=1e-3, atol=1e-12):
                     return hint(
-                        "the weights are proportional to the right values, but they must sum to 1 (they become sampling probabilities)."
+                        "the weights are proportional to the right values, but they must sum to 1 (they "
+                        "become sampling probabilities)."
                     )
                 return hint(
                     f"your weights sum to {float(out.sum()):.4g}: normalise them so that they sum to 1."
                 )
-            if _close(out, g / g.sum(), rtol=1e-3):
+            if close(out, g / g.sum(), rtol=1e-3, atol=1e-12):
                 return hint(
-                    "your weights grow with the density: eq. 5 gives *rare* actions (low density) the large weights."
+                    "your weights grow with the density: eq. 5 gives *rare* actions (low density) the "
+                    "large weights."
                 )
             if out[90:].mean() <= out[:90].mean():
                 return hint(
                     "the 10 rare actions should get larger weights than the 90 common ones; yours do not."
                 )
             return hint(
-                "your weights sum to 1 and favour the rare actions, but they are not proportional to 1/ĝ(y_i) with ĝ the KDE of eq. 4 at bandwidth h (over all D dimensions)."
+                "your weights sum to 1 and favour the rare actions, but they are not proportional to "
+                "1/ĝ(y_i) with ĝ the KDE of eq. 4 at bandwidth h (over all D dimensions)."
             )
         out2 = _tensor(fn(actions.clone(), 0.5), "inverse_weights", (100,))
         if isinstance(out2, Feedback):
             return out2
         g2 = _density(actions, 0.5)
-        if not _close(out2, (1 / g2) / (1 / g2).sum(), rtol=1e-3):
+        if not close(out2, (1 / g2) / (1 / g2).sum(), rtol=1e-3, atol=1e-12):
             return hint("correct for h = 0.2 but not for h = 0.5: use the bandwidth you are given.")
         return correct("Your weights are w_i ∝ 1/ĝ(y_i), summing to 1: rare actions weigh more.")
 
     return run_check(check, "`inverse_weights`")
 
 
-# --------------------------------------------------------------------------- choosing a bandwidth by effective sample size
+# -------------------------------------------------------------- choosing a bandwidth by effective sample size
 _CANDIDATES = (0.02, 0.05, 0.1, 0.2, 0.3, 0.5, 1.0)
 
 
@@ -220,13 +223,15 @@ def check_choose_bandwidth(fn) -> Feedback:
                 h = float(out)
             except (TypeError, ValueError, RuntimeError):
                 return hint(
-                    f"choose_bandwidth must return one bandwidth (a number from `candidates`), got {type(out).__name__}."
+                    "choose_bandwidth must return one bandwidth (a number from `candidates`), got "
+                    f"{type(out).__name__}."
                 )
             if h not in _CANDIDATES:
                 if 0 <= h < len(_CANDIDATES) and float(h).is_integer():
                     return hint("return the bandwidth itself, not its index in `candidates`.")
                 return hint(
-                    f"choose_bandwidth returned {h:g}, which is not one of the candidates {list(_CANDIDATES)}."
+                    f"choose_bandwidth returned {h:g}, which is not one of the candidates "
+                    f"{list(_CANDIDATES)}."
                 )
             if h == ref:
                 continue
@@ -234,23 +239,31 @@ def check_choose_bandwidth(fn) -> Feedback:
             best_any = max(_CANDIDATES, key=lambda c: table[c][0])
             if h == best_any and ess < min_ess:
                 return hint(
-                    f"h = {h:g} brings the most rare samples into minibatches ({share:.0%}), but its weights' effective sample size is "
-                    f"only {ess:.0f} < {min_ess:.0f}: a few stray actions take over. Keep only the bandwidths whose 1/Σ w² reaches min_ess."
+                    f"h = {h:g} brings the most rare samples into minibatches ({share:.0%}), but its "
+                    "weights' effective sample size is "
+                    f"only {ess:.0f} < {min_ess:.0f}: a few stray actions take over. Keep only the "
+                    "bandwidths whose 1/Σ w² reaches min_ess."
                 )
             if h == max(_CANDIDATES, key=lambda c: table[c][1]):
                 return hint(
-                    f"h = {h:g} has the largest effective sample size, because its weights are nearly uniform: its minibatches hold only {share:.0%} rare samples. Among the bandwidths that pass, maximise the rare share."
+                    f"h = {h:g} has the largest effective sample size, because its weights are nearly "
+                    f"uniform: its minibatches hold only {share:.0%} rare samples. Among the bandwidths "
+                    "that pass, maximise the rare share."
                 )
             if ess < min_ess:
                 return hint(
-                    f"h = {h:g} has an effective sample size of {ess:.0f}, below min_ess = {min_ess:.0f}: compute it as 1 / Σ w_i² of the normalised weights."
+                    f"h = {h:g} has an effective sample size of {ess:.0f}, below min_ess = {min_ess:.0f}: "
+                    "compute it as 1 / Σ w_i² of the normalised weights."
                 )
             return hint(
-                f"h = {h:g} passes the effective-sample-size test, but another candidate that passes puts more rare samples into minibatches than its {share:.0%}: compare the shares Σ_rare w_i."
+                f"h = {h:g} passes the effective-sample-size test, but another candidate that passes puts "
+                f"more rare samples into minibatches than its {share:.0%}: compare the shares Σ_rare w_i."
             )
         return correct(
-            "Right: the narrowest bandwidths let a few stray actions take over (low effective sample size), the widest make the weights "
-            "nearly uniform (few rare samples); the choice is in between, and it moves with min_ess and with the data."
+            "Right: the narrowest bandwidths let a few stray actions take over (low effective sample "
+            "size), the widest make the weights "
+            "nearly uniform (few rare samples); the choice is in between, and it moves with min_ess and "
+            "with the data."
         )
 
     return run_check(check, "`choose_bandwidth`")

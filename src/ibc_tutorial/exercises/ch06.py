@@ -27,9 +27,95 @@ def _out(out, shape: tuple, name: str = "dfo_step") -> torch.Tensor | Feedback:
     return tensor_answer(out, name, shape, ": keep N samples of D dimensions")
 
 
+def _generator_check(fn, samples, energies) -> Feedback | None:
+    """Two calls with equally seeded generators, σ > 0, the global generator reseeded differently
+    before each, must agree; calls with differently seeded generators must not. The reader's global
+    random state is restored afterwards."""
+    state = torch.random.get_rng_state()
+    try:
+        outs = []
+        for global_seed, seed in ((11, 0), (12, 0), (11, 1)):
+            torch.manual_seed(global_seed)
+            out = fn(samples.clone(), energies.clone(), 0.1, -1.0, 1.0, torch.Generator().manual_seed(seed))
+            outs.append(out.detach() if isinstance(out, torch.Tensor) else out)
+    finally:
+        torch.random.set_rng_state(state)
+    if not all(isinstance(o, torch.Tensor) for o in outs):
+        return hint("dfo_step must return a torch.Tensor every time it is called.")
+    if not torch.equal(outs[0], outs[1]):
+        return hint(
+            "two calls with equally seeded generators gave different results (with σ > 0): draw every random "
+            "number, the resampling's and the noise's, from the `generator` argument."
+        )
+    if torch.equal(outs[0], outs[2]):
+        return hint(
+            "calls with differently seeded generators gave the same result: draw the random numbers from the "
+            "`generator` argument (not from a generator of your own seeded inside the function)."
+        )
+    return None
+
+
+def _gaussian_check(z: torch.Tensor) -> Feedback | None:
+    """The noise divided by its standard deviation (about 40,000 draws) must look like N(0, 1): the
+    largest distance between its empirical CDF and the normal one (Kolmogorov-Smirnov) below 0.015 (a
+    normal sample of this size exceeds 0.01 about once in a hundred thousand); uniform and Laplace
+    noise are near 0.06 and 0.05."""
+    z = torch.sort(z.double()).values
+    n = len(z)
+    cdf = 0.5 * (1 + torch.erf(z / math.sqrt(2)))
+    ks = float(torch.maximum(torch.arange(1, n + 1) / n - cdf, cdf - torch.arange(n) / n).max())
+    if ks <= 0.015:
+        return None
+    within = float((z.abs() <= 1).double().mean())
+    return hint(
+        f"your noise has the right spread but not the shape of a Gaussian: {within:.0%} of it lies within "
+        "one σ of the resampled value, where N(0, σ) puts 68 % (line 9 draws normal noise, e.g. torch.randn)."
+    )
+
+
+def _clip_check(fn, n: int) -> Feedback | None:
+    """Samples near both bounds of the box [-0.5, 0.75] with σ = 0.5: every output inside the box,
+    and the ones pushed out clamped onto the bound they crossed (about 23 % of all at each)."""
+    low, high = -0.5, 0.75
+    start = torch.where(
+        torch.arange(n)[:, None] % 2 == 0, torch.tensor(high - 0.05), torch.tensor(low + 0.05)
+    )
+    out = _out(fn(start.clone(), torch.zeros(n), 0.5, low, high, torch.Generator().manual_seed(2)), (n, 1))
+    if isinstance(out, Feedback):
+        return out
+    above = float((out > high).double().mean())  # shares of the samples outside the box
+    below = float((out < low).double().mean())
+    if above + below > 0:
+        if float(out.max()) <= 1.0 and float(out.min()) >= -1.0 and above + below > 0.1:
+            return hint(
+                "with low = -0.5 and high = 0.75 some of your samples leave [low, high]: clip to the bounds "
+                "given as arguments, not to [-1, 1]."
+            )
+        if min(above, below) == 0 and max(above, below) > 0.1:
+            side = "upper" if above > 0 else "lower"
+            return hint(
+                f"your samples stay inside one bound but cross the {side} one: clip at both ends, "
+                "[low, high] (line 10)."
+            )
+        if above + below > 0.1:
+            return hint(
+                "some samples leave [low, high]: clip them to the bounds after adding the noise (line 10)."
+            )
+    at_high = float((out == high).double().mean())
+    at_low = float((out == low).double().mean())
+    if min(at_high, at_low) < 0.15:
+        return hint(
+            "samples the noise pushes past a bound should be clamped onto it (Algorithm 1 line 10: clip), "
+            "not "
+            "redrawn, reflected or dropped."
+        )
+    return None
+
+
 # --------------------------------------------------------------------------- one DFO iteration
 def check_dfo_step(fn) -> Feedback:
-    """Check ``fn(samples, energies, sigma, low, high, generator)``: softmax of −E, resample, add noise, clip."""
+    """Check ``fn(samples, energies, sigma, low, high, generator)``: softmax of −E, resample, add noise,
+    clip."""
 
     def check() -> Feedback:
         n = 20000
@@ -46,27 +132,29 @@ def check_dfo_step(fn) -> Feedback:
         values = set(torch.unique(out).tolist())
         if not values <= {0.0, 0.5}:
             return hint(
-                "with sigma = 0 every new sample must be a copy of an old one (resampling with replacement, then zero noise); yours are not."
+                "with sigma = 0 every new sample must be a copy of an old one (resampling with "
+                "replacement, then zero noise); yours are not."
             )
         share = float((out == 0.0).float().mean())  # expected 0.75
         if abs(share - 0.25) < 0.03:
             return hint(
-                "your resampling favours the *high*-energy samples: the probabilities are a softmax of −E (line 5), low energy = likely."
+                "your resampling favours the *high*-energy samples: the probabilities are a softmax of −E "
+                "(line 5), low energy = likely."
             )
         if abs(share - 0.5) < 0.03:
             return hint(
-                "your new population has the old proportions: resample with replacement in proportion to the softmax probabilities p̃_i (lines 7-8)."
+                "your new population has the old proportions: resample with replacement in proportion to "
+                "the softmax probabilities p̃_i (lines 7-8)."
             )
         if abs(share - 0.75) > 0.03:
             return hint(
-                f"after resampling, {share:.0%} of the samples should be copies of the low-energy value where p̃ gives 75 %: check lines 5 and 7-8."
+                f"after resampling, {share:.0%} of the samples should be copies of the low-energy value "
+                "where p̃ gives 75 %: check lines 5 and 7-8."
             )
-        # 2. reproducible with the generator
-        again = fn(samples.clone(), energies.clone(), 0.0, -1.0, 1.0, torch.Generator().manual_seed(0))
-        if not isinstance(again, torch.Tensor) or not torch.equal(again.detach(), out):
-            return hint(
-                "two calls with equally seeded generators gave different results: draw every random number from the `generator` argument."
-            )
+        # 2. reproducible with the generator, whatever the global generator does, and with noise
+        fb = _generator_check(fn, samples, energies)
+        if fb is not None:
+            return fb
         # 3. the noise, on a multi-valued 2-D population: three values, p̃ ∝ 4 : 2 : 1
         values = torch.tensor([[-0.4, -0.4], [0.0, 0.0], [0.4, 0.4]])
         which = torch.arange(n) % 3  # (n,)
@@ -89,94 +177,154 @@ def check_dfo_step(fn) -> Feedback:
             )
         if float((resid[:, 0] - resid[:, 1]).abs().max()) < 1e-9:  # the same draw in both coordinates
             return hint(
-                "the coordinates of a sample move together: draw an independent N(0, σ) for each coordinate (line 9)."
+                "the coordinates of a sample move together: draw an independent N(0, σ) for each "
+                "coordinate (line 9)."
             )
         share = torch.bincount(nearest, minlength=3).float() / n
         if (share - torch.tensor([4.0, 2.0, 1.0]) / 7).abs().max() > 0.03:
             return hint(
-                f"with σ = 0.1 the new samples sit around the three old values in shares {[round(float(x), 2) for x in share]}, "
+                "with σ = 0.1 the new samples sit around the three old values in shares "
+                f"{[round(float(x), 2) for x in share]}, "
                 "where p̃ gives 0.57, 0.29, 0.14: resample by p̃ first (lines 5, 7-8), then add the noise."
             )
         std = float(resid.std())
         if abs(std - 0.01) < 0.003:
             return hint(
-                "your noise has standard deviation σ², not σ: the paper's N(0, σ) takes σ as the standard deviation."
+                "your noise has standard deviation σ², not σ: the paper's N(0, σ) takes σ as the standard "
+                "deviation."
             )
-        if abs(std - 0.1) > 0.01:
+        if abs(std - 0.1) > 0.003:  # 40,000 draws: the standard deviation's own error is about 0.35 %
             return hint(
-                f"with σ = 0.1 the new samples spread with standard deviation {std:.3g}; line 9 adds N(0, σ) to each coordinate."
+                f"with σ = 0.1 the new samples spread with standard deviation {std:.3g}; line 9 adds N(0, "
+                "σ) to each coordinate."
             )
-        # 4. clipping: samples near the upper bound, large noise
-        near = torch.full((n, 1), 0.95)
-        out = _out(fn(near.clone(), torch.zeros(n), 0.5, -1.0, 1.0, torch.Generator().manual_seed(2)), (n, 1))
-        if isinstance(out, Feedback):
-            return out
-        if float(out.max()) > 1.0 or float(out.min()) < -1.0:
-            return hint(
-                "some samples leave [low, high]: clip them to the bounds after adding the noise (line 10)."
-            )
-        at_bound = float((out == 1.0).float().mean())
-        if at_bound < 0.3:
-            return hint(
-                "samples the noise pushes past a bound should be clamped onto it (Algorithm 1 line 10: clip), not redrawn or dropped."
-            )
+        fb = _gaussian_check(resid.reshape(-1) / std)  # the shape, whatever the spread
+        if fb is not None:
+            return fb
+        # 4. clipping: samples near both bounds of an asymmetric box, large noise
+        fb = _clip_check(fn, n)
+        if fb is not None:
+            return fb
         return correct(
-            "Your step resamples by softmax(−E), adds N(0, σ) and clips, exactly lines 5 and 7-10 of Algorithm 1."
+            "Your step resamples by softmax(−E), adds N(0, σ) and clips, exactly lines 5 and 7-10 of "
+            "Algorithm 1."
         )
 
     return run_check(check, "`dfo_step`")
 
 
 # --------------------------------------------------------------------------- the final choice
+SELECT_SAMPLES = torch.tensor([[0.1, 0.2], [-0.5, 0.0], [0.9, -0.3], [0.4, 0.7], [-0.8, -0.6]])
+"""Five candidates; the lowest energy is the third's (not the first: "always the first" is wrong)."""
+SELECT_ENERGIES = torch.tensor([1.0, 3.0, 0.0, 2.0, 4.0])
+"""Energies a nat apart: p̃ ∝ e^{-E}, from 0.64 down to 0.012, so a softmax at another temperature
+(e.g. 1.1) shifts the shares by several standard errors of the checker's 8,000 draws."""
+SELECT_DRAWS = 8000
+
+
+def _draw_shares(fn, generator) -> torch.Tensor | Feedback:
+    """The shares of the candidates among ``SELECT_DRAWS`` calls with ``select="sample"``."""
+    index = {tuple(row): i for i, row in enumerate(SELECT_SAMPLES.tolist())}
+    counts = [0] * len(SELECT_SAMPLES)
+    for _ in range(SELECT_DRAWS):
+        s = fn(SELECT_SAMPLES.clone(), SELECT_ENERGIES.clone(), "sample", generator)
+        if not isinstance(s, torch.Tensor) or tuple(s.shape) != (2,):
+            return _out(s, (2,), "select_action")
+        i = index.get(tuple(s.tolist()))
+        if i is None:
+            return hint(
+                'with select = "sample" return one of the samples, drawn from Categorical({ỹ_i}, {p̃_i}) '
+                "(line 14)."
+            )
+        counts[i] += 1
+    return torch.tensor(counts, dtype=torch.float32) / SELECT_DRAWS
+
+
+def _select_generator_check(fn) -> Feedback | None:
+    """Equally seeded generators give the same draws whatever the global generator does; differently
+    seeded ones give other draws. The reader's global random state is restored."""
+    state = torch.random.get_rng_state()
+    try:
+        runs = []
+        for global_seed, seed in ((21, 5), (22, 5), (21, 6)):
+            torch.manual_seed(global_seed)
+            g = torch.Generator().manual_seed(seed)
+            runs.append(
+                torch.stack(
+                    [fn(SELECT_SAMPLES.clone(), SELECT_ENERGIES.clone(), "sample", g) for _ in range(40)]
+                )
+            )
+    finally:
+        torch.random.set_rng_state(state)
+    if not torch.equal(runs[0], runs[1]):
+        return hint(
+            "two runs with equally seeded generators drew different actions: draw from the `generator` "
+            "argument (torch.multinomial(..., generator=generator)), so that the choice is reproducible."
+        )
+    if torch.equal(runs[0], runs[2]):
+        return hint(
+            "runs with differently seeded generators drew the same actions: draw from the `generator` "
+            "argument, "
+            "not from a generator of your own."
+        )
+    return None
+
+
 def check_select_action(fn) -> Feedback:
     """Check ``fn(samples, energies, select, generator) -> (D,)`` for "argmax" and "sample"."""
 
     def check() -> Feedback:
-        samples = torch.tensor([[0.1, 0.2], [-0.5, 0.0], [0.9, -0.3]])
-        energies = torch.tensor([0.0, math.log(2.0), math.log(4.0)])  # p̃ ∝ 4 : 2 : 1
+        p = torch.softmax(-SELECT_ENERGIES.double(), dim=0)  # (5,) p̃
         a = _out(
-            fn(samples.clone(), energies.clone(), "argmax", torch.Generator().manual_seed(0)),
+            fn(SELECT_SAMPLES.clone(), SELECT_ENERGIES.clone(), "argmax", torch.Generator().manual_seed(0)),
             (2,),
             "select_action",
         )
         if isinstance(a, Feedback):
             return a
-        if torch.equal(a, samples[2]):
+        if torch.equal(a, SELECT_SAMPLES[int(SELECT_ENERGIES.argmax())]):
             return hint(
                 'with select = "argmax" return the sample of highest probability p̃, i.e. of *lowest* energy.'
             )
-        if not torch.equal(a, samples[0]):
+        if not torch.equal(a, SELECT_SAMPLES[int(SELECT_ENERGIES.argmin())]):
             return hint(
-                'with select = "argmax" return the sample with the highest probability p̃ (one of the samples, unchanged).'
+                'with select = "argmax" return the sample with the highest probability p̃ (one of the '
+                "samples, "
+                "unchanged)."
             )
-        g = torch.Generator().manual_seed(1)
-        counts = torch.zeros(3)
-        for _ in range(3000):
-            s = _out(fn(samples.clone(), energies.clone(), "sample", g), (2,), "select_action")
-            if isinstance(s, Feedback):
-                return s
-            match = (samples == s).all(dim=1)
-            if not match.any():
+        share = _draw_shares(fn, torch.Generator().manual_seed(1))
+        if isinstance(share, Feedback):
+            return share
+        expected = p.float()
+        # Pearson's chi-square over the five candidates (4 degrees of freedom): above 30 happens for a
+        # correct draw about once in 200,000 checks; a softmax at temperature 1.1 gives about 60, at 0.9
+        # about 75
+        chi2 = float((SELECT_DRAWS * (share - expected) ** 2 / expected).sum())
+        if chi2 > 30:
+            shown = ", ".join(f"{float(x):.3f}" for x in share)
+            want = ", ".join(f"{float(x):.3f}" for x in expected)
+            if (share - torch.softmax(SELECT_ENERGIES, 0)).abs().max() < 0.02:
+                return hint("your draws favour the high-energy samples: p̃ is the softmax of −E.")
+            if (share - 0.2).abs().max() < 0.02:
                 return hint(
-                    'with select = "sample" return one of the samples, drawn from Categorical({ỹ_i}, {p̃_i}) (line 14).'
+                    "your draws pick every sample equally often: draw with the softmax probabilities p̃."
                 )
-            counts[int(match.float().argmax())] += 1
-        share = counts / counts.sum()
-        expected = torch.tensor([4.0, 2.0, 1.0]) / 7
-        if (share - expected).abs().max() < 0.04:
-            return correct(
-                "Line 14 of Algorithm 1: you draw ŷ with probabilities p̃ (and the argmax picks the lowest energy)."
-            )
-        if (share - expected.flip(0)).abs().max() < 0.04:
-            return hint("your draws favour the high-energy samples: p̃ is the softmax of −E.")
-        if (share - 1 / 3).abs().max() < 0.04:
-            return hint("your draws pick every sample equally often: draw with the softmax probabilities p̃.")
-        if share[0] > 0.97:
+            if float(share.max()) > 0.97:
+                return hint(
+                    'with select = "sample" the action must be *drawn* from p̃, not always the most '
+                    "probable one."
+                )
             return hint(
-                'with select = "sample" the action must be *drawn* from p̃, not always the most probable one.'
+                f"over {SELECT_DRAWS} draws your shares of the five samples are ({shown}) where p̃ is "
+                f"({want}): "
+                "more than chance explains. p̃ is exactly softmax(−E), with no temperature or other change."
             )
-        return hint(
-            f"your draws give the three samples shares {[round(float(x), 2) for x in share]} where p̃ is {[round(float(x), 2) for x in expected]}."
+        fb = _select_generator_check(fn)
+        if fb is not None:
+            return fb
+        return correct(
+            "Line 14 of Algorithm 1: you draw ŷ with probabilities p̃ (and the argmax picks the lowest "
+            "energy)."
         )
 
     return run_check(check, "`select_action`")
@@ -229,37 +377,59 @@ def check_shallow_share(fn) -> Feedback:
                 "a share lies between 0 and 1: normalise over the two valleys (shallow / (shallow + deep))."
             )
         want = [expected(*c) for c in cases]
-        if all(abs(g - w) < 1e-6 for g, w in zip(got, want)):
+        if all(abs(g - w) < 1e-6 for g, w in zip(got, want, strict=False)):
             m = _measured_shallow_share(0.5, 5)
             return correct(
-                f"Each round multiplies by p(y|x) once more. The library's DFO agrees: Δ = 0.5, k = 5 rounds, "
-                f"2000 calls from a uniform start end in the shallow valley {m:.2f} of the time; you predicted {want[1]:.2f}."
+                "Each round multiplies by p(y|x) once more. The library's DFO agrees: Δ = 0.5, k = 5 "
+                "rounds, "
+                f"2000 calls from a uniform start end in the shallow valley {m:.2f} of the time; you "
+                f"predicted {want[1]:.2f}."
             )
-        if all(abs(g - (1 - w)) < 1e-6 for g, w in zip(got, want)):
+        if all(abs(g - (1 - w)) < 1e-6 for g, w in zip(got, want, strict=False)):
             return hint(
-                "that is the share of the *deeper* valley: the shallow one, with the higher floor, gets the smaller share."
+                "that is the share of the *deeper* valley: the shallow one, with the higher floor, gets "
+                "the smaller share."
             )
-        if all(abs(g - expected(d, 1, r)) < 1e-6 for g, (d, k, r) in zip(got, cases)):
+        if all(abs(g - expected(d, 1, r)) < 1e-6 for g, (d, k, r) in zip(got, cases, strict=False)):
             return hint(
-                "your share does not change with k: each of the k rounds multiplies the population by p(y|x) once more."
+                "your share does not change with k: each of the k rounds multiplies the population by "
+                "p(y|x) once more."
             )
-        if all(abs(g - expected(d, k, 1.0)) < 1e-6 for g, (d, k, r) in zip(got, cases)):
+        if all(abs(g - expected(d, k, 1.0)) < 1e-6 for g, (d, k, r) in zip(got, cases, strict=False)):
             return hint(
-                "your share ignores r: the initial samples' share multiplies in (the initialisation is a prior over the valleys)."
+                "your share ignores r: the initial samples' share multiplies in (the initialisation is a "
+                "prior over the valleys)."
             )
-        if all(abs(g - r * math.exp(-k * d)) < 1e-6 for g, (d, k, r) in zip(got, cases)):
+        if all(abs(g - r * math.exp(-k * d)) < 1e-6 for g, (d, k, r) in zip(got, cases, strict=False)):
             return hint(
-                "normalise over the two valleys: the share is shallow / (shallow + deep), with the deep valley's weight 1."
+                "normalise over the two valleys: the share is shallow / (shallow + deep), with the deep "
+                "valley's weight 1."
             )
-        if abs(got[0] - want[0]) > 1e-6:  # Δ = 0.5, k = 1, r = 1
+        if all(abs(g - expected(d, k, 1.0 / r)) < 1e-6 for g, (d, k, r) in zip(got, cases, strict=True)):
             return hint(
-                f"with Δ = 0.5 and one round from an even start, DFO is an importance sampler of p(y|x) itself: "
-                f"the shallow valley gets 1 / (1 + e^0.5), not {got[0]:.3g}."
+                "r is the *shallow* valley's share of the initial samples over the deep one's: it "
+                "multiplies the "
+                "shallow valley's weight, not the deep one's."
             )
-        m = _measured_shallow_share(0.5, 5)
+        # the first case the prediction gets wrong (never one it got right)
+        i = next(i for i, (g, w) in enumerate(zip(got, want, strict=True)) if abs(g - w) > 1e-6)
+        delta, k, r = cases[i]
+        start = (
+            "an even start (r = 1)"
+            if r == 1.0
+            else f"r = {r} (the shallow valley {r} times as full at the start)"
+        )
+        if k == 1:
+            return hint(
+                f"with Δ = {delta}, one round and {start} you predict {got[i]:.3g}: one round of resampling "
+                "multiplies each valley's weight by its e^{−E}; normalise over the two valleys."
+            )
+        measured = ""
+        if r == 1.0 and (delta, k) == (0.5, 5):
+            measured = f"; the library's DFO measures {_measured_shallow_share(0.5, 5):.2f} over 2000 calls"
         return hint(
-            f"with Δ = 0.5 and k = 5 you predict {got[1]:.3g}; the library's DFO measures {m:.2f} over 2000 calls. "
-            "Follow the valleys' weights through one round (resampling multiplies by e^{−E}), then k of them."
+            f"with Δ = {delta}, k = {k} rounds and {start} you predict {got[i]:.3g}{measured}. Follow the "
+            "valleys' weights through one round (resampling multiplies by e^{−E}), then k of them."
         )
 
     return run_check(check, "`shallow_share`")

@@ -65,7 +65,8 @@ def check_yaw_rate(fn) -> Feedback:
             if math.isclose(abs(out), abs(math.tan(DELTA_MAX * s) / L), rel_tol=1e-6):
                 return hint("the yaw rate grows with speed: a car at rest does not turn.")
             return hint(
-                f"for speed {v} m/s and steer {s} your yaw rate is {out:.4f} rad/s, which is not the kinematic "
+                f"for speed {v} m/s and steer {s} your yaw rate is {out:.4f} rad/s, which is not the "
+                "kinematic "
                 "bicycle's: check the formula term by term (speed, wheel angle, wheelbase, sign)."
             )
         return correct(
@@ -140,52 +141,103 @@ def check_pid(fn) -> Feedback:
 
 
 # --------------------------------------------------------------------------- 3. red-light rule
-def check_ran_red_light(fn) -> Feedback:
-    """Check ``fn(rear_before, rear_after, entry, direction, state)`` against the red-light rule."""
+RED_LIGHT_LANES = [  # (entry, direction, name): a lane of each heading, the last one diagonal
+    (np.array([50.0, 10.0]), np.array([0.0, 1.0]), "north"),
+    (np.array([-20.0, 35.0]), np.array([1.0, 0.0]), "east"),
+    (np.array([12.0, -8.0]), np.array([0.0, -1.0]), "south"),
+    (np.array([7.5, 3.0]), np.array([-0.6, -0.8]), "south-west"),
+]
+
+
+def _red_light_lane(ask, entry, d, name) -> Feedback | None:
+    """The rule's cases on one lane, or the hint for the first one answered wrongly. ``ask(before,
+    after, state)`` asks the reader's function about this lane."""
     from ibc_tutorial.driving.lights import GREEN, RED, YELLOW
 
-    entry, d = np.array([50.0, 10.0]), np.array([0.0, 1.0])  # a northbound lane, its junction entry at y = 10
     right = np.array([d[1], -d[0]])
+    cross = (entry - 0.3 * d, entry + 0.4 * d)
+    if not ask(*cross, RED):
+        if name != "north":
+            return hint(
+                f"right for a lane heading north, wrong for one heading {name}: measure the rear's position "
+                "along `direction` (and across it, for the lane's width), not along the y axis."
+            )
+        return hint(
+            "the rear moving from just before the line to just past it while red is an infraction: "
+            "compare the position along the lane before and after the step."
+        )
+    if ask(*cross, YELLOW):
+        return hint("only red counts: crossing at yellow is legal (the light has not turned red yet).")
+    if ask(*cross, GREEN):
+        return hint("crossing at green is not an infraction.")
+    wrong_way = {
+        "already past": (entry + 0.4 * d, entry + 1.4 * d),
+        "still before": (entry - 2.0 * d, entry - 1.0 * d),
+        "backwards": (entry + 0.4 * d, entry - 0.3 * d),
+    }
+    answers = {k: ask(*v, RED) for k, v in wrong_way.items()}
+    if any(answers.values()) and name != "north":
+        return hint(
+            f"right for a lane heading north, wrong for one heading {name}: measure the rear's position "
+            "along "
+            "`direction`, not along the y axis."
+        )
+    if answers["already past"]:
+        return hint(
+            "the rear was already past the line before the step: that crossing was counted (or not) "
+            "earlier; count only the step that crosses it."
+        )
+    if answers["still before"]:
+        return hint("the rear is still before the line after the step: no crossing yet.")
+    if answers["backwards"]:
+        return hint(
+            "moving backwards over the line is not running the light: only a forward crossing counts."
+        )
+    for side in (4.0, -4.0, 2.01, -2.01):
+        if ask(cross[0] + side * right, cross[1] + side * right, RED):
+            where = "in another lane" if abs(side) > 3 else "just outside the 4 m lane"
+            return hint(
+                f"a crossing {abs(side)} m to the {'right' if side > 0 else 'left'} of the lane's centre "
+                "line is "
+                f"{where}: only a crossing within the lane (half a lane width, 2 m, from its centre line) "
+                "counts."
+                + (
+                    ""
+                    if name == "north"
+                    else f" (This lane heads {name}: across it is perpendicular to `direction`.)"
+                )
+            )
+    for side in (1.5, -1.99, 1.99):
+        if not ask(cross[0] + side * right, cross[1] + side * right, RED):
+            return hint(
+                f"a crossing {abs(side)} m to the {'right' if side > 0 else 'left'} of the centre line is "
+                "still "
+                "within the 4 m lane and counts."
+                + (
+                    ""
+                    if name == "north"
+                    else f" (This lane heads {name}: across the lane is perpendicular to `direction`.)"
+                )
+            )
+    return None
 
-    def ask(before, after, state):
-        out = fn(np.array(before, float), np.array(after, float), entry.copy(), d.copy(), state)
-        if not isinstance(out, (bool, np.bool_)):
-            raise TypeError(f"ran_red_light must return True or False, got {type(out).__name__}")
-        return bool(out)
+
+def check_ran_red_light(fn) -> Feedback:
+    """Check ``fn(rear_before, rear_after, entry, direction, state)`` against the red-light rule, on
+    lanes heading north, east, south and south-west."""
 
     def check() -> Feedback:
-        cross = (entry - 0.3 * d, entry + 0.4 * d)
-        if not ask(*cross, RED):
-            return hint(
-                "the rear moving from just before the line to just past it while red is an infraction: "
-                "compare the position along the lane before and after the step."
-            )
-        if ask(*cross, YELLOW):
-            return hint("only red counts: crossing at yellow is legal (the light has not turned red yet).")
-        if ask(*cross, GREEN):
-            return hint("crossing at green is not an infraction.")
-        if ask(entry + 0.4 * d, entry + 1.4 * d, RED):
-            return hint(
-                "the rear was already past the line before the step: that crossing was counted (or not) "
-                "earlier; count only the step that crosses it."
-            )
-        if ask(entry - 2.0 * d, entry - 1.0 * d, RED):
-            return hint("the rear is still before the line after the step: no crossing yet.")
-        if ask(entry + 0.4 * d, entry - 0.3 * d, RED):
-            return hint(
-                "moving backwards over the line is not running the light: only a forward crossing counts."
-            )
-        if ask(cross[0] + 4.0 * right, cross[1] + 4.0 * right, RED) or ask(
-            cross[0] - 4.0 * right, cross[1] - 4.0 * right, RED
-        ):
-            return hint(
-                "a crossing 4 m to the side is in another lane: only a crossing within the lane "
-                "(half a lane width, 2 m, from the lane's centre line) counts."
-            )
-        if not ask(cross[0] + 1.5 * right, cross[1] + 1.5 * right, RED):
-            return hint(
-                "a crossing 1.5 m to the side of the centre line is still within the 4 m lane and counts."
-            )
+        for entry, d, name in RED_LIGHT_LANES:
+
+            def ask(before, after, state, entry=entry, d=d):
+                out = fn(np.array(before, float), np.array(after, float), entry.copy(), d.copy(), state)
+                if not isinstance(out, (bool, np.bool_)):
+                    raise TypeError(f"ran_red_light must return True or False, got {type(out).__name__}")
+                return bool(out)
+
+            fb = _red_light_lane(ask, entry, d, name)
+            if fb is not None:
+                return fb
         return correct("That is the rule the environment applies (``lights.RedLightMonitor``).")
 
     return run_check(check, "`ran_red_light`")
@@ -229,7 +281,8 @@ def check_world_to_bev(fn) -> Feedback:
                 )
             if np.allclose((row, col), (304 - ref[0], ref[1]), atol=1e-6):
                 return hint(
-                    "ahead must be up: image rows grow downwards, so a point ahead of the car has a smaller row."
+                    "ahead must be up: image rows grow downwards, so a point ahead of the car has a "
+                    "smaller row."
                 )
             noturn = (152 - 5 * (x - cx), 96 - 5 * (y - cy))
             if np.allclose((row, col), noturn, atol=1e-6) and yaw != 0:
@@ -241,11 +294,13 @@ def check_world_to_bev(fn) -> Feedback:
                 return hint("the scale: the view has 5 pixels per metre.")
             if np.isclose(col, ref[1], atol=1e-6):
                 return hint(
-                    "the column is right but not the row: the car sits 40 px above the bottom edge of the 192 px view."
+                    "the column is right but not the row: the car sits 40 px above the bottom edge of the "
+                    "192 px view."
                 )
             return hint(
                 f"the point ({x}, {y}) seen from a car at ({cx}, {cy}) heading {yaw:.2f} rad lands at "
-                f"({row:.1f}, {col:.1f}) in your view: check the offset's projection, the scale and the car's pixel."
+                f"({row:.1f}, {col:.1f}) in your view: check the offset's projection, the scale and the "
+                "car's pixel."
             )
         return correct("That is the BEV's geometry: the renderer applies it to all 36,864 pixels at once.")
 
@@ -267,6 +322,10 @@ STOP_CASES = [  # (state, gap_m, speed): 0 green, 1 yellow, 2 red
     (0, 1.0, 0.5),
     (1, 4.5, 6.0),
     (1, 1.5, 6.0),
+    (2, 9.7, 6.0),  # just beyond the horizon (9.5 m): a horizon of 10 m stops here
+    (2, 9.3, 6.0),  # just within it: a horizon of 9 m drives on here
+    (1, 9.4, 3.0),  # yellow, within it, slow enough to stop
+    (1, 9.8, 2.0),  # yellow, beyond it
 ]
 
 
@@ -284,17 +343,27 @@ def check_expert_stops(fn) -> Feedback:
                 return hint(f"expert_stops must return True or False, got {type(out).__name__}.")
             answers.append(bool(out))
         truth = [stops_for_light(*c, config) for c in STOP_CASES]
-        wrong = [c for c, a, t in zip(STOP_CASES, answers, truth) if a != t]
+        wrong = [c for c, a, t in zip(STOP_CASES, answers, truth, strict=False) if a != t]
         if not wrong:
             return correct(
-                "That is the expert's rule. A one-bit 'must stop' flag would draw a yellow line like a red "
-                "one, yet at (yellow, 3 m, 6 m/s) the expert drives on: that is why the BEV draws yellow "
-                "at its own level, 0.6, and lets distance and speed decide."
+                "That is the expert's rule. A one-bit 'must stop' flag draws a yellow line like a red one, "
+                "yet "
+                "at (yellow, 3 m, 6 m/s) the expert drives on: there the flag contradicts the expert's "
+                "label. "
+                "The intensity encoding draws yellow at its own level, 0.6, and lets distance and speed "
+                "decide."
             )
         if any(s == 2 and g > config.stop_distance_m for s, g, _ in wrong):
             return hint(
-                f"distance: the expert considers its light only within {config.stop_distance_m} m of the line; "
+                f"distance: the expert considers its light only within {config.stop_distance_m} m of the "
+                "line; "
                 "a red light further away does not stop it yet."
+            )
+        if any(s == 2 and g <= config.stop_distance_m for s, g, _ in wrong):
+            return hint(
+                f"distance: the expert considers its light within {config.stop_distance_m} m of the line, "
+                "and a "
+                "red light within that distance always stops it."
             )
         yellow = [c for c in wrong if c[0] == 1]
         near_yellow = [k for k, c in enumerate(STOP_CASES) if c[0] == 1 and c[1] <= config.stop_distance_m]

@@ -89,12 +89,14 @@ def _mistakes(a: np.ndarray, b: np.ndarray) -> list[tuple[tuple[float, float], s
         ),
         (
             _q(_boot(a, r, rng, episodes=False) - _boot(b, r, rng, episodes=False)),
-            "you resampled agents but kept each drawn agent's episodes as they are: the episodes vary too (other "
+            "you resampled agents but kept each drawn agent's episodes as they are: the episodes vary too "
+            "(other "
             "starts), so draw them with replacement within each drawn agent.",
         ),
         (
             _q(_boot(a, r, rng, agents=False) - _boot(b, r, rng, agents=False)),
-            "you resampled episodes but kept every agent once: another run of the method would give other agents, "
+            "you resampled episodes but kept every agent once: another run of the method would give other "
+            "agents, "
             "so draw the agents with replacement too.",
         ),
         (
@@ -104,14 +106,16 @@ def _mistakes(a: np.ndarray, b: np.ndarray) -> list[tuple[tuple[float, float], s
         (_q(full_a), "that is an interval for mean(A) alone: the claim is about mean(A) - mean(B)."),
         (
             _q(_boot(a, r, rng, idx=shared) - _boot(b, r, rng, idx=shared)),
-            "the two methods share the same agent and episode draws in your resamples: their agents are different "
+            "the two methods share the same agent and episode draws in your resamples: their agents are "
+            "different "
             "networks, so draw each method's resample independently.",
         ),
     ]
 
 
 def check_bootstrap_difference(fn) -> Feedback:
-    """Check ``fn(scores_a, scores_b, n_resamples, rng) -> (low, high)`` against ``stats.difference_interval``."""
+    """Check ``fn(scores_a, scores_b, n_resamples, rng) -> (low, high)`` against
+    ``stats.difference_interval``."""
 
     def ask(a, b, seed):
         out = fn(a.copy(), b.copy(), RESAMPLES, np.random.default_rng(seed))
@@ -195,7 +199,8 @@ def check_exit_shares(fn) -> Feedback:
                 missing = sorted(set(TURNS) - set(out))
                 if missing and set(out) <= set(TURNS):
                     return hint(
-                        f"for approach {approach} your dict has no {', '.join(map(repr, missing))}: give every "
+                        f"for approach {approach} your dict has no {', '.join(map(repr, missing))}: give "
+                        "every "
                         "exit a share, 0 for one that was never taken."
                     )
                 return hint(
@@ -220,8 +225,10 @@ def check_exit_shares(fn) -> Feedback:
                 ),
                 (
                     _shares_ref(visits, approach, key="node", node=node),
-                    "you took every visit of the junction (its node): an approach is one direction into it, and the "
-                    "visits from other directions have other exits. Keep the visits whose 'approach' is the one asked.",
+                    "you took every visit of the junction (its node): an approach is one direction into "
+                    "it, and the "
+                    "visits from other directions have other exits. Keep the visits whose 'approach' is "
+                    "the one asked.",
                 ),
             ]
             for value, message in mistakes:
@@ -268,7 +275,10 @@ def check_verdict(fn) -> Feedback:
             ref = verdict(Interval(est, lo, hi), t)
             if out == ref:
                 continue
-            case = f"for the interval [{lo:g}, {hi:g}] (estimate {est:g}) and the threshold {t:g} you answered {out!r}"
+            case = (
+                f"for the interval [{lo:g}, {hi:g}] (estimate {est:g}) and the threshold {t:g} you "
+                f"answered {out!r}"
+            )
             if t in (lo, hi):
                 return hint(
                     f"{case}: an interval that ends exactly on the threshold does not lie above (or below) "

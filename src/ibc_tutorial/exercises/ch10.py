@@ -19,24 +19,25 @@ import math
 
 import numpy as np
 
-from ibc_tutorial.exercises.core import Feedback, correct, hint, number_answer, run_check
+from ibc_tutorial.exercises.core import Feedback, close, correct, hint, number_answer, run_check
 from ibc_tutorial.metrics import crashes_per_km, swerve_rate, whiteness
 
 
-def _close(a: float, b: float) -> bool:
-    return math.isclose(a, b, rel_tol=1e-6, abs_tol=1e-9)
-
-
 # --------------------------------------------------------------------------- 1. swerve rate
-def _swerve_ref(offsets, slight, clear, *, relative=True, signed=True, peak=True, half=0.5):
+def _swerve_ref(offsets, slight, clear, *, relative=True, signed=True, peak=True, half=0.5, strict=False):
     x = np.asarray(offsets, dtype=float)
     if relative:
         x = x - x[:, :1]
     if not signed:
         x = np.abs(x)
     m = x.max(axis=1) if peak else x.mean(axis=1)
+    if strict:
+        return float(np.where(m > clear, 1.0, np.where(m > slight, half, 0.0)).mean())
     return float(np.where(m >= clear, 1.0, np.where(m >= slight, half, 0.0)).mean())
 
+
+_PEAKS = 0.025 + 0.05 * np.arange(40)
+"""(40,) the peaks of the last swerve case's passes (m)."""
 
 SWERVE_CASES = [
     # (offsets (P, T), slight, clear); after the first, each case tells one usual mistake from the others
@@ -51,16 +52,30 @@ SWERVE_CASES = [
     (np.array([[0.0, -0.7, -1.2, -0.3], [0.0, 0.2, 0.1, 0.0]]), 0.5, 1.0),  # moved away from the side road
     (np.array([[0.0, 1.1, 1.2, 1.1], [0.0, 0.6, 0.6, 0.6]]), 0.5, 1.0),  # peak, not mean
     (np.array([[0.0, 0.6, 0.7, 0.6], [0.0, 0.2, 0.1, 0.0], [0.0, -0.1, -0.2, 0.0]]), 0.5, 1.0),  # half
+    # peaks exactly at the thresholds (dyadic numbers: the differences are exact): reaching counts
+    (np.array([[0.25, 0.5, 0.75, 0.5], [0.25, 1.25, 0.5, 0.25], [0.0, 0.125, 0.25, 0.125]]), 0.5, 1.0),
+    # other thresholds: the function must use its arguments
+    (np.array([[0.0, 0.6, 0.1, 0.0], [0.0, 0.9, 0.2, 0.0], [0.0, 0.35, 0.3, 0.3]]), 0.3, 0.8),
+    # forty passes peaking every 0.05 m from 0.025 to 1.975 m: thresholds other than the arguments
+    # (by more than 0.05 m) change the count
+    (_PEAKS[:, None] * np.array([0.0, 1.0, 0.5, 0.0]), 0.7, 1.3),
 ]
 
 
 SWERVE_HINTS = {
-    "relative": "a car that enters the section already off the centre line has not swerved: measure each pass's "
+    "relative": "a car that enters the section already off the centre line has not swerved: measure each "
+    "pass's "
     "offsets from where the car was when the section began.",
-    "signed": "only movement towards the side road is a swerve: a car that moves away from it has not been pulled "
+    "signed": "only movement towards the side road is a swerve: a car that moves away from it has not been "
+    "pulled "
     "towards the other option.",
     "peak": "a swerve is judged by how far the car went at its farthest, not on average over the pass.",
     "half": "the paper counts a slight swerve as half a swerve.",
+    "strict": "a pass whose peak is exactly at a threshold has reached it: 'reaches' means at or beyond the "
+    "threshold.",
+    "thresholds": "right for the thresholds 0.5 and 1.0 m, wrong for 0.3 and 0.8 m: use the thresholds "
+    "passed as "
+    "`slight` and `clear`, not the chapter's numbers.",
 }
 
 
@@ -74,15 +89,18 @@ def check_swerve_rate(fn) -> Feedback:
             if isinstance(out, Feedback):
                 return out
             ref = swerve_rate(offsets - offsets[:, :1], slight=slight, clear=clear)
-            if _close(out, ref):
+            if close(out, ref, rtol=1e-6, atol=1e-9):
                 continue
             mistakes = {  # a mistake is named only in a case where no other mistake gives the same answer
                 "relative": _swerve_ref(offsets, slight, clear, relative=False),
                 "signed": _swerve_ref(offsets, slight, clear, signed=False),
                 "peak": _swerve_ref(offsets, slight, clear, peak=False),
                 "half": _swerve_ref(offsets, slight, clear, half=1.0),
+                "strict": _swerve_ref(offsets, slight, clear, strict=True),
             }
-            made = [k for k, v in mistakes.items() if _close(out, v)]
+            if (slight, clear) != (0.5, 1.0):
+                mistakes["thresholds"] = _swerve_ref(offsets, 0.5, 1.0)
+            made = [k for k, v in mistakes.items() if close(out, v, rtol=1e-6, atol=1e-9)]
             if len(made) == 1:
                 return hint(SWERVE_HINTS[made[0]])
             if not made:
@@ -125,25 +143,27 @@ def check_command_whiteness(fn) -> Feedback:
             if isinstance(out, Feedback):
                 return out
             ref = _w_pooled(segments, dt)
-            if _close(out, ref):
+            if close(out, ref, rtol=1e-6, atol=1e-9):
                 continue
             joined = np.concatenate(segments)
-            if _close(out, whiteness(joined, dt)):
+            if close(out, whiteness(joined, dt), rtol=1e-6, atol=1e-9):
                 return hint(
                     "a restart puts the car somewhere else: the change of command across it is not a change "
                     "the model made. Take differences within each stretch only."
                 )
             per = [whiteness(s, dt) for s in segments if len(s) >= 2]
-            if _close(out, float(np.mean(per))):
+            if close(out, float(np.mean(per)), rtol=1e-6, atol=1e-9):
                 return hint(
                     "the stretches have different lengths: pool their squared rates of change over all the "
                     "changes (eq. 2's D) instead of averaging one W per stretch."
                 )
-            if _close(out, ref * dt) or _close(out, ref * dt * dt):
+            if close(out, ref * dt, rtol=1e-6, atol=1e-9) or close(out, ref * dt * dt, rtol=1e-6, atol=1e-9):
                 return hint("eq. 2 divides each change by the time between decisions, δt.")
-            if _close(out, ref * ref):
+            if close(out, ref * ref, rtol=1e-6, atol=1e-9):
                 return hint("eq. 2 is a root mean square: take the square root.")
-            if _close(out, ref * 250.0) or _close(out, ref * math.degrees(0.6)):
+            if close(out, ref * 250.0, rtol=1e-6, atol=1e-9) or close(
+                out, ref * math.degrees(0.6), rtol=1e-6, atol=1e-9
+            ):
                 return hint(
                     "the exercise asks for the book's unit, steer per second (1/s), not degrees per second."
                 )
@@ -178,16 +198,21 @@ def check_crashes_per_km(fn) -> Feedback:
             c = [r["crashes"] for r in runs]
             d = [r["distance_m"] for r in runs]
             ref = crashes_per_km(c, d)
-            if _close(out, ref):
+            if close(out, ref, rtol=1e-6, atol=1e-9):
                 continue
-            if _close(out, float(np.mean([ci / (di / 1000) for ci, di in zip(c, d)]))):
+            if close(
+                out,
+                float(np.mean([ci / (di / 1000) for ci, di in zip(c, d, strict=False)])),
+                rtol=1e-6,
+                atol=1e-9,
+            ):
                 return hint(
                     "a short run would weigh as much as a long one: pool the crashes and the distances of "
                     "all runs first, then divide."
                 )
-            if _close(out, ref / 1000) or _close(out, ref * 1000):
+            if close(out, ref / 1000, rtol=1e-6, atol=1e-9) or close(out, ref * 1000, rtol=1e-6, atol=1e-9):
                 return hint("the distances are in metres; the rate is per kilometre.")
-            if _close(out, float(sum(c))):
+            if close(out, float(sum(c)), rtol=1e-6, atol=1e-9):
                 return hint(
                     "a count alone does not compare routes of different lengths: divide by the distance."
                 )

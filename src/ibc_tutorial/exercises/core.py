@@ -84,6 +84,18 @@ def tensor_answer(out, name: str, shape: tuple, what: str = "") -> torch.Tensor 
     return out.detach()
 
 
+def close(a, b, rtol: float = 1e-4, atol: float = 1e-4) -> bool:
+    """Whether the reader's ``a`` and the reference ``b`` (tensors, arrays or numbers) have the same
+    shape and are finite and equal within ``rtol`` and ``atol`` (compared in float64)."""
+    a = torch.as_tensor(a, dtype=torch.float64)
+    b = torch.as_tensor(b, dtype=torch.float64)
+    return (
+        a.shape == b.shape
+        and bool(torch.isfinite(a).all())
+        and bool(torch.allclose(a, b, rtol=rtol, atol=atol))
+    )
+
+
 def number_answer(value, name: str) -> float | Feedback:
     """A reader's function's return value as a finite float, or the hint that says why it is not one
     (``name`` is the function's name in the exercise). True and False are refused: they are not numbers."""

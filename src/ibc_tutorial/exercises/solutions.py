@@ -13,7 +13,8 @@ from ibc_tutorial.kde import inverse_density_weights, kde_density
 
 # =========================================================================== chapter 01: the tree
 def ch01_best_constant_mse(actions):
-    """The constant c minimising (1/N) Σ (a_i - c)^2: setting the derivative -2/N Σ (a_i - c) to zero gives the mean."""
+    """The constant c minimising (1/N) Σ (a_i - c)^2: setting the derivative -2/N Σ (a_i - c) to zero
+    gives the mean."""
     return float(actions.mean())
 
 
@@ -23,7 +24,8 @@ def ch01_hits_tree(car_xy, tree_xy, car_radius, tree_radius):
 
 
 def ch01_swerve(y):
-    """(E,) the largest move towards the side road, to the right (-y), since the first time step (>= 0, as t = 0 counts too)."""
+    """(E,) the largest move towards the side road, to the right (-y), since the first time step
+    (>= 0, as t = 0 counts too)."""
     return y[:, 0] - y.min(dim=1).values
 
 
@@ -68,7 +70,8 @@ def ch03_info_nce(pos_energy, neg_energy, weights=None):
 
 
 def ch03_soft_targets(candidates, actions, temperature):
-    """Eq. 5 of the steering-EBM paper with the intended sign: softmax(−(a − a_GT)² / T) over the candidates."""
+    """Eq. 5 of the steering-EBM paper with the intended sign: softmax(−(a − a_GT)² / T) over the
+    candidates."""
 
     sq = ((candidates[None, :, :] - actions[:, None, :]) ** 2).sum(dim=-1)  # (B, K)
     return torch.softmax(-sq / temperature, dim=1)
@@ -88,7 +91,7 @@ def ch03_predict_decision():
     return {"mse": 0.7 * 0.88 - 0.3 * 0.88, "mae": 0.85, "argmin": "right", "sample_right": 0.7}
 
 
-# =========================================================================== chapter 04: DA-IBC counter-examples
+# =========================================================================== chapter 04: counter-examples
 def ch04_expert_negatives(expert_actions, batch_size, n_neg, sigma, generator=None):
     """Sec. 2.4 of the DA-IBC paper: expert actions drawn with replacement, plus N(0, σ²I)."""
 
@@ -120,7 +123,8 @@ def ch05_kde_1d(x, data, h):
 
 
 def ch05_inverse_weights(actions, h):
-    """w_i ∝ 1/ĝ(y_i) (eq. 5), normalised to sum to 1, with ĝ the product-kernel KDE over the actions themselves."""
+    """w_i ∝ 1/ĝ(y_i) (eq. 5), normalised to sum to 1, with ĝ the product-kernel KDE over the actions
+    themselves."""
 
     d = actions.shape[1]
     u = (actions[:, None, :] - actions[None, :, :]) / h  # (M, M, D)
@@ -230,7 +234,9 @@ def ch08_unseen_share(probs, batch_size):
 
 
 def ch08_recipe(method):
-    """The chapter's table: BC's Beta NLL; IBC uniform everywhere, argmax; DA-IBC from the expert's actions, a draw."""
+    """The chapter's table: BC's Beta NLL; IBC uniform everywhere, argmax; DA-IBC from the expert's
+    actions, a draw. (IBC ending with a draw is accepted too: the paper leaves its baseline's ending
+    unstated.)"""
     if method == "bc":
         return {"loss": "beta nll", "negatives": None, "dfo_init": None, "dfo_select": None}
     if method == "ibc":
@@ -244,6 +250,21 @@ def ch08_recipe(method):
 
 
 # =========================================================================== chapter 09: the replication
+def ch09_bootstrap_difference(scores_a, scores_b, n_resamples, rng):
+    """95 % percentile interval of mean(A) − mean(B) by the two-level bootstrap: for each method
+    independently, A agents drawn with replacement, then E episodes of each drawn agent, averaged."""
+
+    def resampled_means(x):  # (A, E) -> (n_resamples,)
+        a, e = x.shape
+        agents = rng.integers(a, size=(n_resamples, a))  # (R, A) the drawn agents
+        episodes = rng.integers(e, size=(n_resamples, a, e))  # (R, A, E) their drawn episodes
+        return x[agents[:, :, None], episodes].mean(axis=(1, 2))
+
+    diffs = resampled_means(np.asarray(scores_a, float)) - resampled_means(np.asarray(scores_b, float))
+    low, high = np.percentile(diffs, [2.5, 97.5])
+    return float(low), float(high)
+
+
 def ch09_exit_shares(visits, approach):
     """Share of the approach's visits that left by each exit (all three keys, summing to 1)."""
 
@@ -251,6 +272,17 @@ def ch09_exit_shares(visits, approach):
     return {t: turns.count(t) / len(turns) for t in ("left", "straight", "right")}
 
 
+def ch09_verdict(estimate, low, high, threshold):
+    """The interval decides, not the estimate: wholly above the threshold, wholly below, or neither
+    (an end exactly on the threshold is neither)."""
+    if low > threshold:
+        return "holds"
+    if high < threshold:
+        return "does not hold"
+    return "cannot tell at this scale"
+
+
+# =========================================================================== chapter 10: road following
 def ch10_swerve_rate(offsets, slight, clear):
     """Share of passes (P, T) whose farthest offset towards the side road, from where the pass began,
     reaches ``clear`` (a swerve, 1) or ``slight`` (half a swerve)."""
