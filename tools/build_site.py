@@ -276,7 +276,7 @@ def generate(srcdir: Path) -> dict[str, int]:
         head = (
             f":::{{note}} Exercises of chapter [{chapter[5:7]} · {title}](../{chapter})\n"
             'Each exercise cell ends with a checker that answers "not attempted", "correct", or a hint '
-            "naming what is wrong; this page shows the notebook as stored, with its stubs unanswered.\n:::\n\n"
+            "naming what is wrong; this page shows the notebook as stored, its stubs unanswered.\n:::\n\n"
             if (ROOT / chapter).exists()
             else ""
         )
@@ -398,9 +398,7 @@ def build(out: Path, jobs: str) -> None:
             raise SystemExit(f"sphinx-build failed (exit code {result.returncode}); site/ left as it was")
     shutil.rmtree(out, ignore_errors=True)
     staging.rename(out)  # the new site replaces the old one whole
-    print(
-        f"built {out.relative_to(ROOT) if out.is_relative_to(ROOT) else out} in {time.perf_counter() - start:.1f} s"
-    )
+    print(f"built {out} in {time.perf_counter() - start:.1f} s")
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -12,8 +12,9 @@ import importlib.util
 import re
 from pathlib import Path
 
-import ibc_tutorial
 from sphinx.util.fileutil import copy_asset
+
+import ibc_tutorial
 
 project = "ibc-tutorial"
 author = "the ibc-tutorial authors"
@@ -51,6 +52,8 @@ napoleon_numpy_docstring = False
 html_theme = "sphinx_book_theme"
 html_title = "ibc-tutorial"
 html_static_path = ["_static"]
+html_favicon = "_static/favicon.svg"  # without one the browser asks for /favicon.ico, a 404
+html_context = {"default_mode": "light"}  # unset, the theme logs "invalid theme mode" on a first visit
 html_css_files = ["site.css"]
 html_copy_source = False  # the notebook files are linked from each page (the original, not a copy)
 html_show_sourcelink = False
