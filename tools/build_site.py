@@ -267,14 +267,15 @@ def generate(srcdir: Path) -> dict[str, int]:
     widgets = 0
     for nb_path in chapters:
         title, summary = summaries.get(nb_path, ("", ""))
-        head = f":::{{note}} In this chapter\n{summary}\n:::\n\n" if summary else ""
+        head = f":::{{admonition}} In this chapter\n:class: note\n\n{summary}\n:::\n\n" if summary else ""
         header = head + run_note(nb_path, srcdir, setup, "chapter")
         widgets += page_notebook(ROOT / nb_path, srcdir / nb_path, nb_path, header)
     for nb_path in exercises:
         chapter = nb_path.replace("exercises/", "book/", 1)
         title = summaries.get(chapter, ("", ""))[0]
         head = (
-            f":::{{note}} Exercises of chapter [{chapter[5:7]} · {title}](../{chapter})\n"
+            f":::{{admonition}} Exercises of chapter {chapter[5:7]}\n:class: note\n\n"
+            f"The exercises of [{chapter[5:7]} · {title}](../{chapter}). "
             'Each exercise cell ends with a checker that answers "not attempted", "correct", or a hint '
             "naming what is wrong; this page shows the notebook as stored, its stubs unanswered.\n:::\n\n"
             if (ROOT / chapter).exists()
