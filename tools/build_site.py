@@ -179,8 +179,16 @@ def cli_page() -> str:
 
     def help_of(argv: list[str]) -> str:
         out = io.StringIO()
-        with contextlib.redirect_stdout(out), contextlib.suppress(SystemExit):
-            cli.main(argv)
+        columns = os.environ.get("COLUMNS")
+        os.environ["COLUMNS"] = "80"  # argparse's width: the page's code column, whatever the terminal
+        try:
+            with contextlib.redirect_stdout(out), contextlib.suppress(SystemExit):
+                cli.main(argv)
+        finally:
+            if columns is None:
+                del os.environ["COLUMNS"]
+            else:
+                os.environ["COLUMNS"] = columns
         text = out.getvalue().rstrip()
         if not text.startswith("usage:"):
             raise SystemExit(f"ibc-tutorial {' '.join(argv)} printed no usage:\n{text}")
@@ -420,6 +428,5 @@ def main(argv: list[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    os.environ.setdefault("COLUMNS", "100")  # the --help texts' width
     os.environ.setdefault("TQDM_DISABLE", "1")
     main()
