@@ -395,18 +395,17 @@ def build(out: Path, jobs: str) -> None:
             ", ".join(f"{v} {k}" for k, v in counts.items()),
             f"({time.perf_counter() - start:.1f} s)",
         )
-        staging = out.with_name(out.name + ".partial")
-        shutil.rmtree(staging, ignore_errors=True)
+        # built inside the temporary folder: myst-nb writes its notebook copies beside the output folder
+        staging = Path(tmp) / "html"
         command = [
             sys.executable, "-m", "sphinx", "-b", "html", "-W", "--keep-going", "-q", "-j", jobs,
             "-c", str(CONF_DIR), "-d", str(doctrees), str(srcdir), str(staging),
         ]  # fmt: skip
         result = subprocess.run(command, cwd=ROOT)
         if result.returncode:
-            shutil.rmtree(staging, ignore_errors=True)
             raise SystemExit(f"sphinx-build failed (exit code {result.returncode}); site/ left as it was")
-    shutil.rmtree(out, ignore_errors=True)
-    staging.rename(out)  # the new site replaces the old one whole
+        shutil.rmtree(out, ignore_errors=True)
+        shutil.copytree(staging, out)  # the new site replaces the old one whole
     print(f"built {out} in {time.perf_counter() - start:.1f} s")
 
 
