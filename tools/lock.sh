@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Regenerate environment.lock from pyproject.toml (runtime + dev extras), every package pinned.
+# Regenerate environment.lock from pyproject.toml (runtime + dev + docs extras), every package pinned.
 #   bash tools/lock.sh        (needs pip-tools: python -m pip install pip-tools)
 # pip-compile pins the CPU wheel it finds as torch==2.13.0+cpu; the lock keeps the plain
 # torch==2.13.0, which on these machines installs that same CPU build.
@@ -8,7 +8,7 @@ cd "$(dirname "$0")/.."
 tmp=$(mktemp)
 # start from the current pins: pip-compile keeps every pin that still satisfies pyproject.toml
 cp environment.lock "$tmp"
-pip-compile --quiet --extra dev --strip-extras --allow-unsafe \
+pip-compile --quiet --extra dev --extra docs --strip-extras --allow-unsafe \
   --no-emit-index-url --no-emit-find-links --no-emit-trusted-host \
   --output-file "$tmp" pyproject.toml
 {
