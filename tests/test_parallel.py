@@ -69,7 +69,7 @@ def test_same_results_with_one_and_two_workers(float64):
     one = parallel.parallel_map(train_tiny, seeds, workers=1)
     two = parallel.parallel_map(train_tiny, seeds, workers=2)
     assert len(one) == len(two) == len(seeds)
-    for (w1, l1), (w2, l2) in zip(one, two):
+    for (w1, l1), (w2, l2) in zip(one, two, strict=True):
         assert l1 == l2
         assert all(torch.equal(w1[k], w2[k]) for k in w1)
         assert all(v.dtype == torch.float64 for v in w2.values())
