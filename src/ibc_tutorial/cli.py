@@ -108,6 +108,19 @@ def check_output_dir(name: str, path) -> Path:
     return path
 
 
+def check_arguments(args: argparse.Namespace) -> None:
+    """The arguments every command shares, checked before the paths: ``--device`` (a device this machine
+    has), ``--threads`` >= 0, ``--workers`` >= 1 (``ValueError`` naming the argument)."""
+    from ibc_tutorial.utils import check_device, check_int  # deferred: loads torch
+
+    if getattr(args, "device", None) is not None:
+        check_device("--device", args.device)
+    if getattr(args, "threads", None) is not None:
+        check_int("--threads", args.threads, minimum=0)
+    if getattr(args, "workers", None) is not None:
+        check_int("--workers", args.workers, minimum=1)
+
+
 def check_paths(command: str, args: argparse.Namespace) -> None:
     """The paths a sub-command's arguments name, checked before any work (``UserError`` naming the
     argument)."""
@@ -375,6 +388,7 @@ def main(argv: list[str] | None = None) -> int:
     prog = f"ibc-tutorial {args.command}"
     args.command_line = " ".join(["ibc-tutorial", *argv])  # the provenance's command
     try:
+        check_arguments(args)
         check_paths(args.command, args)
         return int(getattr(importlib.import_module(COMMANDS), function)(args) or 0)
     except KeyboardInterrupt:

@@ -45,7 +45,7 @@ from ibc_tutorial.experiments.steering import evaluate as ev
 from ibc_tutorial.experiments.steering.models import LABELS, MODELS
 from ibc_tutorial.experiments.steering.presets import LAPTOP, SteeringPreset, differences
 from ibc_tutorial.experiments.steering.task import collect_demonstrations, side_road_counts
-from ibc_tutorial.experiments.steering.train import EVAL, TRACE, read_eval, run_dir, run_one
+from ibc_tutorial.experiments.steering.train import EVAL, TRACE, StudyInputs, read_eval, run_dir, run_one
 from ibc_tutorial.parallel import imap_unordered
 from ibc_tutorial.utils import check_int
 
@@ -193,7 +193,9 @@ def _work_one(model: str, seed: int, out: str, preset_d: dict) -> dict:
         _WORKER.clear()
         _WORKER[key] = (ds, log.checksum(), refs, window)
     ds, sha, refs, window = _WORKER[key]
-    return run_one(model, seed, out, preset, ds, refs, window, sha, keep_final=seed == preset.seeds[0])
+    return run_one(
+        model, seed, out, preset, StudyInputs(ds, sha, refs, window), keep_final=seed == preset.seeds[0]
+    )
 
 
 def _stats(values: list) -> dict:

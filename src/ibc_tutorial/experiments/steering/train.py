@@ -12,6 +12,7 @@ model, preset or dataset is refused. An interrupted run resumes from ``last.pt``
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -186,22 +187,29 @@ def evaluate_model(steering: SteeringModel, references: list[Reference], preset:
     return {"routes": routes, "summary": summarize_routes(routes)}
 
 
+@dataclass
+class StudyInputs:
+    """What every run of a study shares (made once per process): the data, the routes, the Fig. 5 window."""
+
+    dataset: DemoDataset
+    """The rendered demonstrations."""
+    data_sha256: str
+    """Their content checksum (``DemoLog.checksum``), stored in every checkpoint."""
+    references: list[Reference]
+    """The expert's drives of the evaluation routes."""
+    window_obs: dict | None
+    """The observations of the Fig. 5 window (None: no trace)."""
+
+
 def run_one(
-    model: str,
-    seed: int,
-    out,
-    preset: SteeringPreset,
-    dataset: DemoDataset,
-    references: list[Reference],
-    window_obs: dict | None,
-    data_sha256: str,
-    keep_final: bool,
+    model: str, seed: int, out, preset: SteeringPreset, inputs: StudyInputs, keep_final: bool
 ) -> dict:
     """Train, evaluate, trace; write the run's files (``eval.json`` last) and return its ``eval.json``."""
     d = run_dir(out, model, seed)
+    dataset, data_sha256, window_obs = inputs.dataset, inputs.data_sha256, inputs.window_obs
     steering, losses, seconds, resumed = train_model(model, seed, dataset, preset, d, data_sha256=data_sha256)
     te = time.perf_counter()
-    ev = evaluate_model(steering, references, preset)
+    ev = evaluate_model(steering, inputs.references, preset)
     arrays = {}
     if window_obs is not None:
         arrays["steer"] = steering.steer(window_obs).numpy().astype(np.float32)  # (T,)
