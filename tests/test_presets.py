@@ -120,3 +120,9 @@ def test_overrides_are_recorded_in_the_provenance(tmp_path):
     assert prov["overrides"] == ["train.steps=2", "seeds=0"] and prov["preset"]["steps"] == 2
     assert prov["command"] == "ibc-tutorial " + " ".join(argv)
     assert "`train.steps=2`" in (out / "PROVENANCE.md").read_text()
+
+
+def test_a_preset_stored_before_light_encoding_existed_keeps_its_intensities():
+    stored = {k: v for k, v in P.LAPTOP.to_dict().items() if k != "light_encoding"}
+    assert P.Preset.from_dict(stored).light_encoding == "intensity"
+    assert P.Preset.from_dict(P.LAPTOP.to_dict()) == P.LAPTOP

@@ -56,6 +56,8 @@ from ibc_tutorial.optimizers.dfo import DFOConfig
 from ibc_tutorial.training import LR_SCHEDULES, TrainConfig
 from ibc_tutorial.utils import check_choice, check_int, check_positive
 
+LEGACY_LIGHT_ENCODING = "intensity"
+"""How presets stored without a ``light_encoding`` field (written before it existed) drew the lights."""
 METHODS = ("bc", "ibc", "da-ibc")
 """The three agents of the DA-IBC paper's sec. 4: Beta BC, conventional IBC and DA-IBC."""
 
@@ -235,11 +237,13 @@ class Preset:
 
     @classmethod
     def from_dict(cls, d: dict) -> Preset:
-        """Inverse of ``to_dict``; unknown keys are refused."""
+        """Inverse of ``to_dict``; unknown keys are refused. A preset stored before ``light_encoding`` existed
+        drew the lights by intensity (``LEGACY_LIGHT_ENCODING``), whatever today's default."""
         names = {f.name for f in fields(cls)}
         unknown = set(d) - names
         if unknown:
             raise ValueError(f"unknown preset fields {sorted(unknown)}")
+        d = {"light_encoding": LEGACY_LIGHT_ENCODING, **d}
         return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
 
 
