@@ -1,4 +1,5 @@
-"""The Fig. 2 network of the DA-IBC paper and the agents built on it (ibc_tutorial.experiments.agents.agent, .presets)."""
+"""The Fig. 2 network of the DA-IBC paper and the agents built on it (ibc_tutorial.experiments.agents.agent,
+.presets)."""
 
 import dataclasses
 
@@ -139,7 +140,7 @@ def test_the_network_is_built_from_its_architecture():
         torch.manual_seed(0)
         b = network_from_architecture(arch)
         assert type(a) is type(b) and all(
-            torch.equal(x, y) for x, y in zip(a.state_dict().values(), b.state_dict().values())
+            torch.equal(x, y) for x, y in zip(a.state_dict().values(), b.state_dict().values(), strict=True)
         )
         assert arch["network"] == type(a).__name__ and arch["encoder"] == type(a.encoder).__name__
         assert list(a.encoder.channels) == arch["cnn_channels"] and a.encoder.bev_size == arch["bev_size"]
@@ -148,7 +149,8 @@ def test_the_network_is_built_from_its_architecture():
 
 
 def test_ended_crossing_energies_replay_the_episode_and_refuse_what_they_cannot_reproduce():
-    from ibc_tutorial.experiments.agents.evaluate import ended_crossing_energies, episode_rows, evaluate_agent
+    from ibc_tutorial.experiments.agents.crossings import ended_crossing_energies
+    from ibc_tutorial.experiments.agents.evaluate import episode_rows, evaluate_agent
 
     torch.manual_seed(0)
     actions = torch.tensor([[0.6, 1.0]] * 100 + [[0.7, 0.9]] * 100)  # DFO starts at hard right turns: crashes

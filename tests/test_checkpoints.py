@@ -1,7 +1,9 @@
-"""Agent checkpoints: round trip, weights_only loading, refusal of foreign files (ibc_tutorial.experiments.agents.checkpoints)."""
+"""Agent checkpoints: round trip, weights_only loading, refusal of foreign files
+(ibc_tutorial.experiments.agents.checkpoints)."""
 
 import dataclasses
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
 import torch
@@ -10,6 +12,18 @@ from ibc_tutorial import __version__
 from ibc_tutorial.experiments.agents.agent import build_network
 from ibc_tutorial.experiments.agents.checkpoints import FORMAT, load_agent, load_checkpoint, save_checkpoint
 from ibc_tutorial.experiments.agents.presets import LAPTOP, TINY
+
+
+def _agent(method, preset, network, expert_actions, init_weights=None):
+    """What ``save_checkpoint`` reads of an ``Agent`` (any object with these attributes)."""
+    return SimpleNamespace(
+        method=method,
+        preset=preset,
+        network=network,
+        expert_actions=expert_actions,
+        init_weights=init_weights,
+    )
+
 
 SHIPPED = Path(__file__).resolve().parents[1] / "book" / "results" / "laptop" / "runs"
 
@@ -21,13 +35,15 @@ def saved(tmp_path):
     actions = torch.rand(30, 2) * 2 - 1
     path = save_checkpoint(
         tmp_path / "a.pt",
-        method="da-ibc",
-        preset=TINY,
-        network=net,
+        _agent(
+            method="da-ibc",
+            preset=TINY,
+            network=net,
+            expert_actions=actions,
+            init_weights=torch.full((30,), 1 / 30),
+        ),
         data_sha256="ab" * 32,
         epoch=3,
-        expert_actions=actions,
-        init_weights=torch.full((30,), 1 / 30),
     )
     return path, net, actions
 
@@ -56,12 +72,9 @@ def test_a_network_on_a_gpu_is_stored_as_cpu_copies(monkeypatch):
     cpu_net = build_network("da-ibc", TINY)
     save_checkpoint(
         "unused.pt",
-        method="da-ibc",
-        preset=TINY,
-        network=cpu_net,
+        _agent(method="da-ibc", preset=TINY, network=cpu_net, expert_actions=torch.zeros(30, 2)),
         data_sha256="ab" * 32,
         epoch=1,
-        expert_actions=torch.zeros(30, 2),
     )
     assert all(
         stored["model"][k].data_ptr() != v.data_ptr() for k, v in cpu_net.state_dict().items()
@@ -84,13 +97,11 @@ def test_a_network_on_a_gpu_is_stored_as_cpu_copies(monkeypatch):
         for half in (False, True):
             save_checkpoint(
                 "unused.pt",
-                method="da-ibc",
-                preset=TINY,
-                network=net,
+                _agent(
+                    method="da-ibc", preset=TINY, network=net, expert_actions=actions, init_weights=weights
+                ),
                 data_sha256="ab" * 32,
                 epoch=1,
-                expert_actions=actions,
-                init_weights=weights,
                 half=half,
             )
             model = stored["model"]

@@ -18,6 +18,7 @@ from ibc_tutorial.experiments.agents.claims import (
     spread_interval,
 )
 from ibc_tutorial.experiments.agents.presets import TINY
+from ibc_tutorial.experiments.agents.results import episode_table
 
 SHIPPED = Path(__file__).resolve().parents[1] / "book" / "results" / "laptop"
 VERDICTS = {stats.HOLDS, stats.DOES_NOT_HOLD, stats.CANNOT_TELL}
@@ -54,8 +55,8 @@ def test_every_claim_gets_a_verdict(judged, replicated):
 
 
 def test_the_parts_are_computed_from_the_folder(judged, replicated):
-    da = stats.episode_table(replicated, "da-ibc", "red_light_infractions", "heldout").values  # (1, 1)
-    bc = stats.episode_table(replicated, "bc", "red_light_infractions", "heldout").values
+    da = episode_table(replicated, "da-ibc", "red_light_infractions", "heldout").values  # (1, 1)
+    bc = episode_table(replicated, "bc", "red_light_infractions", "heldout").values
     by_hand = stats.compare(da, bc, "DA-IBC runs more red lights than BC (held-out starts, per episode)")
     assert judged[3].parts[1] == by_hand
     first = first_eval_scores(replicated, "bc", TINY)  # (agents, eval_episodes)

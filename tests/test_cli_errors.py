@@ -36,7 +36,8 @@ def snapshot(*roots) -> dict:
 
 
 def refused(capsys, argv, *words, roots=()):
-    """``cli.main(argv)`` gives exit code 2 and one line holding ``words``, and changes nothing under ``roots``."""
+    """``cli.main(argv)`` gives exit code 2 and one line holding ``words``, and changes nothing under
+    ``roots``."""
     before = snapshot(*roots)
     code = cli.main([str(a) for a in argv])
     err = capsys.readouterr().err
@@ -222,7 +223,8 @@ def test_train_refuses_a_folder_of_another_run(shared, tmp_path, capsys):
 
 
 def test_a_finished_replicated_run_is_never_overwritten(shared, tmp_path, capsys):
-    """``replicate`` deletes a finished run's checkpoints; its folder still refuses another run or an extension."""
+    """``replicate`` deletes a finished run's checkpoints; its folder still refuses another run or an
+    extension."""
     _, data, run = shared
     out = tmp_path / "run"
     shutil.copytree(run, out)
@@ -403,7 +405,7 @@ def test_read_only_folder(shared, tmp_path, capsys):
         ro.chmod(0o755)
 
 
-# ----------------------------------------------------------------------------- bad command lines, Ctrl-C, debug
+# --------------------------------------------------------------------------- bad command lines, Ctrl-C, debug
 def test_bad_command_lines_are_one_line(shared, tmp_path, capsys):
     _, data, run = shared
     roots = [tmp_path, run]

@@ -11,7 +11,7 @@ from ibc_tutorial.driving.dataset import DemoLog
 from ibc_tutorial.driving.sim import score
 from ibc_tutorial.experiments.agents.checkpoints import load_checkpoint
 from ibc_tutorial.experiments.agents.presets import TINY
-from ibc_tutorial.experiments.agents.train import read_metrics
+from ibc_tutorial.experiments.agents.run_folder import read_metrics
 
 
 @pytest.fixture(scope="module")
@@ -115,7 +115,7 @@ def test_resume_continues_exactly(data, tmp_path):
     assert [m["loss"] for m in read_metrics(whole)] == [m["loss"] for m in read_metrics(parts)]
     # evaluate's policy seed defaults to the agent's training seed (1 here), as replicate's final evaluation
     reports = [tmp_path / "default.json", tmp_path / "seed1.json", tmp_path / "seed0.json"]
-    for report, extra in zip(reports, ([], ["--policy-seed", "1"], ["--policy-seed", "0"])):
+    for report, extra in zip(reports, ([], ["--policy-seed", "1"], ["--policy-seed", "0"]), strict=True):
         assert (
             cli.main(
                 ["evaluate", "--checkpoint", str(whole / "final.pt"), "--steps", "12", "--out", str(report)]
@@ -130,7 +130,8 @@ def test_resume_continues_exactly(data, tmp_path):
 
 
 def test_resume_accepts_the_same_demonstrations_collected_again(data, tmp_path):
-    """The run records the demonstrations' content, not the file's bytes (which hold the time it was written)."""
+    """The run records the demonstrations' content, not the file's bytes (which hold the time it was
+    written)."""
     out = tmp_path / "run"
     base = ["train", "--method", "bc", "--preset", "tiny", "--seed", "0", "--out", str(out)]
     assert cli.main(base + ["--data", str(data), "--epochs", "1"]) == 0

@@ -69,7 +69,7 @@ def test_same_results_with_one_and_two_workers(float64):
     one = parallel.parallel_map(train_tiny, seeds, workers=1)
     two = parallel.parallel_map(train_tiny, seeds, workers=2)
     assert len(one) == len(two) == len(seeds)
-    for (w1, l1), (w2, l2) in zip(one, two):
+    for (w1, l1), (w2, l2) in zip(one, two, strict=True):
         assert l1 == l2
         assert all(torch.equal(w1[k], w2[k]) for k in w1)
         assert all(v.dtype == torch.float64 for v in w2.values())
@@ -157,3 +157,21 @@ def test_default_workers(monkeypatch):
         monkeypatch.setenv(parallel.WORKERS_ENV, bad)
         with pytest.raises(ValueError, match=parallel.WORKERS_ENV):
             parallel.default_workers()
+
+
+# ----------------------------------------------------------------- imap_unordered (the studies' pool)
+def test_imap_unordered_gives_every_result_with_the_threads_asked_for():
+    calls = [functools.partial(where_am_i, x) for x in range(5)]
+    out = list(parallel.imap_unordered(calls, workers=2, threads=2))
+    assert sorted(x for x, *_ in out) == list(range(5))
+    assert all(pid != os.getpid() and threads == 2 for _, pid, threads, _ in out)
+    lazy = parallel.imap_unordered([functools.partial(where_am_i, x) for x in range(3)], workers=1)
+    assert [x for x, *_ in lazy] == [0, 1, 2]  # in this process, in order
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_imap_unordered_raises_a_calls_error_as_it_is(workers):
+    calls = [functools.partial(fail_on_two, x) for x in (0, 2)]
+    with pytest.raises(ValueError, match="two is not allowed"):
+        list(parallel.imap_unordered(calls, workers=workers))
+    assert sorted(parallel.imap_unordered([functools.partial(fail_on_two, 1)], workers=workers)) == [1]

@@ -13,7 +13,8 @@ from ibc_tutorial import cli
 from ibc_tutorial.experiments.agents.ablations import ABLATION_SEEDS, ablation_preset
 from ibc_tutorial.experiments.agents.checkpoints import load_agent
 from ibc_tutorial.experiments.agents.presets import LAPTOP, METHODS, TINY, Preset, differences
-from ibc_tutorial.experiments.agents.results import collect_results, load_results, machine, run_dir
+from ibc_tutorial.experiments.agents.results import collect_results, load_results, run_dir
+from ibc_tutorial.experiments.runs import machine
 
 SHIPPED = Path(__file__).resolve().parents[1] / "book" / "results" / "laptop"
 
@@ -67,7 +68,8 @@ def test_replicate_tiny(replicated):
 
 
 def test_evaluate_defaults_are_the_replication_protocol(replicated, tmp_path):
-    """``ibc-tutorial evaluate --checkpoint final.pt`` with no other option remakes the run's final_eval.json."""
+    """``ibc-tutorial evaluate --checkpoint final.pt`` with no other option remakes the run's
+    final_eval.json."""
     out = replicated
     for method in METHODS:
         d = run_dir(out, method, 0)
@@ -130,7 +132,8 @@ def test_the_shipped_results_are_a_clean_run_of_an_ancestor_commit(name):
 
 
 def test_the_shipped_crossings_are_clean_runs_of_an_ancestor_commit():
-    """Chapter 08's ``evaluate --crossings`` files: one per shipped agent, each from a clean ancestor commit."""
+    """Chapter 08's ``evaluate --crossings`` files: one per shipped agent, each from a clean ancestor
+    commit."""
     files = sorted((SHIPPED / "crossings").glob("*.json"))
     if not files:
         pytest.skip("no shipped crossings")
@@ -148,7 +151,8 @@ def test_the_shipped_crossings_are_clean_runs_of_an_ancestor_commit():
     "folder, variant", [("flag-lights", "no-brake-noise"), ("previous-preset", "previous-preset")]
 )
 def test_the_shipped_ablation_folders_are_todays_variants_of_the_laptop_preset(folder, variant):
-    """Chapter 08 compares each shipped ablation folder with today's replication as the variant named here: the
+    """Chapter 08 compares each shipped ablation folder with today's replication as the variant named here:
+    the
     folder's preset must be that variant of today's laptop preset in every setting (its name aside)."""
     stored = json.loads((SHIPPED.parent / "ablations" / folder / "provenance.json").read_text())["preset"]
     assert differences(Preset.from_dict(stored), ablation_preset(LAPTOP, variant)) == {}
@@ -192,7 +196,7 @@ def _folder_of_episodes(
                 "score": dist * 0.7**reds,
                 "termination": None,
             }
-            for s, (dist, reds) in zip(starts, eps)
+            for s, (dist, reds) in zip(starts, eps, strict=True)
         ]
         (d / "final_eval.json").write_text(json.dumps({"summary": {}, "episodes": rows}))
     return root

@@ -1,4 +1,5 @@
-"""The road-following study's closed-loop protocol: reference path, crashes and restarts, side-road sections."""
+"""The road-following study's closed-loop protocol: reference path, crashes and restarts, side-road
+sections."""
 
 import numpy as np
 import pytest

@@ -1,10 +1,10 @@
 """``ibc-tutorial replicate-steering`` end to end on the tiny preset: files, resume, refusals."""
 
-import argparse
 import json
 
 import pytest
 
+from ibc_tutorial import cli
 from ibc_tutorial.experiments.steering import replicate as R
 from ibc_tutorial.experiments.steering.models import MODELS
 from ibc_tutorial.experiments.steering.presets import LAPTOP, TINY
@@ -12,9 +12,7 @@ from ibc_tutorial.experiments.steering.train import load_model, run_dir
 
 
 def _run(*argv) -> int:
-    p = argparse.ArgumentParser()
-    R.add_arguments(p)
-    return R.run(p.parse_args(list(argv)))
+    return cli.main(["replicate-steering", *argv])
 
 
 @pytest.fixture(scope="module")
@@ -64,7 +62,8 @@ def test_resumes_and_refuses(study, tmp_path):
 
 
 def test_an_interrupted_run_resumes_from_last_pt(tmp_path, monkeypatch):
-    """A run stopped after its checkpoint at step 2 continues from last.pt and ends as the uninterrupted one."""
+    """A run stopped after its checkpoint at step 2 continues from last.pt and ends as the uninterrupted
+    one."""
     import shutil
 
     import torch
@@ -77,7 +76,7 @@ def test_an_interrupted_run_resumes_from_last_pt(tmp_path, monkeypatch):
     ds = DemoDataset(log, bev_size=TINY.bev_size)
     monkeypatch.setattr(T, "CHECKPOINT_EVERY", 2)
     snapshot = tmp_path / "step2.pt"
-    save = T.save_checkpoint
+    save = T.save_model_checkpoint
 
     def spy(path, **kw):
         p = save(path, **kw)
@@ -85,7 +84,7 @@ def test_an_interrupted_run_resumes_from_last_pt(tmp_path, monkeypatch):
             shutil.copy(p, snapshot)
         return p
 
-    monkeypatch.setattr(T, "save_checkpoint", spy)
+    monkeypatch.setattr(T, "save_model_checkpoint", spy)
     for name in ("ebm-smooth", "mdn"):
         full, losses, _, resumed = T.train_model(
             name, 0, ds, TINY, tmp_path / name / "a", data_sha256=log.checksum()
@@ -102,4 +101,4 @@ def test_an_interrupted_run_resumes_from_last_pt(tmp_path, monkeypatch):
     with pytest.raises(ValueError, match="other demonstrations"):
         T.train_model("mdn", 0, ds, TINY, tmp_path / "mdn" / "b", data_sha256="0" * 64)
     with pytest.raises(ValueError, match="other settings"):
-        T.load_checkpoint(tmp_path / "mdn" / "b" / "last.pt", model="ebm", preset=TINY)
+        T.load_model_checkpoint(tmp_path / "mdn" / "b" / "last.pt", model="ebm", preset=TINY)

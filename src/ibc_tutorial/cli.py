@@ -1,21 +1,25 @@
 """The ``ibc-tutorial`` command line: every sub-command's arguments, in one place.
 
-Each sub-command's work lives in a module with a ``run(args)`` function that checks its inputs
-and its output path first, then does the work. The parser is built here; only the chosen
-sub-command's arguments are added and its module imported, so ``ibc-tutorial --version`` and
-``--help`` are instant.
+The CLI is the top layer (CONTRIBUTING.md, "Layers"): it parses the arguments, checks the paths
+they name (``check_input_file``, ``check_output_file``, ``check_output_dir``: before any work,
+``--out`` never overwritten without ``--force``), records the command line for the provenance
+(``args.command_line``: the library never reads ``sys.argv``), and then calls the sub-command's
+function in ``ibc_tutorial.experiments.commands``. Only the chosen sub-command's arguments are
+added and its modules imported, so ``ibc-tutorial --version`` and ``--help`` are instant.
 
-**User errors** (a bad argument, a damaged or foreign file, a folder that holds other work, an
-output that cannot be written) are one line on stderr and exit code 2, never a traceback: the
-modules raise ``UserError`` (or the library's ``ValueError``, which names the argument or file),
-and ``main`` prints it. Ctrl-C prints one line too (exit code 130). ``IBC_TUTORIAL_DEBUG=1``
-shows the traceback instead, for maintainers. The checks every command shares are here:
-``check_input_file``, ``check_output_file`` and ``check_output_dir``.
+**User errors** (a bad argument or ``--set`` override, a damaged or foreign file, a folder that
+holds other work, an output that cannot be written) are one line on stderr and exit code 2,
+never a traceback: the library raises ``ValueError`` naming the argument or file, the checks
+here raise ``UserError``, and ``main`` prints either. Ctrl-C prints one line too (exit code
+130). ``IBC_TUTORIAL_DEBUG=1`` shows the traceback instead, for maintainers.
 
     ibc-tutorial collect   --town town01 --routes 10 --seed 0 --out data/town01.npz
-    ibc-tutorial train     --method da-ibc --data data/town01.npz --preset laptop --seed 0 --out runs/da-ibc/seed0
-    ibc-tutorial evaluate  --checkpoint runs/da-ibc/seed0/final.pt      # the table's protocol: town02, routeless
+    ibc-tutorial train     --method da-ibc --data data/town01.npz --preset laptop --seed 0 --out
+    runs/da-ibc/seed0
+    ibc-tutorial evaluate  --checkpoint runs/da-ibc/seed0/final.pt      # the table's protocol: town02,
+    routeless
     ibc-tutorial replicate --preset laptop --out book/results/laptop
+    ibc-tutorial replicate --preset tiny --set dfo.n_samples=64 --out /tmp/tiny
 """
 
 from __future__ import annotations
@@ -104,7 +108,44 @@ def check_output_dir(name: str, path) -> Path:
     return path
 
 
+def check_arguments(args: argparse.Namespace) -> None:
+    """The arguments every command shares, checked before the paths: ``--device`` (a device this machine
+    has), ``--threads`` >= 0, ``--workers`` >= 1 (``ValueError`` naming the argument)."""
+    from ibc_tutorial.utils import check_device, check_int  # deferred: loads torch
+
+    if getattr(args, "device", None) is not None:
+        check_device("--device", args.device)
+    if getattr(args, "threads", None) is not None:
+        check_int("--threads", args.threads, minimum=0)
+    if getattr(args, "workers", None) is not None:
+        check_int("--workers", args.workers, minimum=1)
+
+
+def check_paths(command: str, args: argparse.Namespace) -> None:
+    """The paths a sub-command's arguments name, checked before any work (``UserError`` naming the
+    argument)."""
+    force = bool(getattr(args, "force", False))
+    if command == "collect":
+        check_output_file("--out", args.out, force=force)
+    elif command == "train":
+        check_input_file("--data", args.data, "demonstration file (.npz)")
+        check_output_dir("--out", args.out)
+    elif command == "evaluate":
+        if getattr(args, "crossings", False) and not args.out:
+            raise UserError("--crossings needs --out (the crossings are written there, not printed)")
+        if args.out:
+            check_output_file("--out", args.out, force=force)
+        check_input_file("--checkpoint", args.checkpoint, "agent checkpoint (.pt)")
+    elif command in ("replicate", "replicate-steering"):
+        check_output_dir("--out", args.out)
+
+
 THREADS_HELP = "torch CPU threads (default 0: torch's choice; 1 is fastest on a busy machine)"
+SET_HELP = (
+    "override one setting of the preset, FIELD=VALUE, repeatable: a field of the preset (epochs=3) or of "
+    "the library config it makes (dfo.n_samples=1024, collect.routes=2, train.lr=3e-4, bev.size=32); "
+    "checked before any work, recorded in the provenance"
+)
 DEVICE_HELP = (
     "where the networks run: cpu, cuda, cuda:N or mps (default: %(default)s; the random draws stay on "
     "the CPU's seeded generators)"
@@ -162,6 +203,9 @@ def _train_arguments(p: argparse.ArgumentParser) -> None:
         "run of the same settings there is resumed",
     )
     p.add_argument("--epochs", type=int, default=None, help="override the preset's number of epochs")
+    p.add_argument(
+        "--set", action="append", default=[], metavar="FIELD=VALUE", dest="overrides", help=SET_HELP
+    )
     p.add_argument("--force", action="store_true", help="start over: delete the run already in --out")
     p.add_argument("--threads", type=int, default=0, help=THREADS_HELP)
     p.add_argument("--device", default="cpu", help=DEVICE_HELP)
@@ -238,39 +282,71 @@ def _replicate_arguments(p: argparse.ArgumentParser) -> None:
         choices=ABLATIONS,
         help="replicate a variant of the preset instead (chapter 08's ablations; BC and DA-IBC, 3 seeds)",
     )
+    p.add_argument(
+        "--set", action="append", default=[], metavar="FIELD=VALUE", dest="overrides", help=SET_HELP
+    )
     p.add_argument("--device", default="cpu", help=DEVICE_HELP + "; every worker uses it")
 
 
 def _replicate_steering_arguments(p: argparse.ArgumentParser) -> None:
-    from ibc_tutorial.experiments.steering.replicate import add_arguments  # deferred: loads torch
+    from ibc_tutorial.experiments.steering.presets import PRESETS  # deferred: loads torch
 
-    add_arguments(p)
+    p.add_argument(
+        "--preset", default="laptop", choices=tuple(PRESETS), help="settings (default: %(default)s)"
+    )
+    p.add_argument(
+        "--out",
+        required=True,
+        help="folder for the data, runs, results and provenance; an interrupted "
+        "study of the same preset there is resumed",
+    )
+    p.add_argument("--force", action="store_true", help="start over: delete the study already in --out")
+    p.add_argument(
+        "--threads", type=int, default=0, help=THREADS_HELP.replace("threads", "threads per process", 1)
+    )
+    p.add_argument("--workers", type=int, default=1, help="runs in parallel processes (default: %(default)s)")
+    p.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="FIELD=VALUE",
+        dest="overrides",
+        help=SET_HELP.replace(
+            "(dfo.n_samples=1024, collect.routes=2, train.lr=3e-4, bev.size=32)", "(train.lr=3e-4)"
+        ),
+    )
+    p.add_argument(
+        "--device", default="cpu", choices=("cpu",), help="where to train (the study is sized for a CPU)"
+    )
 
 
-# name -> (module with ``run(args)``, function adding the arguments, help)
+COMMANDS = "ibc_tutorial.experiments.commands"
+"""The module holding each sub-command's work, a function of the parsed arguments."""
+
+# name -> (function of ``COMMANDS`` taking the parsed arguments, function adding the arguments, help)
 SUBCOMMANDS: dict[str, tuple[str, object, str]] = {
     "collect": (
-        "ibc_tutorial.driving.collect",
+        "collect",
         _collect_arguments,
         "drive the expert and store demonstrations",
     ),
     "train": (
-        "ibc_tutorial.experiments.agents.train",
+        "train",
         _train_arguments,
         "train a BC, IBC or DA-IBC driving agent",
     ),
     "evaluate": (
-        "ibc_tutorial.experiments.agents.evaluate",
+        "evaluate",
         _evaluate_arguments,
         "drive a trained agent in closed loop and score it",
     ),
     "replicate": (
-        "ibc_tutorial.experiments.agents.replicate",
+        "replicate",
         _replicate_arguments,
         "collect, train, evaluate: every result of chapters 08-09",
     ),
     "replicate-steering": (
-        "ibc_tutorial.experiments.steering.replicate",
+        "replicate_steering",
         _replicate_steering_arguments,
         "the steering-EBM paper's road-following study: every result of chapter 10",
     ),
@@ -307,11 +383,14 @@ def main(argv: list[str] | None = None) -> int:
     if args.command is None:
         parser.print_help()
         return 0
-    module, _add, _help = SUBCOMMANDS[args.command]
+    function, _add, _help = SUBCOMMANDS[args.command]
     debug = os.environ.get(DEBUG_ENV, "").strip().lower() not in ("", "0", "false")
     prog = f"ibc-tutorial {args.command}"
+    args.command_line = " ".join(["ibc-tutorial", *argv])  # the provenance's command
     try:
-        return int(importlib.import_module(module).run(args) or 0)
+        check_arguments(args)
+        check_paths(args.command, args)
+        return int(getattr(importlib.import_module(COMMANDS), function)(args) or 0)
     except KeyboardInterrupt:
         if debug:
             raise

@@ -1,4 +1,5 @@
-"""Independent runs side by side in worker processes: ``parallel_map``, ``parallel_calls``.
+"""Independent runs side by side in worker processes: ``parallel_map``, ``parallel_calls``,
+``imap_unordered``.
 
 The toy chapters train the same small network from several seeds. Networks this small gain
 little from torch's threads (each step is a few small matrix products): on two cores, two
@@ -6,7 +7,9 @@ processes with one thread each finish a set of such runs about 1.5 to 1.7 times 
 process with two threads, where a pool of Python threads would be held back by the GIL.
 ``parallel_map(job, calls)`` runs ``job`` on each call in a pool of worker processes, one thread
 each, and returns the results in the order of ``calls``; ``parallel_calls`` does the same for
-calls of different functions.
+calls of different functions. ``imap_unordered(calls, workers=..., threads=...)`` is the pool of the
+command line's long studies (``ibc-tutorial replicate``, ``replicate-steering``): each result as soon as
+its call finishes, the caller's errors unchanged, and as many torch threads per worker as asked.
 
 **Same results with any number of workers.** Each call runs with the caller's default dtype and
 deterministic-algorithms setting, and a call's result must depend only on its arguments: a job
@@ -39,8 +42,8 @@ import os
 import pickle
 import random
 import signal
-from collections.abc import Callable, Iterable
-from concurrent.futures import ProcessPoolExecutor
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any, TypeVar
 
@@ -84,10 +87,10 @@ def _settings() -> dict[str, Any]:
     }
 
 
-def _init_worker() -> None:
+def _init_worker(threads: int = 1) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the caller's to handle (it stops the workers)
     os.environ[QUIET_ENV] = "1"  # no progress bars: a worker's would interleave with the caller's output
-    torch.set_num_threads(1)
+    torch.set_num_threads(max(1, int(threads)))
 
 
 def _run_in_worker(payload: bytes) -> bytes:
@@ -178,6 +181,41 @@ def parallel_calls(calls: Iterable[Callable[[], T]], *, workers: int | None = No
     return _execute("each call", tasks, workers)
 
 
+def imap_unordered(
+    calls: Iterable[Callable[[], T]], *, workers: int | None = None, threads: int = 1
+) -> Iterator[T]:
+    """``call()`` for each of ``calls``, in up to ``workers`` processes of ``threads`` torch threads each:
+    yields each result as soon as its call finishes (not in the order of ``calls``).
+
+    The calls are submitted at once (the caller can do other work before it asks for the first result);
+    with one worker they run here, one after another, as the results are asked for. An error of a call
+    is raised as it is (so a ``ValueError`` of the library stays one), and an error or Ctrl-C stops the
+    workers at once. Each call is a function of an importable module, or a ``functools.partial`` of one,
+    whose arguments and result can be pickled (see ``parallel_calls``).
+    """
+    workers = default_workers() if workers is None else check_int("workers", workers, minimum=1)
+    threads = check_int("threads", threads, minimum=1)
+    tasks = list(calls)
+    if min(workers, len(tasks)) <= 1:
+        return (task() for task in tasks)
+    for task in tasks:
+        _check_importable("each call", task)
+    settings = _settings()
+    payloads = [pickle.dumps((task, settings), protocol=pickle.HIGHEST_PROTOCOL) for task in tasks]
+    pool = _pool(workers, threads)
+    futures = [pool.submit(_run_in_worker, payload) for payload in payloads]
+
+    def results() -> Iterator:
+        try:
+            for future in as_completed(futures):
+                yield pickle.loads(future.result())
+        except BaseException:  # an error or Ctrl-C: stop the workers now (the studies' files are atomic)
+            shutdown(terminate=True)
+            raise
+
+    return results()
+
+
 def _execute(what: str, tasks: list[Callable], workers: int | None) -> list:
     """Run the zero-argument ``tasks``: here (one worker or one task) or in the kept pool."""
     workers = default_workers() if workers is None else check_int("workers", workers, minimum=1)
@@ -226,22 +264,27 @@ def _execute(what: str, tasks: list[Callable], workers: int | None) -> list:
 
 
 _POOL: ProcessPoolExecutor | None = None
-"""The worker processes of the last ``parallel_map`` or ``parallel_calls`` call, kept for the next one."""
+"""The worker processes of the last call, kept for the next one (the package's one pool)."""
+_POOL_SHAPE: tuple[int, int] = (0, 0)
+"""(workers, torch threads per worker) of ``_POOL``."""
 
 
-def _pool(workers: int) -> ProcessPoolExecutor:
-    """The kept pool if it has ``workers`` processes, else a new one (the old one shut down)."""
-    global _POOL
-    if _POOL is not None and (_POOL._max_workers != workers or getattr(_POOL, "_broken", False)):
+def _pool(workers: int, threads: int = 1) -> ProcessPoolExecutor:
+    """The kept pool if it has ``workers`` processes of ``threads`` threads, else a new one (the old one
+    shut down)."""
+    global _POOL, _POOL_SHAPE
+    if _POOL is not None and (_POOL_SHAPE != (workers, threads) or getattr(_POOL, "_broken", False)):
         shutdown()
     if _POOL is None:
         ctx = multiprocessing.get_context("spawn")  # never fork: see the module docstring
-        _POOL = ProcessPoolExecutor(workers, mp_context=ctx, initializer=_init_worker)
+        _POOL = ProcessPoolExecutor(workers, mp_context=ctx, initializer=_init_worker, initargs=(threads,))
+        _POOL_SHAPE = (workers, threads)
     return _POOL
 
 
 def shutdown(*, terminate: bool = False) -> None:
-    """End the worker processes ``parallel_map`` and ``parallel_calls`` keep (``terminate``: at once,
+    """End the worker processes ``parallel_map``, ``parallel_calls`` and ``imap_unordered`` keep
+    (``terminate``: at once,
     without letting a running call finish). The next call starts new ones."""
     global _POOL
     pool, _POOL = _POOL, None

@@ -12,9 +12,9 @@ farther than IBC" is about the *method*, so its uncertainty has both parts. This
 - ``exit_spread`` and ``exit_spread_test`` (over ``driving.analysis.exit_counts``): the free-driving
   (Fig. 5) question, does one agent leave the same junction approach by different exits more than
   another does, beyond what chance gives with so few visits (a stratified permutation test);
-- ``episode_table``: the per-episode values of a replication folder's runs (every agent of a
-  method, or the expert's row; the table's starts or the held-out ones) as an (agents, episodes)
-  array, the input of the intervals.
+
+The intervals take (agents, episodes) arrays of numbers; this module reads no file and knows no
+folder. A replication folder's arrays come from ``experiments.agents.results.episode_table``.
 
 Everything is numpy, seeded (``seed``: an int or a ``np.random.Generator``) and vectorised over
 the resamples.
@@ -23,7 +23,6 @@ the resamples.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
@@ -37,8 +36,6 @@ LEVEL = 0.95
 """Coverage of the intervals: 95 %, the 2.5th to the 97.5th percentile of the resampled statistic."""
 HOLDS, DOES_NOT_HOLD, CANNOT_TELL = "holds", "does not hold", "cannot tell at this scale"
 """The three verdicts of ``verdict``."""
-EPISODE_VALUES = ("score", "distance_m", "red_light_infractions", "steps")
-"""The per-episode numbers of a ``final_eval.json`` row that ``episode_table`` can read."""
 _CHUNK = 1 << 22
 """Largest number of drawn (resample, agent, episode) cells held at once (32 MB of indices)."""
 
@@ -264,14 +261,16 @@ def compare(
 
 
 def judge(claim: str, interval: Interval, threshold: float = 0.0) -> Judgement:
-    """A ``Judgement`` of "the quantity is above ``threshold``" from any interval (e.g. ``ratio_interval``)."""
+    """A ``Judgement`` of "the quantity is above ``threshold``" from any interval (e.g.
+    ``ratio_interval``)."""
     v = verdict(interval, threshold)  # checks both
     return Judgement(str(claim), interval, float(threshold), v)
 
 
 # --------------------------------------------------------------------------- free driving (Fig. 5)
 def exit_spread(visits, min_visits: int = 2) -> tuple[int, int]:
-    """(visits not by their approach's most common exit, visits) over approaches visited >= ``min_visits`` times.
+    """(visits not by their approach's most common exit, visits) over approaches visited >= ``min_visits``
+    times.
 
     Zero for an agent that always leaves an approach the same way; an agent that picks one of two
     exits at random on every visit leaves about half its visits by the less common one.
@@ -370,56 +369,3 @@ def exit_spread_test(
     alpha = (1 - level) / 2
     v = HOLDS if p_greater < alpha else (DOES_NOT_HOLD if p_less < alpha else CANNOT_TELL)
     return ExitTest(float(t_obs), p_greater, p_less, len(shared), (total_a, total_b), v)
-
-
-# --------------------------------------------------------------------------- reading a replication
-EVALUATIONS = {"final": "final_eval.json", "heldout": "heldout_eval.json"}
-"""The evaluations of a run: the table's starts (``final``) and the held-out starts (``heldout``)."""
-
-
-@dataclass(frozen=True)
-class EpisodeTable:
-    """One method's per-episode values in a replication folder."""
-
-    values: np.ndarray
-    """(A, E): row a is agent ``agents[a]``, column j the episode started from ``starts[j]``."""
-    agents: tuple[int, ...]
-    """The agents' training seeds (``(0,)`` for the expert, which has one row)."""
-    starts: tuple[int, ...]
-    """The episodes' environment seeds (the same starts for every agent)."""
-
-
-def episode_table(folder, method: str, key: str = "score", evaluation: str = "final") -> EpisodeTable:
-    """The ``key`` of every episode of one method's runs in a replication folder, agents by seed.
-
-    Reads ``folder/runs/<method>/seed<k>/final_eval.json`` (``evaluation="heldout"``:
-    ``heldout_eval.json``) for whatever agents are there, or for ``method="expert"`` the one
-    ``folder/runs/expert/final_eval.json`` as a single row. ValueError if there are none, or if the
-    agents did not drive the same starts in the same order (their columns would not be comparable).
-    The expert's row of the same ``evaluation`` has the same starts: ``table.starts ==
-    expert.starts`` says so before ``ratio_interval(table.values, expert.values[0])``.
-    """
-    from ibc_tutorial.experiments.agents.results import read_final_eval
-
-    check_choice("key", key, EPISODE_VALUES)
-    check_choice("evaluation", evaluation, tuple(EVALUATIONS))
-    name = EVALUATIONS[evaluation]
-    root = Path(folder) / "runs" / str(method)
-    if method == "expert":
-        files, agents = ([root / name], [0]) if (root / name).is_file() else ([], [])
-    else:
-        files = [f for f in root.glob(f"seed*/{name}") if f.parent.name[4:].isdigit()]
-        files.sort(key=lambda f: int(f.parent.name[4:]))
-        agents = [int(f.parent.name[4:]) for f in files]
-    if not files:
-        raise ValueError(f"method {method!r} has no runs with a {name} under {root}")
-    rows = [read_final_eval(f)["episodes"] for f in files]  # ValueError naming a damaged file
-    starts = tuple(int(r["seed"]) for r in rows[0])
-    for a, r in zip(agents, rows):
-        if tuple(int(x["seed"]) for x in r) != starts:
-            raise ValueError(
-                f"{method} seed {a} drove other starts than seed {agents[0]}: its {name} "
-                "must list the same episode seeds in the same order"
-            )
-    values = np.array([[float(x[key]) for x in r] for r in rows])  # (A, E)
-    return EpisodeTable(values, tuple(agents), starts)

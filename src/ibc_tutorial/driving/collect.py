@@ -10,19 +10,16 @@ seen; the label is always the expert's own action (``driving.expert``). Routeles
 
     ibc-tutorial collect --town town01 --routes 10 --seed 0 --out data/town01.npz
 
-The command checks ``--out`` before driving, and never overwrites an existing file unless
-``--force`` is given.
+(The command line checks ``--out`` before driving, and never overwrites an existing file unless
+``--force`` is given: ``ibc_tutorial.cli``.)
 """
 
 from __future__ import annotations
 
-import argparse
-import time
 from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from ibc_tutorial.cli import check_output_file
 from ibc_tutorial.driving.dataset import DemoLog
 from ibc_tutorial.driving.env import MAX_SPEED
 from ibc_tutorial.driving.expert import Expert, ExpertConfig
@@ -51,7 +48,8 @@ class CollectConfig:
     steer_noise: float = 0.3
     """Size of the expert's steering perturbations during collection (0 = none)."""
     brake_noise: float = 0.0
-    """Strength of the expert's braking perturbations during collection, in [0, 1] (0 = none; ``ExpertConfig``)."""
+    """Strength of the expert's braking perturbations during collection, in [0, 1] (0 = none;
+    ``ExpertConfig``)."""
 
     def __post_init__(self):
         check_choice("town", self.town, TOWNS)
@@ -164,38 +162,6 @@ def collect(config: CollectConfig = CollectConfig(), show_progress: bool | None 
             }
         )
     bar.close()
-    # what was collected and how; no wall time (the command prints it), so identical collections give identical logs
+    # what was collected and how; no wall time (the command prints it): identical collections, identical logs
     meta = {"config": asdict(c), "expert": asdict(expert.config), "routes": routes, "episodes": ended}
     return rec.log(meta)
-
-
-# ---------------------------------------------------------------------- command line
-def run(args: argparse.Namespace) -> int:
-    """``ibc-tutorial collect`` (arguments in ``ibc_tutorial.cli``): check the inputs and ``--out``, collect, save.
-
-    Errors are raised (``ValueError``, ``cli.UserError``) for ``cli.main`` to print on one line."""
-    config = CollectConfig(
-        args.town,
-        args.routes,
-        args.seed,
-        args.min_minutes,
-        args.max_minutes,
-        args.routeless,
-        args.steer_noise,
-        args.brake_noise,
-    )
-    check_output_file("--out", args.out, force=getattr(args, "force", False))
-    t0 = time.perf_counter()
-    log = collect(config)
-    seconds = time.perf_counter() - t0
-    path = log.save(args.out)
-    eps = log.meta["episodes"]
-    dist = sum(e["distance_m"] for e in eps)
-    inf = sum(e["red_light_infractions"] for e in eps)
-    ends = sum(e["end"] != "completed" for e in eps)
-    print(
-        f"{len(log)} samples in {len(eps)} episodes of {config.town}: {dist / 1000:.1f} km, "
-        f"{inf} red-light infractions, {ends} episodes ended early; "
-        f"{seconds:.1f} s; written to {path}"
-    )
-    return 0

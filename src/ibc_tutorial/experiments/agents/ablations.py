@@ -1,6 +1,7 @@
 """Ablations of the laptop replication: which of its departures from the paper decide how the agents drive.
 
-    ibc-tutorial replicate --preset laptop --ablation no-brake-noise --out book/results/ablations/no-brake-noise
+    ibc-tutorial replicate --preset laptop --ablation no-brake-noise --out
+    book/results/ablations/no-brake-noise
 
 An ablation is a replication of a variant of a preset (``ablation_preset``): one setting changed
 back (or away), with BC and DA-IBC only, three seeds, the table's final evaluation and nothing
@@ -31,6 +32,7 @@ from dataclasses import dataclass, replace
 
 from ibc_tutorial import stats
 from ibc_tutorial.experiments.agents.presets import Preset
+from ibc_tutorial.experiments.agents.results import episode_table
 from ibc_tutorial.utils import check_choice
 
 ABLATIONS = {
@@ -101,20 +103,20 @@ class AblationRow:
 def compare_folders(variant, reference, methods: tuple[str, ...] = ABLATION_METHODS) -> list[AblationRow]:
     """Compare two replication folders method by method, on their shared seeds and the table's starts.
 
-    Each folder is read with ``stats.episode_table``; ValueError if a method has no shared seeds or
+    Each folder is read with ``episode_table``; ValueError if a method has no shared seeds or
     the folders' episodes started elsewhere (their columns would not be comparable)."""
     rows = []
     for m in methods:
         tables = {}
         for key in ("score", "red_light_infractions", "distance_m"):
-            a, b = stats.episode_table(variant, m, key), stats.episode_table(reference, m, key)
+            a, b = episode_table(variant, m, key), episode_table(reference, m, key)
             if a.starts != b.starts:
                 raise ValueError(f"{variant} and {reference} evaluated {m} from other starts: not comparable")
             seeds = tuple(s for s in a.agents if s in b.agents)
             if not seeds:
                 raise ValueError(f"{variant} and {reference} share no seed of {m}")
-            pick = lambda t: t.values[[t.agents.index(s) for s in seeds]]  # noqa: E731  (S, E)
-            tables[key] = (pick(a), pick(b))
+            rows_a, rows_b = [a.agents.index(s) for s in seeds], [b.agents.index(s) for s in seeds]
+            tables[key] = (a.values[rows_a], b.values[rows_b])  # (S, E) each
         va, vb = tables["score"]
         diff = stats.difference_interval(va, vb)
         rows.append(

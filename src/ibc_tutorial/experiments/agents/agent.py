@@ -1,4 +1,5 @@
-"""The driving agents of the DA-IBC paper: its Fig. 2 network with a Beta head (BC) or an energy head (IBC, DA-IBC).
+"""The driving agents of the DA-IBC paper: its Fig. 2 network with a Beta head (BC) or an energy head (IBC,
+DA-IBC).
 
 The network (the DA-IBC paper's sec. 3.3 and Fig. 2):
 
@@ -51,7 +52,8 @@ minibatches the predicted mean acceleration follows the label (correlation 0.94)
 
 
 def architecture(method: str, preset: Preset) -> dict:
-    """The Fig. 2 network of ``method`` at ``preset``'s sizes, as plain data: what must match for weights to be reused."""
+    """The Fig. 2 network of ``method`` at ``preset``'s sizes, as plain data: what must match for weights to
+    be reused."""
     check_choice("method", method, METHODS)
     arch = {
         "network": "BetaPolicy" if method == "bc" else "EnergyModel",
@@ -108,24 +110,8 @@ def to_tensor_obs(obs, device: torch.device | str | None = None) -> dict[str, to
 
 
 def dfo_config(method: str, preset: Preset) -> DFOConfig | None:
-    """How ``method`` runs Algorithm 1 (None for bc): the original IBC's DFO, or DA-IBC's (see ``presets``)."""
-    check_choice("method", method, METHODS)
-    if method == "bc":
-        return None
-    p = preset
-    if method == "ibc":
-        init, select = "uniform", "argmax"  # the original IBC's DFO: uniform start, lowest energy
-    else:
-        init, select = "inverse-kde", "sample"  # Algorithm 1: w ∝ 1 / ĝ start, ŷ ~ Categorical(p̃) (line 14)
-    return DFOConfig(
-        n_samples=p.dfo_samples,
-        n_iters=p.dfo_iters,
-        sigma_init=p.dfo_sigma_init,
-        shrink=p.dfo_shrink,
-        bandwidth=p.kde_bandwidth,
-        init=init,
-        select=select,
-    )
+    """How ``method`` runs Algorithm 1 (None for bc): ``preset.dfo_config(method)`` (see ``presets``)."""
+    return preset.dfo_config(method)
 
 
 class Agent:
@@ -169,7 +155,8 @@ class Agent:
         return next(self.network.parameters()).device
 
     def to(self, device: torch.device | str) -> Agent:
-        """Move the network and the expert actions to ``device`` (checked: ``utils.check_device``); returns self."""
+        """Move the network and the expert actions to ``device`` (checked: ``utils.check_device``); returns
+        self."""
         device = check_device("device", device)
         self.network.to(device)
         self.expert_actions = self.expert_actions.to(device)  # (M, 2): the DFO population lives here
@@ -199,7 +186,8 @@ class Agent:
 
     @torch.no_grad()
     def energy_grid(self, obs, n_per_dim: int = 41) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """E over a (steer, acceleration) grid for one observation: (steer (G,), accel (G,), E (G, G)) [accel, steer]."""
+        """E over a (steer, acceleration) grid for one observation: (steer (G,), accel (G,), E (G, G)) [accel,
+        steer]."""
         if self.method == "bc":
             raise ValueError("energy_grid needs an energy agent (ibc or da-ibc), got bc")
         obs = to_tensor_obs(obs, self.device)

@@ -11,7 +11,8 @@ it loads with ``torch.load(..., weights_only=True)``: no pickled code runs. It h
   recorded step's state and action, not the file's bytes, which carry the time it was written);
 - ``seed``: the training seed (also the policy seed of its evaluations; absent in older files,
   whose metrics record it);
-- ``epoch``, ``model`` (the state dict; float16 in a ``final.pt``), the expert actions and DFO initial weights the agent
+- ``epoch``, ``model`` (the state dict; float16 in a ``final.pt``), the expert actions and DFO initial weights
+the agent
   acts with, and, for resuming, ``optimizer`` and ``generator`` states (``training.Trainer``)
   and the metrics so far.
 
@@ -33,13 +34,15 @@ import torch
 from ibc_tutorial import __version__
 from ibc_tutorial.experiments.agents.agent import Agent, architecture, network_from_architecture
 from ibc_tutorial.experiments.agents.presets import METHODS, Preset
+from ibc_tutorial.experiments.runs import read_torch_file
 from ibc_tutorial.utils import atomic_torch_save, check_choice
 
 FORMAT = "ibc_tutorial.agent"
 """The ``format`` entry of every agent checkpoint."""
 FORMAT_VERSION = 2
 """The layout version of the checkpoint dict; another one is refused. 2: the BEV draws lights by intensity
-(red 1.0, yellow 0.6, green 0.3; version 1 agents saw a 0/1 "must stop" flag and cannot be fed version 2 views)."""
+(red 1.0, yellow 0.6, green 0.3; version 1 agents saw a 0/1 "must stop" flag and cannot be fed version 2
+views)."""
 
 
 def _minor(version: str) -> str:
@@ -47,78 +50,70 @@ def _minor(version: str) -> str:
 
 
 def _cpu_copy(t: torch.Tensor, dtype: torch.dtype | None = None) -> torch.Tensor:
-    """A detached copy of ``t`` on the CPU (in ``dtype``, else its own), whatever its device: ``t`` is not moved."""
+    """A detached copy of ``t`` on the CPU (in ``dtype``, else its own), whatever its device: ``t`` is not
+    moved."""
     return t.detach().to("cpu", dtype=t.dtype if dtype is None else dtype, copy=True)
 
 
 def save_checkpoint(
     path,
+    agent: Agent,
     *,
-    method: str,
-    preset: Preset,
-    network: torch.nn.Module,
     data_sha256: str,
     epoch: int,
-    expert_actions: torch.Tensor,
-    init_weights: torch.Tensor | None = None,
-    optimizer: dict | None = None,
-    generator: torch.Tensor | None = None,
-    metrics: list | None = None,
     seed: int | None = None,
+    metrics: list | None = None,
+    resume: dict | None = None,
     half: bool = False,
 ) -> Path:
     """Write an agent checkpoint atomically (see the module docstring for its contents).
 
-    ``half`` stores the network's floating-point weights as float16 (a final checkpoint: half the
-    size; ``train.round_to_half`` rounds the network first, so nothing is lost that it used).
-
-    ``optimizer`` and ``generator`` are the states kept for resuming (``Trainer.state_dict()``'s
-    ``"optimizer"`` and ``"generator"``), or None in a final checkpoint; they are stored as given.
+    ``agent``: an ``Agent`` (or anything with its ``method``, ``preset``, ``network``, ``expert_actions`` and
+    ``init_weights``). ``resume``: the states kept for resuming (``Trainer.state_dict()``'s ``"optimizer"``
+    and ``"generator"``, stored as CPU copies), or None in a final checkpoint. ``half`` stores the network's
+    floating-point weights as float16 (a final checkpoint: half the size; ``train.round_to_half`` rounds the
+    network first, so nothing is lost that it used).
 
     The weights, expert actions and initial weights are stored as CPU copies whatever their device
     (a network on a GPU is copied, not moved), so the file loads on any machine.
     """
+    resume = resume or {}
     ckpt = {
         "format": FORMAT,
         "format_version": FORMAT_VERSION,
         "package_version": __version__,
-        "method": check_choice("method", method, METHODS),
-        "architecture": architecture(method, preset),
-        "preset": preset.to_dict(),
+        "method": check_choice("method", agent.method, METHODS),
+        "architecture": architecture(agent.method, agent.preset),
+        "preset": agent.preset.to_dict(),
         "data_sha256": str(data_sha256),
         "epoch": int(epoch),
         "seed": None if seed is None else int(seed),
         "model": {
             k: _cpu_copy(v, torch.float16 if half and v.is_floating_point() else None)
-            for k, v in network.state_dict().items()
+            for k, v in agent.network.state_dict().items()
         },
-        "expert_actions": _cpu_copy(expert_actions, torch.float32),
-        "init_weights": None if init_weights is None else _cpu_copy(init_weights, torch.float32),
-        "optimizer": optimizer,
-        "generator": generator,
+        "expert_actions": _cpu_copy(agent.expert_actions, torch.float32),
+        "init_weights": None if agent.init_weights is None else _cpu_copy(agent.init_weights, torch.float32),
+        "optimizer": _on_cpu(resume.get("optimizer")),
+        "generator": resume.get("generator"),
         "metrics": list(metrics or []),
     }
     return atomic_torch_save(ckpt, path)
 
 
+def _on_cpu(obj):
+    """``obj`` (tensors in dicts, lists, tuples) with every tensor on the CPU: what a checkpoint stores."""
+    if isinstance(obj, torch.Tensor):
+        return obj.cpu()
+    if isinstance(obj, dict):
+        return {k: _on_cpu(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return type(obj)(_on_cpu(v) for v in obj)
+    return obj
+
+
 def _read(path: Path) -> dict:
-    """``torch.load(weights_only=True)`` with its errors as one ValueError naming the file (never torch's advice
-    to load with ``weights_only=False``: that would run code stored in the file)."""
-    if path.is_dir():
-        raise ValueError(f"{path} is a folder, expected an agent checkpoint file")
-    if not path.is_file():
-        raise ValueError(f"no checkpoint at {path}")
-    try:
-        return torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as exc:
-        text = str(exc)
-        if "weights_only" in text or "Unsupported global" in text:
-            why = "it holds Python objects, not only tensors and plain data (refused: loading them could run code)"
-        elif "zip" in text.lower() or "central directory" in text or isinstance(exc, (EOFError, OSError)):
-            why = "it is truncated or damaged"
-        else:
-            why = f"{type(exc).__name__}: {' '.join(text.split()[:16])}"
-        raise ValueError(f"{path} is not a readable agent checkpoint ({why}): train it again") from None
+    return read_torch_file(path, "agent checkpoint", "train it again")
 
 
 def _field(path: Path, ckpt: dict, key: str, types, what: str):
@@ -131,7 +126,8 @@ def _field(path: Path, ckpt: dict, key: str, types, what: str):
 
 
 def _check_fields(path: Path, ckpt: dict, resumable: bool) -> None:
-    """Every field's type, shape and range (see the module docstring); ValueError naming the file and field."""
+    """Every field's type, shape and range (see the module docstring); ValueError naming the file and
+    field."""
     bad = lambda msg: ValueError(f"{path} is damaged: {msg}: train it again")  # noqa: E731
     _field(path, ckpt, "architecture", dict, "a dict")
     preset_d = _field(path, ckpt, "preset", dict, "a dict")
@@ -182,7 +178,8 @@ def _check_fields(path: Path, ckpt: dict, resumable: bool) -> None:
         if not isinstance(w, torch.Tensor) or w.shape != (len(acts),) or not w.is_floating_point():
             got = tuple(w.shape) if isinstance(w, torch.Tensor) else type(w).__name__
             raise bad(
-                f"init_weights must be a float tensor of shape ({len(acts)},), one per expert action, got {got}"
+                f"init_weights must be a float tensor of shape ({len(acts)},), one per expert action, "
+                f"got {got}"
             )
         if not torch.isfinite(w).all() or (w < 0).any() or not w.sum() > 0:
             raise bad("init_weights must be finite, >= 0 and not all 0")
@@ -247,7 +244,8 @@ def load_checkpoint(
 
 
 def training_seed(ckpt: dict) -> int | None:
-    """The seed a checkpoint's agent was trained with (its ``seed``, or, in older files, its metrics'), or None."""
+    """The seed a checkpoint's agent was trained with (its ``seed``, or, in older files, its metrics'), or
+    None."""
     if ckpt.get("seed") is not None:
         return int(ckpt["seed"])
     seeds = {m.get("seed") for m in ckpt.get("metrics", [])}

@@ -29,9 +29,10 @@ from typing import NamedTuple
 import numpy as np
 
 from ibc_tutorial import stats
+from ibc_tutorial.experiments.agents.layout import EVALUATIONS, run_dir
 from ibc_tutorial.experiments.agents.presets import Preset
-from ibc_tutorial.experiments.agents.results import load_results, run_dir
-from ibc_tutorial.experiments.agents.train import read_metrics
+from ibc_tutorial.experiments.agents.results import episode_table, load_results
+from ibc_tutorial.experiments.agents.run_folder import read_metrics
 from ibc_tutorial.utils import check_int
 
 CLAIMS = {
@@ -41,22 +42,25 @@ CLAIMS = {
     4: "DA-IBC takes different exits at a junction, BC does not",
     5: "DA-IBC's minima spread in steering at a junction, gather at a red light",
 }
-"""The DA-IBC paper's sec. 4.3 claims, by number: 1 from its Fig. 4, 2-3 from its table, 4 from its Fig. 5, 5 from
+"""The DA-IBC paper's sec. 4.3 claims, by number: 1 from its Fig. 4, 2-3 from its table, 4 from its Fig. 5, 5
+from
 its Fig. 6."""
 
-EVALUATIONS = {"final": "the table's starts", "heldout": "held-out starts"}
+STARTS = {"final": "the table's starts", "heldout": "held-out starts"}
 """The final evaluations claims 2 and 3 are judged on, and how the parts name them."""
 CLAIM_METHODS = ("bc", "ibc", "da-ibc")
 """The methods a folder must hold for the claims to be judged."""
 FREE_METHODS = ("bc", "da-ibc")
 """The agents that drove freely (claim 4)."""
 STEER_SPREAD = 0.1
-"""Claim 5, junction: "spread along the steering axis" read as a standard deviation of the DFO draws' steering above this."""
+"""Claim 5, junction: "spread along the steering axis" read as a standard deviation of the DFO draws' steering
+above this."""
 
 
 # --------------------------------------------------------------------------- the pieces
 def combine(*verdicts: str) -> str:
-    """A claim made of several parts holds if every part does, does not hold if one part does not, else cannot tell."""
+    """A claim made of several parts holds if every part does, does not hold if one part does not, else cannot
+    tell."""
     for v in verdicts:
         if v not in (stats.HOLDS, stats.DOES_NOT_HOLD, stats.CANNOT_TELL):
             raise ValueError(
@@ -69,7 +73,8 @@ def combine(*verdicts: str) -> str:
 
 
 def spread_interval(x, seed: int = 0, n_resamples: int = stats.DEFAULT_RESAMPLES) -> stats.Interval:
-    """The (population) standard deviation of the 1-D ``x`` with a 95 % percentile bootstrap interval over its entries."""
+    """The (population) standard deviation of the 1-D ``x`` with a 95 % percentile bootstrap interval over its
+    entries."""
     x = np.asarray(x, dtype=float)
     if x.ndim != 1 or len(x) < 2 or not np.isfinite(x).all():
         raise ValueError(f"x must be a finite 1-D array of at least 2 values, got shape {x.shape}")
@@ -83,7 +88,8 @@ def spread_interval(x, seed: int = 0, n_resamples: int = stats.DEFAULT_RESAMPLES
 
 
 def first_eval_scores(folder, method: str, preset: Preset) -> np.ndarray:
-    """(agents, episodes) scores of the first evaluation during training (epoch ``preset.eval_every``), from each
+    """(agents, episodes) scores of the first evaluation during training (epoch ``preset.eval_every``), from
+    each
     agent's ``metrics.jsonl``; ValueError naming the file if its first entry is not that evaluation."""
     rows = []
     for seed in preset.seeds:
@@ -116,7 +122,8 @@ class ClaimVerdict:
     exit_test: stats.ExitTest | None = None
     """Claim 4's free-driving exit test, DA-IBC against BC (None for the other claims)."""
     missing: tuple[str, ...] = ()
-    """Parts the folder holds no data for (each counts as "cannot tell"), e.g. a landscape moment not found."""
+    """Parts the folder holds no data for (each counts as "cannot tell"), e.g. a landscape moment not
+    found."""
 
 
 @dataclass(frozen=True)
@@ -145,7 +152,8 @@ class ClaimVerdicts:
 
 
 def _check_folder(folder) -> tuple[Path, dict, dict, Preset]:
-    """The folder's ``load_results``, checked to be a finished replication of the three methods with its figures."""
+    """The folder's ``load_results``, checked to be a finished replication of the three methods with its
+    figures."""
     if not isinstance(folder, (str, Path)):
         raise ValueError(f"folder must be a path to a replication folder, got {type(folder).__name__}")
     folder = Path(folder)
@@ -198,7 +206,7 @@ def judge_claims(folder) -> ClaimVerdicts:
     evaluations = [ev for ev in EVALUATIONS if ev == "final" or preset.heldout_episodes > 0]
 
     def table(method, key, ev):  # (agents, episodes) values of one method
-        return stats.episode_table(folder, method, key, ev).values
+        return episode_table(folder, method, key, ev).values
 
     claims: dict[int, ClaimVerdict] = {}
 
@@ -213,7 +221,7 @@ def judge_claims(folder) -> ClaimVerdicts:
         stats.compare(
             table("da-ibc", "distance_m", ev),
             table("ibc", "distance_m", ev),
-            f"DA-IBC drives farther than IBC ({EVALUATIONS[ev]}, m)",
+            f"DA-IBC drives farther than IBC ({STARTS[ev]}, m)",
         )
         for ev in evaluations
     )
@@ -222,7 +230,7 @@ def judge_claims(folder) -> ClaimVerdicts:
         stats.compare(
             table("da-ibc", "red_light_infractions", ev),
             table("bc", "red_light_infractions", ev),
-            f"DA-IBC runs more red lights than BC ({EVALUATIONS[ev]}, per episode)",
+            f"DA-IBC runs more red lights than BC ({STARTS[ev]}, per episode)",
         )
         for ev in evaluations
     )

@@ -20,8 +20,9 @@ import torch
 from ibc_tutorial.driving.analysis import exits_per_approach, junction_visits, road_coverage
 from ibc_tutorial.experiments.agents.agent import Agent
 from ibc_tutorial.experiments.agents.evaluate import EVAL_SEED, episode_rows, evaluate_agent
+from ibc_tutorial.experiments.agents.layout import FREE_DRIVING, LANDSCAPES
 from ibc_tutorial.experiments.agents.presets import Preset
-from ibc_tutorial.experiments.agents.results import FREE_DRIVING, LANDSCAPES, write_npz
+from ibc_tutorial.experiments.runs import write_npz
 
 TOWN = "town02"
 """Where the free driving happens (unseen in training)."""
@@ -145,7 +146,8 @@ def pick_junction(recordings: list[dict]) -> tuple | None:
 
 
 def pick_red(recordings: list[dict]) -> tuple | None:
-    """(recording, step) of the red-light observation: the first drive with a red light 2-15 m ahead, closest to 6 m."""
+    """(recording, step) of the red-light observation: the first drive with a red light 2-15 m ahead, closest
+    to 6 m."""
     for rec in recordings:
         ok = np.flatnonzero(
             rec["red_ahead"] & (rec["entry_dist"] >= RED_DISTANCE[0]) & (rec["entry_dist"] <= RED_DISTANCE[1])
@@ -158,7 +160,8 @@ def pick_red(recordings: list[dict]) -> tuple | None:
 def landscapes(
     out, agent: Agent, recordings: dict, n_grid: int = 41, n_inferences: int = 10, log=print
 ) -> dict:
-    """Energy over (steer, acceleration) and ten DFO inferences at a junction and at a red light; writes ``landscapes.npz``.
+    """Energy over (steer, acceleration) and ten DFO inferences at a junction and at a red light; writes
+    ``landscapes.npz``.
 
     The moments are picked from ``agent``'s own drives first, then from the other agents'.
     Returns the moments' descriptions (``results.json``'s ``landscapes``).

@@ -26,18 +26,38 @@ the network's size, the training settings of the DA-IBC paper's sec. 4.2, the in
 The paper gives no σ for the counter-example noise; ``neg_sigma`` = 0.1 is the value chapter
 04 studied.
 
-A variant is made with ``dataclasses.replace(LAPTOP, epochs=12)``; ``differences(PAPER, p)``
-lists what a preset changes from the paper.
+**Made of the library's configs.** A preset is stored flat (checkpoints and results folders hold
+``to_dict()``), and maps onto the configs of the library in one place, ``CONFIG_FIELDS``:
+``collect_config()`` is the ``driving.collect.CollectConfig`` of its demonstrations,
+``dfo_config(method)`` the ``optimizers.dfo.DFOConfig`` a method acts with, ``train_config(...)``
+the ``training.TrainConfig`` of a run. ``__post_init__`` builds them, so every setting is validated
+once, by the config that defines it, when the preset is made (before any work); ``bev_size`` by the
+renderer's rule (``driving.bev.check_bev_size``: only the sizes it draws).
+
+A variant is made with ``dataclasses.replace(LAPTOP, epochs=12)``, or from the command line with
+``--set FIELD=VALUE`` (``with_overrides``: ``--set dfo.n_samples=1024`` or ``--set dfo_samples=1024``);
+``differences(PAPER, p)`` lists what a preset changes from the paper.
+
+**The lights.** The DA-IBC paper's BEV channels are binary maps, "values restricted to 0 or 1" (its
+sec. 2.1), the light channels white where a light is red: the ``PAPER`` preset draws them so, as one
+"must stop" bit (``light_encoding="flag"``: red and yellow at 1, green not drawn). The book's other
+variant, "intensity" (red 1.0, yellow 0.6, green 0.3: chapter 07, which measured that it contradicts
+none of the expert's labels), is chapter 08's ``intensity-lights`` ablation.
 """
 
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, fields
 
-from ibc_tutorial.driving.bev import LIGHT_ENCODINGS
-from ibc_tutorial.training import LR_SCHEDULES
-from ibc_tutorial.utils import check_choice, check_fraction, check_int, check_positive
+from ibc_tutorial.driving.bev import LIGHT_ENCODINGS, check_bev_size
+from ibc_tutorial.driving.collect import CollectConfig
+from ibc_tutorial.experiments.settings import with_overrides as _with_overrides
+from ibc_tutorial.optimizers.dfo import DFOConfig
+from ibc_tutorial.training import LR_SCHEDULES, TrainConfig
+from ibc_tutorial.utils import check_choice, check_int, check_positive
 
+LEGACY_LIGHT_ENCODING = "intensity"
+"""How presets stored without a ``light_encoding`` field (written before it existed) drew the lights."""
 METHODS = ("bc", "ibc", "da-ibc")
 """The three agents of the DA-IBC paper's sec. 4: Beta BC, conventional IBC and DA-IBC."""
 
@@ -58,12 +78,15 @@ class Preset:
     max_minutes: float = 4.5
     """Longest route in minutes (mean 3.5, the paper's)."""
     brake_noise: float = 0.0
-    """Strength of the expert's braking perturbations while collecting, in [0, 1] (the paper: none; ``driving.expert``)."""
+    """Strength of the expert's braking perturbations while collecting, in [0, 1] (the paper: none;
+    ``driving.expert``)."""
     # ---- network (the paper's Fig. 2)
     bev_size: int = 192
     """Side of the bird's-eye view in pixels (the paper: 192)."""
-    light_encoding: str = "intensity"
-    """How the BEV draws lights: by state ("intensity", as the paper's Fig. 1(d)) or as one bit ("flag")."""
+    light_encoding: str = "flag"
+    """How the BEV draws lights (``driving.bev.LIGHT_ENCODINGS``): as one "must stop" bit ("flag", the paper's
+    binary channels: red and yellow 1, green not drawn) or by state ("intensity": red 1.0, yellow 0.6, green
+    0.3, the book's variant)."""
     cnn_channels: tuple = (32, 64, 128, 256)
     """Output channels of the CNN's stride-2 convolutions."""
     embed_dim: int = 256
@@ -76,7 +99,8 @@ class Preset:
     lr: float = 1e-5
     """Adam step size (the paper: 1e-5)."""
     lr_schedule: str = "constant"
-    """"constant" (the paper: no schedule given) or "cosine" decay to 0 over the run (``training.TrainConfig``)."""
+    """"constant" (the paper: no schedule given) or "cosine" decay to 0 over the run
+    (``training.TrainConfig``)."""
     epochs: int = 400
     """Training epochs, each ceil(M / batch_size) minibatches (the paper: up to 400)."""
     batch_size: int = 128
@@ -108,7 +132,8 @@ class Preset:
     final_steps: int = 3000
     """Steps of each final episode (the paper: 3000)."""
     heldout_episodes: int = 10
-    """Episodes of a second final evaluation from other starts (``evaluate.HELDOUT_SEED``), which nothing is tuned on
+    """Episodes of a second final evaluation from other starts (``evaluate.HELDOUT_SEED``), which nothing is
+    tuned on
     (0: none)."""
     seeds: tuple = (0, 1, 2)
     """Training seeds: one agent per seed and method (the paper: three agents per method)."""
@@ -120,8 +145,14 @@ class Preset:
     """Steps of each free-driving episode."""
 
     def __post_init__(self):
-        check_int("routes", self.routes, minimum=1)
-        check_int("bev_size", self.bev_size, minimum=8)
+        # the settings of the library's configs are checked by those configs (CONFIG_FIELDS)
+        self.collect_config()
+        for method in ("ibc", "da-ibc"):
+            self.dfo_config(method)
+        check_bev_size(self.bev_size)  # the renderer's rule: only the sizes it draws
+        check_choice("light_encoding", self.light_encoding, LIGHT_ENCODINGS)
+        check_choice("lr_schedule", self.lr_schedule, LR_SCHEDULES)
+        check_positive("lr", self.lr)
         for f in (
             "embed_dim",
             "head_hidden",
@@ -129,8 +160,6 @@ class Preset:
             "epochs",
             "batch_size",
             "n_neg",
-            "dfo_samples",
-            "dfo_iters",
             "eval_every",
             "eval_episodes",
             "eval_steps",
@@ -141,23 +170,65 @@ class Preset:
             check_int(f, getattr(self, f), minimum=1)
         for f in ("routeless_episodes", "heldout_episodes"):
             check_int(f, getattr(self, f), minimum=0)
-        check_choice("light_encoding", self.light_encoding, LIGHT_ENCODINGS)
         if (
             not self.methods
             or any(m not in METHODS for m in self.methods)
             or len(set(self.methods)) < len(self.methods)
         ):
             raise ValueError(f"methods must name distinct methods of {METHODS}, got {self.methods!r}")
-        check_fraction("Preset.brake_noise", self.brake_noise)
-        for f in ("lr", "kde_bandwidth", "min_minutes", "max_minutes"):
-            check_positive(f, getattr(self, f))
-        check_choice("lr_schedule", self.lr_schedule, LR_SCHEDULES)
-        for f in ("neg_sigma", "dfo_sigma_init", "dfo_shrink"):
-            check_positive(f, getattr(self, f), allow_zero=True)
+        check_positive("neg_sigma", self.neg_sigma, allow_zero=True)
         if not self.cnn_channels or any(int(c) < 1 for c in self.cnn_channels):
             raise ValueError(f"cnn_channels must be positive integers, got {self.cnn_channels!r}")
         if not self.seeds:
             raise ValueError("seeds must name at least one seed")
+
+    # ---- the library's configs (CONFIG_FIELDS says which field goes where)
+    def collect_config(self) -> CollectConfig:
+        """The demonstrations' ``CollectConfig``: town01 routes (the paper's sec. 4.1)."""
+        return CollectConfig(
+            town="town01",
+            routes=self.routes,
+            seed=self.collect_seed,
+            min_minutes=self.min_minutes,
+            max_minutes=self.max_minutes,
+            brake_noise=self.brake_noise,
+        )
+
+    def dfo_config(self, method: str) -> DFOConfig | None:
+        """How ``method`` runs Algorithm 1 (None for bc): the original IBC's DFO, or DA-IBC's (module
+        docstring)."""
+        check_choice("method", method, METHODS)
+        if method == "bc":
+            return None
+        if method == "ibc":
+            init, select = "uniform", "argmax"  # the original IBC's DFO: uniform start, lowest energy
+        else:
+            init, select = (
+                "inverse-kde",
+                "sample",
+            )  # Algorithm 1: w ∝ 1 / ĝ start, ŷ ~ Categorical(p̃) (line 14)
+        return DFOConfig(
+            n_samples=self.dfo_samples,
+            n_iters=self.dfo_iters,
+            sigma_init=self.dfo_sigma_init,
+            shrink=self.dfo_shrink,
+            bandwidth=self.kde_bandwidth,
+            init=init,
+            select=select,
+        )
+
+    def train_config(self, steps_per_epoch: int, seed: int, **extra) -> TrainConfig:
+        """The ``TrainConfig`` of a run: ``epochs`` x ``steps_per_epoch`` Adam steps, a callback (evaluation
+        and checkpoint) every ``eval_every`` epochs; ``extra``: its other fields (``progress``, ``desc``)."""
+        return TrainConfig(
+            steps=self.epochs * steps_per_epoch,
+            batch_size=self.batch_size,
+            lr=self.lr,
+            lr_schedule=self.lr_schedule,
+            seed=seed,
+            log_every=self.eval_every * steps_per_epoch,
+            **extra,
+        )
 
     def to_dict(self) -> dict:
         """JSON- and checkpoint-friendly form (tuples become lists)."""
@@ -166,22 +237,25 @@ class Preset:
 
     @classmethod
     def from_dict(cls, d: dict) -> Preset:
-        """Inverse of ``to_dict``; unknown keys are refused."""
+        """Inverse of ``to_dict``; unknown keys are refused. A preset stored before ``light_encoding`` existed
+        drew the lights by intensity (``LEGACY_LIGHT_ENCODING``), whatever today's default."""
         names = {f.name for f in fields(cls)}
         unknown = set(d) - names
         if unknown:
             raise ValueError(f"unknown preset fields {sorted(unknown)}")
+        d = {"light_encoding": LEGACY_LIGHT_ENCODING, **d}
         return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
 
 
 PAPER = Preset(name="paper")
-"""The DA-IBC paper's settings (sec. 4.2). Days of compute on a CPU; given for reference."""
+"""The DA-IBC paper's settings (sec. 4.2), its binary light channels included. Days of compute on a CPU;
+given for reference."""
 
 LAPTOP = Preset(
     name="laptop",
-    brake_noise=1.0,  # held brakes while collecting, so that the data show the car leaving from rest (chapter 08)
+    brake_noise=1.0,  # held brakes while collecting: the data show the car leaving from rest (chapter 08)
     bev_size=64,  # 9x fewer pixels than 192; the same 5 channels and field of view (OR-pooled)
-    light_encoding="flag",  # one "must stop" bit: the agents drive better with it (chapter 08's ablation)
+    light_encoding="flag",  # the paper's "must stop" bit: agents drive better with it (chapter 08's ablation)
     cnn_channels=(16, 32, 32, 64),  # a small CNN: 64 -> 4 x 4 x 64 after four stride-2 convolutions
     embed_dim=256,  # as the paper: 256-d BEV and 256-d state embeddings
     head_hidden=128,  # the energy head runs N_neg times per sample and N_samples times per decision
@@ -239,9 +313,36 @@ PRESETS = {p.name: p for p in (PAPER, LAPTOP, TINY)}
 """All named presets."""
 
 
+CONFIG_FIELDS = {
+    "collect.routes": "routes",
+    "collect.seed": "collect_seed",
+    "collect.min_minutes": "min_minutes",
+    "collect.max_minutes": "max_minutes",
+    "collect.brake_noise": "brake_noise",
+    "bev.size": "bev_size",
+    "bev.light_encoding": "light_encoding",
+    "train.lr": "lr",
+    "train.lr_schedule": "lr_schedule",
+    "train.batch_size": "batch_size",
+    "dfo.n_samples": "dfo_samples",
+    "dfo.n_iters": "dfo_iters",
+    "dfo.sigma_init": "dfo_sigma_init",
+    "dfo.shrink": "dfo_shrink",
+    "dfo.bandwidth": "kde_bandwidth",
+}
+"""The one map between the library configs' names (``CollectConfig``, the renderer's, ``TrainConfig``,
+``DFOConfig``) and a preset's fields: what ``collect_config``, ``dfo_config`` and ``train_config`` read,
+and the names ``--set`` accepts beside the fields' own."""
+
+
 def get_preset(name: str) -> Preset:
     """The preset called ``name`` ("paper", "laptop" or "tiny")."""
     return PRESETS[check_choice("preset", name, tuple(PRESETS))]
+
+
+def with_overrides(preset: Preset, overrides) -> Preset:
+    """``preset`` with the ``--set FIELD=VALUE`` overrides applied and checked (``experiments.settings``)."""
+    return _with_overrides(preset, overrides, CONFIG_FIELDS)
 
 
 def differences(a: Preset, b: Preset) -> dict[str, tuple]:

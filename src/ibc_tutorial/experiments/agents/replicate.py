@@ -28,84 +28,59 @@ demonstrations, the expert's row and every random draw stay on the CPU (see ``tr
 
 from __future__ import annotations
 
-import argparse
-import multiprocessing
-import signal
-import sys
-import threading
+import functools
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict
 from pathlib import Path
 
 import torch
 
-from ibc_tutorial.cli import check_output_dir
-from ibc_tutorial.driving.collect import CollectConfig, collect
-from ibc_tutorial.driving.dataset import DemoDataset, DemoLog
-from ibc_tutorial.experiments.agents.ablations import ablation_preset
+from ibc_tutorial.driving.collect import collect
+from ibc_tutorial.driving.dataset import DemoLog
+from ibc_tutorial.experiments.agents.bookkeeping import TrainingData
 from ibc_tutorial.experiments.agents.checkpoints import load_agent
 from ibc_tutorial.experiments.agents.evaluate import (
     EVAL_SEED,
     HELDOUT_SEED,
     episode_rows,
     evaluate_agent,
-    summarize,
+    summarize_episodes,
 )
 from ibc_tutorial.experiments.agents.figures import free_driving, landscapes
-from ibc_tutorial.experiments.agents.presets import Preset, differences, get_preset
-from ibc_tutorial.experiments.agents.results import (
+from ibc_tutorial.experiments.agents.layout import (
     DATA,
-    FREE_DRIVING,
-    LANDSCAPES,
+    ENTRIES,
+    EVALUATIONS,
+    FINAL_EVAL,
     PROVENANCE,
     RESULTS,
-    begin_invocation,
-    check_only_entries,
-    collect_results,
-    delete_entries,
     expert_dir,
     finished_runs,
-    now,
-    preset_results,
-    read_json_dict,
+    planned_runs,
     run_dir,
     run_name,
-    write_json,
-    write_provenance,
 )
-from ibc_tutorial.experiments.agents.train import inspect_run, train_agent
-from ibc_tutorial.kde import inverse_density_weights
+from ibc_tutorial.experiments.agents.presets import PAPER, Preset, differences
+from ibc_tutorial.experiments.agents.results import collect_results, preset_results
+from ibc_tutorial.experiments.agents.run_folder import inspect_run
+from ibc_tutorial.experiments.agents.train import train_agent
+from ibc_tutorial.experiments.runs import (
+    Provenance,
+    check_only_entries,
+    delete_entries,
+    read_json_dict,
+    write_json,
+)
+from ibc_tutorial.parallel import imap_unordered
 from ibc_tutorial.utils import check_device, check_int
 
 FIGURE_METHODS = ("bc", "da-ibc")
 """The agents of the first seed kept for the Fig. 5/6 analogues (their ``final.pt`` is kept too)."""
-ENTRIES = ("data", "runs", RESULTS, PROVENANCE, "PROVENANCE.md", FREE_DRIVING, LANDSCAPES)
-"""What a replication folder holds (``--force`` deletes these, and only these)."""
-HEARTBEAT_S = 30.0
-"""How often a running replication records in ``provenance.json`` that it is still running."""
-
-
-def _init_worker(threads: int) -> None:
-    signal.signal(
-        signal.SIGINT, signal.SIG_IGN
-    )  # Ctrl-C is the main process's to handle (it stops the workers)
-    torch.set_num_threads(max(1, int(threads)))
-
-
-def _collect_config(preset: Preset) -> CollectConfig:
-    return CollectConfig(
-        "town01",
-        preset.routes,
-        preset.collect_seed,
-        preset.min_minutes,
-        preset.max_minutes,
-        brake_noise=preset.brake_noise,
-    )
 
 
 def _same_preset(stored, preset: Preset) -> bool:
-    """Whether a stored preset dict describes ``preset`` (fields added since it was written take their defaults)."""
+    """Whether a stored preset dict describes ``preset`` (fields added since it was written take their
+    defaults)."""
     try:
         return isinstance(stored, dict) and Preset.from_dict(stored) == preset
     except (TypeError, ValueError):
@@ -146,7 +121,7 @@ def check_folder(out, preset: Preset) -> None:
         config = log.meta.get("config")
         if not isinstance(config, dict) or any(
             config.get(k, 0.0 if k == "brake_noise" else None) != v
-            for k, v in asdict(_collect_config(preset)).items()
+            for k, v in asdict(preset.collect_config()).items()
             if k in ("town", "routes", "seed", "min_minutes", "max_minutes", "brake_noise")
         ):
             raise ValueError(
@@ -160,7 +135,9 @@ def check_folder(out, preset: Preset) -> None:
 
 
 def clear_folder(out) -> None:
-    """Delete a replication's entries (``ENTRIES``) from ``out``, nothing else: ``--force``."""
+    """Delete a replication's entries (``ENTRIES``) from ``out``, nothing else: ``--force``. ValueError if
+    ``out`` holds other files (they are not a replication's to delete)."""
+    check_only_entries(out, ENTRIES, "replication")
     delete_entries(out, ENTRIES)
 
 
@@ -168,12 +145,11 @@ _WORKER_DATA: dict = {}
 """Per worker process: the rendered dataset and its KDE probabilities, made once."""
 
 
-def _dataset(data: Path, preset: Preset) -> tuple[DemoDataset, torch.Tensor]:
+def _training_data(data: Path, preset: Preset) -> TrainingData:
     """The rendered demonstrations and their minibatch probabilities w ∝ 1 / ĝ, made once per process."""
-    key = (str(data), data.stat().st_mtime_ns, preset.bev_size, preset.kde_bandwidth)
+    key = (str(data), data.stat().st_mtime_ns, preset.bev_size, preset.kde_bandwidth, preset.light_encoding)
     if key not in _WORKER_DATA:
-        ds = DemoDataset(data, bev_size=preset.bev_size, cache=True, light_encoding=preset.light_encoding)
-        _WORKER_DATA[key] = (ds, inverse_density_weights(ds.actions, preset.kde_bandwidth))  # (M,) eqs. 4-5
+        _WORKER_DATA[key] = TrainingData.of(data, preset)
     return _WORKER_DATA[key]
 
 
@@ -189,8 +165,8 @@ def final_evaluations(
     (an ``Agent`` or "expert") into ``out_dir``; returns the first."""
     evals = {}
     for name, seed, episodes in (
-        ("heldout_eval.json", HELDOUT_SEED, preset.heldout_episodes),
-        ("final_eval.json", EVAL_SEED, preset.final_episodes),
+        (EVALUATIONS["heldout"], HELDOUT_SEED, preset.heldout_episodes),
+        (EVALUATIONS["final"], EVAL_SEED, preset.final_episodes),
     ):
         if not episodes:
             continue
@@ -211,14 +187,12 @@ def final_evaluations(
             town="town02",
             steps=preset.final_steps,
             start_seed=seed,
-            summary=summarize(rows),
+            summary=summarize_episodes(rows),
             episodes=rows,
             eval_seconds=round(time.perf_counter() - te, 1),
         )
-        write_json(
-            out_dir / name, evals[name]
-        )  # final_eval.json last: once it exists, the run counts as finished
-    return evals["final_eval.json"]
+        write_json(out_dir / name, evals[name])  # final_eval.json last: once it exists, the run is finished
+    return evals[FINAL_EVAL]
 
 
 def run_one(
@@ -229,7 +203,6 @@ def run_one(
     preset = preset if isinstance(preset, Preset) else Preset.from_dict(preset)
     out = Path(out)
     data = out / DATA
-    dataset, probs = _dataset(data, preset)
     d = run_dir(out, method, seed)
     res = train_agent(
         method,
@@ -237,8 +210,7 @@ def run_one(
         preset,
         seed,
         d,
-        dataset=dataset,
-        sample_probs=probs,
+        dataset=_training_data(data, preset),
         show_progress=show_progress,
         log=log,
         device=device,
@@ -258,7 +230,7 @@ def run_one(
 def expert_row(out: Path, preset: Preset, log=print) -> None:
     """The PID expert on the same starts as the agents (``runs/expert/``), unless already there."""
     d = expert_dir(out)
-    if (d / "final_eval.json").exists():
+    if (d / FINAL_EVAL).exists():
         return
     d.mkdir(parents=True, exist_ok=True)
     ev = final_evaluations("expert", d, preset, 0, extra={"method": "expert"})
@@ -271,63 +243,48 @@ def replicate(
     out,
     *,
     command: str = "",
+    overrides: tuple = (),
     workers: int = 1,
     log=print,
     show_progress: bool | None = None,
-    force: bool = False,
     device: str = "cpu",
 ) -> dict:
     """Run the whole replication (see the module docstring); returns the contents of ``results.json``.
 
-    ``out`` is checked first (``check_folder``); ``force`` deletes the replication already there. ``device``
-    ("cpu", "cuda", "cuda:1", "mps") is where the agents train and drive."""
+    ``out`` is checked first (``check_folder``; ``clear_folder`` is ``--force``). ``command`` and
+    ``overrides``
+    (the ``--set`` items that made ``preset``) are recorded in the provenance. ``device`` ("cpu", "cuda",
+    "cuda:1", "mps") is where the agents train and drive."""
     device = str(check_device("device", device))  # a string: it goes to the worker processes
+    workers = check_int("workers", workers, minimum=1)
     out = Path(out)
-    if force:
-        check_only_entries(out, ENTRIES, "replication")
-        clear_folder(out)
     check_folder(out, preset)
     out.mkdir(parents=True, exist_ok=True)
-    t0 = time.perf_counter()
-    started, invocations = begin_invocation(out)
-    command = command or f"ibc-tutorial replicate --preset {preset.name} --out {out}"
-    planned = [run_name(m, s) for s in preset.seeds for m in preset.methods]
     res_file = out / RESULTS
     results = read_json_dict(res_file, "delete it and re-run") if res_file.exists() else {}
-    lock = threading.Lock()
-
-    def heartbeat(complete: bool = False) -> None:
-        with lock:
-            invocations[-1].update(last_seen=now(), seconds=round(time.perf_counter() - t0, 1))
-            write_provenance(
-                out, preset, started, invocations, finished_runs(out, preset), planned, command, complete
-            )
+    provenance = Provenance(
+        out,
+        title=f"the `{preset.name}` replication",
+        command=command or f"ibc-tutorial replicate --preset {preset.name} --out {out}",
+        preset=preset.to_dict(),
+        differences=differences(PAPER, preset),
+        reference="the paper's settings",
+        planned=[run_name(m, s) for m, s in planned_runs(preset)],
+        finished=lambda: finished_runs(out, preset),
+        overrides=list(overrides),
+    )
 
     def save(complete: bool) -> None:
         results.update(collect_results(out, preset))
         results.update(preset_results(preset, complete))
         write_json(res_file, results)
-        heartbeat(complete)
+        provenance.write(complete)
 
-    stop = threading.Event()
-
-    def beat() -> None:
-        while not stop.wait(HEARTBEAT_S):
-            heartbeat()
-
-    heartbeat()
-    threading.Thread(target=beat, daemon=True, name="provenance heartbeat").start()
-    try:
+    with provenance:
         _work(out, preset, results, save, workers, log, show_progress, device)
         save(True)
-    finally:
-        stop.set()
-        if not results.get("complete"):
-            heartbeat()  # an interrupted invocation's time counts too
     if log:
-        log(
-            f"replication finished in {sum(i['seconds'] for i in invocations) / 60:.1f} min; results in {out}"
-        )
+        log(f"replication finished in {provenance.wall_seconds / 60:.1f} min; results in {out}")
     return results
 
 
@@ -345,25 +302,21 @@ def _work(
     # 1. the demonstrations
     data = out / DATA
     if not data.exists():
-        demo = collect(_collect_config(preset), show_progress=show_progress)
+        demo = collect(preset.collect_config(), show_progress=show_progress)
         demo.save(data)
         if log:
             log(f"collected {len(demo)} samples in town01")
     results["data"] = {"file": DATA, "samples": len(DemoLog.load(data)), "routes": preset.routes}
 
     # 2-3. the runs, seed by seed (in ``workers`` processes: the first seed's runs are submitted first)
-    todo = [
-        (m, s)
-        for s in preset.seeds
-        for m in preset.methods
-        if not (run_dir(out, m, s) / "final_eval.json").exists()
-    ]
+    todo = [(m, s) for m, s in planned_runs(preset) if not (run_dir(out, m, s) / FINAL_EVAL).exists()]
 
     def after_run(ev: dict) -> None:
         if log:
             log(
                 f"{ev['method']} seed {ev['seed']}: final town02 score {ev['summary']['score_mean']:.1f} ± "
-                f"{ev['summary']['score_std']:.1f} ({ev['train_seconds']:.0f} s training, {ev['eval_seconds']:.0f} s evaluation)"
+                f"{ev['summary']['score_std']:.1f} ({ev['train_seconds']:.0f} s training, "
+                f"{ev['eval_seconds']:.0f} s evaluation)"
             )
         save(False)
 
@@ -373,7 +326,7 @@ def _work(
             "free_driving" in results
             or not preset.routeless_episodes
             or not set(FIGURE_METHODS) <= set(preset.methods)
-            or not all((run_dir(out, m, s0) / "final_eval.json").exists() for m in FIGURE_METHODS)
+            or not all((run_dir(out, m, s0) / FINAL_EVAL).exists() for m in FIGURE_METHODS)
         ):
             return
         agents = {m: load_agent(run_dir(out, m, s0) / "final.pt")[0].to(device) for m in FIGURE_METHODS}
@@ -383,50 +336,17 @@ def _work(
         save(False)
 
     figures_if_ready()
-    if workers <= 1:
-        expert_row(out, preset, log)
-        save(False)
-        for method, seed in todo:
-            after_run(run_one(method, seed, out, preset, show_progress=show_progress, log=log, device=device))
-            figures_if_ready()
-        return
-    ctx = multiprocessing.get_context("spawn")  # no fork after torch has started its threads
-    with ProcessPoolExecutor(
-        max_workers=workers, mp_context=ctx, initializer=_init_worker, initargs=(torch.get_num_threads(),)
-    ) as pool:
-        try:
-            futures = [pool.submit(run_one, m, s, str(out), preset.to_dict(), device=device) for m, s in todo]
-            expert_row(out, preset, log)  # here, while the workers train
-            save(False)
-            for fut in as_completed(futures):
-                after_run(fut.result())
-                figures_if_ready()
-        except (
-            KeyboardInterrupt
-        ):  # stop the workers now (their files are written atomically; the runs resume)
-            for proc in list(getattr(pool, "_processes", {}).values()):
-                proc.terminate()
-            pool.shutdown(wait=False, cancel_futures=True)
-            raise
-
-
-def run(args: argparse.Namespace) -> int:
-    """``ibc-tutorial replicate`` (arguments in ``ibc_tutorial.cli``): check the inputs and the folder, then
-    replicate. Errors are raised for ``cli.main`` to print on one line."""
-    preset = get_preset(args.preset)
-    if getattr(args, "ablation", None):
-        preset = ablation_preset(preset, args.ablation)
-    threads = check_int("--threads", args.threads, minimum=0)
-    workers = check_int("--workers", args.workers, minimum=1)
-    device = check_device("--device", getattr(args, "device", "cpu"))
-    out = check_output_dir("--out", args.out)
-    force = bool(getattr(args, "force", False))
-    if not force:
-        check_folder(out, preset)  # before any work (replicate checks again after --force's deletion)
-    else:
-        check_only_entries(out, ENTRIES, "replication")
-    if threads:
-        torch.set_num_threads(threads)
-    command = "ibc-tutorial " + " ".join(sys.argv[1:]) if sys.argv and "replicate" in sys.argv else ""
-    replicate(preset, out, command=command, workers=workers, force=force, device=str(device))
-    return 0
+    here = {"log": log, "show_progress": show_progress} if workers == 1 else {}  # a worker's are quiet
+    runs = imap_unordered(  # submitted now; with one worker, each run when its result is asked for
+        [
+            functools.partial(run_one, m, s, str(out), preset.to_dict(), device=device, **here)
+            for m, s in todo
+        ],
+        workers=workers,
+        threads=torch.get_num_threads(),
+    )
+    expert_row(out, preset, log)  # here, while the workers train
+    save(False)
+    for ev in runs:
+        after_run(ev)
+        figures_if_ready()

@@ -1,4 +1,5 @@
-"""The steering-EBM paper's road-following study in the town (chapter 10, ``ibc-tutorial replicate-steering``).
+"""The steering-EBM paper's road-following study in the town (chapter 10, ``ibc-tutorial
+replicate-steering``).
 
 - ``presets``: the ``laptop`` and ``tiny`` settings;
 - ``task``: the steering-only task, its demonstrations (side roads rarely taken) and minibatches;

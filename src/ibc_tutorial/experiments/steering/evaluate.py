@@ -2,7 +2,8 @@
 
 **Routes** (``ROUTES``): four fixed town02 routes that keep straight past every side road: a lap
 of the outer loop each way, on to 12 m before its first junction again (``loop-ccw``: side roads
-on the left; ``loop-cw``: on the right; four side roads each) and the east-west road at y = 82 m each way (two side roads each, ending before
+on the left; ``loop-cw``: on the right; four side roads each) and the east-west road at y = 82 m each way (two
+side roads each, ending before
 the T at its end). 12 side-road passes and about 2.3 km per model and seed. Each route has its
 own light phases (seeded by ``preset.eval_seed``).
 
@@ -48,19 +49,11 @@ from ibc_tutorial.driving.env import DrivingEnv, EnvConfig
 from ibc_tutorial.driving.expert import Expert
 from ibc_tutorial.driving.routes import Route
 from ibc_tutorial.driving.towns import get_town
+from ibc_tutorial.experiments.steering.presets import EVAL_TOWN, ROUTES
 from ibc_tutorial.experiments.steering.task import longitudinal_config, steering_observation
 from ibc_tutorial.metrics import crashes_per_km, swerve_rate, whiteness
 from ibc_tutorial.utils import check_choice
 
-EVAL_TOWN = "town02"
-"""The evaluation town, unseen in training."""
-ROUTES = {
-    "loop-ccw": ((0.0, 0.0), (196.0, 0.0), 5.0, ("straight",) * 4),
-    "loop-cw": ((196.0, 0.0), (0.0, 0.0), 5.0, ("straight",) * 4),
-    "y82-east": ((0.0, 82.0), (50.0, 82.0), 3.0, ("straight",) * 2),
-    "y82-west": ((196.0, 82.0), (139.0, 82.0), 3.0, ("straight",) * 2),
-}
-"""name -> (from node, to node) of the start lane, start arc length (m), turns at the T-junctions."""
 END_MARGIN_M = 12.0
 """A route ends this far before the end of its last lane (before the next junction's stop line)."""
 PATH_SPACING_M = 0.5
@@ -110,8 +103,9 @@ def route_length(route: Route, cap_m: float = 0.0) -> float:
     return min(total, cap_m) if cap_m > 0 else total
 
 
-def make_env(preset) -> DrivingEnv:
-    """A town02 environment at the preset's BEV size (episodes are started with a route)."""
+def route_env(preset) -> DrivingEnv:
+    """The town02 environment (``driving.env.DrivingEnv``) at the preset's BEV size, for driving the fixed
+    routes (each episode is started with one)."""
     return DrivingEnv(config=EnvConfig(EVAL_TOWN, preset.bev_size, routeless=True, max_steps=10**6))
 
 
@@ -164,7 +158,8 @@ class Reference:
 
 
 def resample_path(xy: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarray]:
-    """Points every ``spacing`` metres along the polyline ``xy`` (K, 2), and for each the first step reaching it."""
+    """Points every ``spacing`` metres along the polyline ``xy`` (K, 2), and for each the first step reaching
+    it."""
     seg = np.linalg.norm(np.diff(xy, axis=0), axis=1)  # (K-1,)
     s = np.concatenate([[0.0], np.cumsum(seg)])  # (K,) arc length at each step
     grid = np.arange(0.0, s[-1], spacing)  # (M,)
@@ -204,7 +199,7 @@ def expert_reference(
 ) -> tuple[Reference, np.ndarray | None]:
     """The expert drives route ``name``; returns its ``Reference`` (and the observations of steps
     ``keep_obs`` = (first, end), as the models would see them, or None)."""
-    env = make_env(preset)
+    env = route_env(preset)
     route = build_route(name)
     length = route_length(route, preset.route_cap_m)
     offsets = light_offsets(env, preset, name)
@@ -244,7 +239,7 @@ def expert_reference(
 def fig5_window(ref: Reference) -> tuple[int, int] | None:
     """(first, end) steps of 5 s around the first side-road pass the expert drives without slowing
     (speed > 3 m/s throughout), starting ``FIG5_BEFORE`` steps before it enters the junction; None if none."""
-    for a, b, side, k in ref.sections:
+    for _a, _b, _side, k in ref.sections:
         first = int(k) - FIG5_BEFORE
         if (
             first >= 0
@@ -275,7 +270,7 @@ def drive_route(policy, ref: Reference, preset, *, max_steps: int | None = None)
     The result: ``crashes``, ``distance_m`` (driven by the model), ``crashes_per_km``, ``w_cmd``
     (1/s), ``steps``, ``timeout`` (the step budget ran out), ``crash_steps``, ``swerve_peak_m`` (P,)
     and ``swerve_score`` (P,) per side-road section, and ``steer`` (T,) the commands."""
-    env = make_env(preset)
+    env = route_env(preset)
     route = build_route(ref.name)
     town = env.town
     budget = max_steps if max_steps is not None else 3 * len(ref.poses) + 600
@@ -363,3 +358,22 @@ def _pad(rows: list[list[float]]) -> np.ndarray:
 def expert_whiteness(ref: Reference) -> float:
     """W (1/s) of the expert's own steering commands along a reference."""
     return whiteness(ref.steer, DT)
+
+
+def summarize_routes(routes: list[dict]) -> dict:
+    """One run's routes pooled: crashes, distance, crashes per km, W_cmd (pooled over the commands'
+    changes), the swerve rate over every side-road section driven, and the number of passes."""
+    crashes = sum(r["crashes"] for r in routes)
+    dist = sum(r["distance_m"] for r in routes)
+    n = sum(r["steps"] - 1 for r in routes)
+    w = float(np.sqrt(sum((r["steps"] - 1) * r["w_cmd"] ** 2 for r in routes) / n)) if n else float("nan")
+    scores = [s for r in routes for s in r["swerve_score"] if s is not None]
+    return {
+        "crashes": crashes,
+        "distance_m": round(dist, 2),
+        "crashes_per_km": round(crashes_per_km(crashes, dist), 4) if dist > 0 else None,
+        "w_cmd": round(w, 5),
+        "swerve_rate": round(float(np.mean(scores)), 4) if scores else None,
+        "passes": len(scores),
+        "timeouts": sum(bool(r["timeout"]) for r in routes),
+    }

@@ -8,7 +8,20 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, fields
 
+from ibc_tutorial.driving.bev import check_bev_size
+from ibc_tutorial.experiments.settings import with_overrides as _with_overrides
+from ibc_tutorial.training import TrainConfig
 from ibc_tutorial.utils import check_choice, check_int, check_positive, check_probability
+
+EVAL_TOWN = "town02"
+"""The evaluation town, unseen in training."""
+ROUTES = {
+    "loop-ccw": ((0.0, 0.0), (196.0, 0.0), 5.0, ("straight",) * 4),
+    "loop-cw": ((196.0, 0.0), (0.0, 0.0), 5.0, ("straight",) * 4),
+    "y82-east": ((0.0, 82.0), (50.0, 82.0), 3.0, ("straight",) * 2),
+    "y82-west": ((196.0, 82.0), (139.0, 82.0), 3.0, ("straight",) * 2),
+}
+"""name -> (from node, to node) of the start lane, start arc length (m), turns at the T-junctions."""
 
 PAPER_BINS = 512
 """The paper's grid: 512 linearly spaced steering values (EBMs) and 512 bins (classification)."""
@@ -87,16 +100,16 @@ class SteeringPreset:
     """Training seeds (the paper: three runs per model)."""
     # ---- evaluation (town02)
     eval_routes: tuple = ("loop-ccw", "loop-cw", "y82-east", "y82-west")
-    """The fixed town02 routes (``evaluate.ROUTES``)."""
+    """The fixed town02 routes (``ROUTES``)."""
     route_cap_m: float = 0.0
     """Cut every route to this length (metres); 0 = the whole route."""
     eval_seed: int = 1000
     """Seeds the light phases of the evaluation routes."""
 
     def __post_init__(self):
+        check_bev_size(self.bev_size)  # the renderer's rule: only the sizes it draws
         for f in (
             "routes",
-            "bev_size",
             "embed_dim",
             "head_hidden",
             "head_layers",
@@ -113,10 +126,12 @@ class SteeringPreset:
         check_probability("side_road_share", self.side_road_share)
         if not self.seeds or not self.eval_routes:
             raise ValueError("seeds and eval_routes must name at least one each")
-        from ibc_tutorial.experiments.steering.evaluate import ROUTES
-
         for r in self.eval_routes:
             check_choice("eval_routes", r, tuple(ROUTES))
+
+    def train_config(self, seed: int, **extra) -> TrainConfig:
+        """The ``TrainConfig`` of one model's run (``extra``: its other fields, e.g. ``log_every``)."""
+        return TrainConfig(steps=self.steps, batch_size=self.batch_size, lr=self.lr, seed=seed, **extra)
 
     def to_dict(self) -> dict:
         """JSON-friendly form (tuples become lists)."""
@@ -156,6 +171,21 @@ TINY = SteeringPreset(
 
 PRESETS = {p.name: p for p in (LAPTOP, TINY)}
 """All named presets."""
+
+
+CONFIG_FIELDS = {
+    "train.steps": "steps",
+    "train.batch_size": "batch_size",
+    "train.lr": "lr",
+    "bev.size": "bev_size",
+}
+"""The library configs' names of a preset's fields (``training.TrainConfig``, the renderer's): what
+``train_config`` reads, and names ``--set`` accepts beside the fields' own."""
+
+
+def with_overrides(preset: SteeringPreset, overrides) -> SteeringPreset:
+    """``preset`` with the ``--set FIELD=VALUE`` overrides applied and checked (``experiments.settings``)."""
+    return _with_overrides(preset, overrides, CONFIG_FIELDS)
 
 
 def get_preset(name: str) -> SteeringPreset:

@@ -22,39 +22,32 @@ refused before any work (``--force`` starts over). Chapter 10 only reads the fol
 
 from __future__ import annotations
 
-import argparse
-import multiprocessing
-import sys
-import threading
-import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
+import functools
 from pathlib import Path
 
 import numpy as np
 import torch
 
-from ibc_tutorial import __version__
-from ibc_tutorial.cli import check_output_dir
 from ibc_tutorial.driving.dataset import DemoDataset, DemoLog
-from ibc_tutorial.experiments.agents.replicate import _init_worker
-from ibc_tutorial.experiments.agents.results import (
-    begin_invocation,
+from ibc_tutorial.experiments.runs import (
+    PROVENANCE,
+    PROVENANCE_MD,
+    Provenance,
     check_only_entries,
     delete_entries,
-    git_commit,
-    machine,
-    now,
     read_folder,
     read_json_dict,
+    read_npz,
     write_json,
     write_npz,
 )
 from ibc_tutorial.experiments.steering import evaluate as ev
 from ibc_tutorial.experiments.steering.models import LABELS, MODELS
-from ibc_tutorial.experiments.steering.presets import LAPTOP, PRESETS, SteeringPreset, differences, get_preset
+from ibc_tutorial.experiments.steering.presets import LAPTOP, SteeringPreset, differences
 from ibc_tutorial.experiments.steering.task import collect_demonstrations, side_road_counts
-from ibc_tutorial.experiments.steering.train import EVAL, TRACE, read_eval, run_dir, run_one
-from ibc_tutorial.utils import atomic_write_bytes, check_choice, check_int
+from ibc_tutorial.experiments.steering.train import EVAL, TRACE, StudyInputs, read_eval, run_dir, run_one
+from ibc_tutorial.parallel import imap_unordered
+from ibc_tutorial.utils import check_int
 
 DATA = "data/town01.npz"
 """The demonstrations, relative to the folder."""
@@ -64,12 +57,8 @@ RESULTS = "results.json"
 """The file chapter 10 reads."""
 TRACES = "traces.npz"
 """The Fig. 5 analogue's arrays."""
-PROVENANCE = "provenance.json"
-"""How, where and when the results were made (``PROVENANCE.md`` says the same for readers)."""
-ENTRIES = ("data", "runs", REFERENCES, RESULTS, TRACES, PROVENANCE, "PROVENANCE.md")
+ENTRIES = ("data", "runs", REFERENCES, RESULTS, TRACES, PROVENANCE, PROVENANCE_MD)
 """What a study folder holds (``--force`` deletes these, and only these)."""
-HEARTBEAT_S = 30.0
-"""How often a running study records in ``provenance.json`` that it is still running."""
 
 PAPER = {
     "table1": {  # per run: real-world interventions, W_eff, W_cmd (°/s); VISTA crashes, W_cmd (°/s)
@@ -204,7 +193,9 @@ def _work_one(model: str, seed: int, out: str, preset_d: dict) -> dict:
         _WORKER.clear()
         _WORKER[key] = (ds, log.checksum(), refs, window)
     ds, sha, refs, window = _WORKER[key]
-    return run_one(model, seed, out, preset, ds, refs, window, sha, keep_final=seed == preset.seeds[0])
+    return run_one(
+        model, seed, out, preset, StudyInputs(ds, sha, refs, window), keep_final=seed == preset.seeds[0]
+    )
 
 
 def _stats(values: list) -> dict:
@@ -227,8 +218,8 @@ def collect_results(out: Path, preset: SteeringPreset) -> dict:
             d = run_dir(out, model, seed)
             if (d / EVAL).exists():
                 runs[model][str(seed)] = read_eval(d / EVAL)
-                with np.load(d / TRACE, allow_pickle=False) as z:
-                    traces.update({f"{model}/seed{seed}/{k}": z[k] for k in z.files})
+                trace = read_npz(d / TRACE, f"delete {d} and re-run the same command")
+                traces.update({f"{model}/seed{seed}/{k}": v for k, v in trace.items()})
         per_seed = [r["summary"] for r in runs[model].values()]
         if per_seed:
             table[model] = {
@@ -244,104 +235,53 @@ def collect_results(out: Path, preset: SteeringPreset) -> dict:
     return {"runs": runs, "table": table, "traces": traces}
 
 
-def _provenance(
-    out: Path,
-    preset: SteeringPreset,
-    started: str,
-    invocations: list,
-    done: list,
-    planned: list,
-    command: str,
-    complete: bool,
-) -> None:
-    wall = sum(float(i["seconds"]) for i in invocations)
-    prov = {
-        "command": command,
-        "commit": git_commit(),
-        "package_version": __version__,
-        "started": started,
-        "finished": now() if complete else None,
-        "updated": now(),
-        "wall_seconds": round(wall, 1),
-        "invocations": invocations,
-        "resumed": len(invocations) > 1,
-        "complete": complete,
-        "runs_done": done,
-        "runs_planned": planned,
-        "machine": machine(),
-        "preset": preset.to_dict(),
-    }
-    write_json(out / PROVENANCE, prov)
-    m = prov["machine"]
-    lines = [
-        f"# Provenance of the `{preset.name}` road-following study",
-        "",
-        f"- command: `{command}`",
-        f"- commit: `{prov['commit']}` (ibc_tutorial {__version__})",
-        f"- started: {started}; "
-        + (f"finished: {prov['finished']}" if complete else f"NOT FINISHED (last update {prov['updated']})"),
-        f"- wall time: {wall / 60:.1f} min over {len(invocations)} invocation(s)"
-        + (" (resumed)" if len(invocations) > 1 else ""),
-        f"- machine: {m['nproc']} CPUs ({m['cpu']}), {m['os']}, Python {m['python']}, torch {m['torch']} with "
-        f"{m['torch_threads']} thread(s)",
-        f"- runs finished: {len(done)} of {len(planned)}",
-        "",
-        "Differences of this preset from the `laptop` preset (field: laptop -> this preset):",
-        "",
-    ]
-    lines += [f"- `{k}`: {a} -> {b}" for k, (a, b) in differences(LAPTOP, preset).items()] or ["- none"]
-    atomic_write_bytes(out / "PROVENANCE.md", ("\n".join(lines) + "\n").encode())
+def clear_folder(out) -> None:
+    """Delete a study's entries (``ENTRIES``) from ``out``, nothing else: ``--force``."""
+    check_only_entries(out, ENTRIES, "study")
+    delete_entries(out, ENTRIES)
+
+
+def finished_runs(out, preset: SteeringPreset) -> list[str]:
+    """The runs of ``preset`` under ``out`` that have their ``eval.json``, in planned order."""
+    return [f"{m}/seed{s}" for s in preset.seeds for m in MODELS if (run_dir(out, m, s) / EVAL).exists()]
 
 
 def replicate(
-    preset: SteeringPreset, out, *, command: str = "", workers: int = 1, force: bool = False, log=print
+    preset: SteeringPreset, out, *, command: str = "", overrides: tuple = (), workers: int = 1, log=print
 ) -> dict:
-    """Run the whole study (module docstring) into ``out``; returns the contents of ``results.json``."""
+    """Run the whole study (module docstring) into ``out``; returns the contents of ``results.json``.
+
+    ``out`` is checked first (``check_folder``; ``clear_folder`` is ``--force``); ``command`` and
+    ``overrides`` (the ``--set`` items that made ``preset``) are recorded in the provenance."""
     out = Path(out)
-    if force and out.exists():
-        check_only_entries(out, ENTRIES, "study")
-        delete_entries(out, ENTRIES)
+    workers = check_int("workers", workers, minimum=1)
     check_folder(out, preset)
     out.mkdir(parents=True, exist_ok=True)
-    t0 = time.perf_counter()
-    started, invocations = begin_invocation(out)
-    command = command or f"ibc-tutorial replicate-steering --preset {preset.name} --out {out}"
-    planned = [f"{m}/seed{s}" for s in preset.seeds for m in MODELS]
-    lock = threading.Lock()
+    provenance = Provenance(
+        out,
+        title=f"the `{preset.name}` road-following study",
+        command=command or f"ibc-tutorial replicate-steering --preset {preset.name} --out {out}",
+        preset=preset.to_dict(),
+        differences=differences(LAPTOP, preset),
+        reference="the `laptop` preset",
+        planned=[f"{m}/seed{s}" for s in preset.seeds for m in MODELS],
+        finished=lambda: finished_runs(out, preset),
+        overrides=list(overrides),
+    )
     results: dict = {}
-
-    def finished() -> list:
-        return [f"{m}/seed{s}" for s in preset.seeds for m in MODELS if (run_dir(out, m, s) / EVAL).exists()]
-
-    def heartbeat(complete: bool = False) -> None:
-        with lock:
-            invocations[-1].update(last_seen=now(), seconds=round(time.perf_counter() - t0, 1))
-            _provenance(out, preset, started, invocations, finished(), planned, command, complete)
 
     def save(complete: bool) -> None:
         agg = collect_results(out, preset)
         write_npz(out / TRACES, agg.pop("traces"))
         results.update(agg, complete=complete)
         write_json(out / RESULTS, results)
-        heartbeat(complete)
+        provenance.write(complete)
 
-    stop = threading.Event()
-    heartbeat()
-
-    def beat() -> None:
-        while not stop.wait(HEARTBEAT_S):
-            heartbeat()
-
-    threading.Thread(target=beat, daemon=True, name="provenance heartbeat").start()
-    try:
+    with provenance:
         _work(out, preset, results, save, workers, log)
         save(True)
-    finally:
-        stop.set()
-        if not results.get("complete"):
-            heartbeat()
     if log:
-        log(f"study finished in {sum(i['seconds'] for i in invocations) / 60:.1f} min; results in {out}")
+        log(f"study finished in {provenance.wall_seconds / 60:.1f} min; results in {out}")
     return results
 
 
@@ -408,28 +348,19 @@ def _work(out: Path, preset: SteeringPreset, results: dict, save, workers: int, 
             s = r["summary"]
             log(
                 f"{r['model']} seed {r['seed']}: {s['crashes']} crashes in {s['distance_m'] / 1000:.2f} km, "
-                f"W_cmd {s['w_cmd']:.3f}/s, swerve rate {s['swerve_rate']} ({r['train_seconds']:.0f} s training, "
+                f"W_cmd {s['w_cmd']:.3f}/s, swerve rate {s['swerve_rate']} "
+                f"({r['train_seconds']:.0f} s training, "
                 f"{r['eval_seconds']:.0f} s driving)"
             )
         save(False)
 
-    if workers <= 1:
-        for m, s in todo:
-            after(_work_one(m, s, str(out), preset.to_dict()))
-        return
-    ctx = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(
-        max_workers=workers, mp_context=ctx, initializer=_init_worker, initargs=(torch.get_num_threads(),)
-    ) as pool:
-        try:
-            futures = [pool.submit(_work_one, m, s, str(out), preset.to_dict()) for m, s in todo]
-            for fut in as_completed(futures):
-                after(fut.result())
-        except KeyboardInterrupt:
-            for proc in list(getattr(pool, "_processes", {}).values()):
-                proc.terminate()
-            pool.shutdown(wait=False, cancel_futures=True)
-            raise
+    runs = imap_unordered(
+        [functools.partial(_work_one, m, s, str(out), preset.to_dict()) for m, s in todo],
+        workers=workers,
+        threads=torch.get_num_threads(),
+    )
+    for r in runs:
+        after(r)
 
 
 def load_results(out) -> dict:
@@ -441,49 +372,3 @@ def load_results(out) -> dict:
             f"{Path(out) / TRACES} is missing: delete {out} and re-run 'ibc-tutorial replicate-steering'"
         )
     return res
-
-
-# ---------------------------------------------------------------------- command line
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    """The arguments of ``ibc-tutorial replicate-steering``."""
-    p.add_argument(
-        "--preset", default="laptop", choices=tuple(PRESETS), help="settings (default: %(default)s)"
-    )
-    p.add_argument(
-        "--out",
-        required=True,
-        help="folder for the data, runs, results and provenance; an interrupted "
-        "study of the same preset there is resumed",
-    )
-    p.add_argument("--force", action="store_true", help="start over: delete the study already in --out")
-    p.add_argument(
-        "--threads",
-        type=int,
-        default=0,
-        help="torch CPU threads per process (default 0: torch's choice; 1 is fastest on a busy machine)",
-    )
-    p.add_argument("--workers", type=int, default=1, help="runs in parallel processes (default: %(default)s)")
-    p.add_argument(
-        "--device", default="cpu", choices=("cpu",), help="where to train (the study is sized for a CPU)"
-    )
-
-
-def run(args: argparse.Namespace) -> int:
-    """``ibc-tutorial replicate-steering``: check the inputs and the folder, then run the study."""
-    preset = get_preset(args.preset)
-    threads = check_int("--threads", args.threads, minimum=0)
-    workers = check_int("--workers", args.workers, minimum=1)
-    check_choice("--device", args.device, ("cpu",))
-    out = check_output_dir("--out", args.out)
-    force = bool(getattr(args, "force", False))
-    if not force:
-        check_folder(out, preset)
-    else:
-        check_only_entries(out, ENTRIES, "study")
-    if threads:
-        torch.set_num_threads(threads)
-    command = (
-        "ibc-tutorial " + " ".join(sys.argv[1:]) if sys.argv and "replicate-steering" in sys.argv else ""
-    )
-    replicate(preset, out, command=command, workers=workers, force=force)
-    return 0

@@ -44,7 +44,8 @@ DEMO_TOWN = "town01"
 
 
 def longitudinal_config(speed: float = 6.0, steer_noise: float = 0.0) -> ExpertConfig:
-    """The expert's settings with one target speed everywhere and an unscaled throttle (see the module docstring)."""
+    """The expert's settings with one target speed everywhere and an unscaled throttle (see the module
+    docstring)."""
     speed = check_positive("speed", speed)
     return replace(
         ExpertConfig(),

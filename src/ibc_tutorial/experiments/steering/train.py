@@ -11,8 +11,8 @@ model, preset or dataset is refused. An interrupted run resumes from ``last.pt``
 
 from __future__ import annotations
 
-import json
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -20,8 +20,13 @@ import torch
 
 from ibc_tutorial import __version__
 from ibc_tutorial.driving.dataset import DemoDataset
-from ibc_tutorial.experiments.agents.results import write_npz
-from ibc_tutorial.experiments.steering.evaluate import Reference, drive_route, expert_whiteness
+from ibc_tutorial.experiments.runs import read_json, read_torch_file, write_json, write_npz
+from ibc_tutorial.experiments.steering.evaluate import (
+    Reference,
+    drive_route,
+    expert_whiteness,
+    summarize_routes,
+)
 from ibc_tutorial.experiments.steering.models import (
     MODELS,
     SteeringModel,
@@ -31,9 +36,8 @@ from ibc_tutorial.experiments.steering.models import (
 )
 from ibc_tutorial.experiments.steering.presets import SteeringPreset
 from ibc_tutorial.experiments.steering.task import SteeringBatches
-from ibc_tutorial.metrics import crashes_per_km
-from ibc_tutorial.training import TrainConfig, Trainer
-from ibc_tutorial.utils import atomic_torch_save, atomic_write_bytes, check_choice, check_int
+from ibc_tutorial.training import Trainer
+from ibc_tutorial.utils import atomic_torch_save, check_choice, check_int
 
 FORMAT = "ibc_tutorial.steering_model"
 """The ``format`` entry of every checkpoint of this study."""
@@ -50,7 +54,7 @@ def run_dir(out, model: str, seed: int) -> Path:
     return Path(out) / "runs" / model / f"seed{seed}"
 
 
-def save_checkpoint(
+def save_model_checkpoint(
     path,
     *,
     model: str,
@@ -82,15 +86,13 @@ def save_checkpoint(
     return atomic_torch_save(ckpt, path)
 
 
-def load_checkpoint(path, *, model: str, preset: SteeringPreset, data_sha256: str | None = None) -> dict:
-    """Read a checkpoint with ``weights_only=True`` and check that it is of ``model``, ``preset`` and the data."""
+def load_model_checkpoint(
+    path, *, model: str, preset: SteeringPreset, data_sha256: str | None = None
+) -> dict:
+    """Read a checkpoint with ``weights_only=True`` and check that it is of ``model``, ``preset`` and the
+    data."""
     path = Path(path)
-    try:
-        ckpt = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as exc:
-        raise ValueError(
-            f"{path} is not a readable checkpoint ({type(exc).__name__}): delete it and re-run"
-        ) from None
+    ckpt = read_torch_file(path, "checkpoint of the road-following study", "delete it and re-run")
     if not isinstance(ckpt, dict) or ckpt.get("format") != FORMAT:
         raise ValueError(f"{path} is not a checkpoint of the road-following study: delete it and re-run")
     if ckpt.get("model") != model or ckpt.get("preset") != preset.to_dict():
@@ -107,7 +109,7 @@ def load_checkpoint(path, *, model: str, preset: SteeringPreset, data_sha256: st
 
 def load_model(path, model: str, preset: SteeringPreset) -> SteeringModel:
     """A ``SteeringModel`` from a run's ``final.pt`` (or ``last.pt``)."""
-    ckpt = load_checkpoint(path, model=model, preset=preset)
+    ckpt = load_model_checkpoint(path, model=model, preset=preset)
     net = build_network(model, preset)
     try:
         net.load_state_dict(ckpt["weights"], strict=True)
@@ -121,7 +123,8 @@ def load_model(path, model: str, preset: SteeringPreset) -> SteeringModel:
 def train_model(
     model: str, seed: int, dataset: DemoDataset, preset: SteeringPreset, out, *, data_sha256: str
 ) -> tuple[SteeringModel, list, float, int]:
-    """Train (or resume) one model in ``out``; returns (model, loss curve [[step, loss]], seconds, resumed step)."""
+    """Train (or resume) one model in ``out``; returns (model, loss curve [[step, loss]], seconds, resumed
+    step)."""
     check_choice("model", model, MODELS)
     seed = check_int("seed", seed, minimum=0)
     out = Path(out)
@@ -130,21 +133,15 @@ def train_model(
     torch.manual_seed(seed)  # the network's initial weights
     network = build_network(model, preset)
     data = SteeringBatches(dataset, pairs=uses_pairs(model))
-    config = TrainConfig(
-        steps=preset.steps,
-        batch_size=preset.batch_size,
-        lr=preset.lr,
-        seed=seed,
-        log_every=CHECKPOINT_EVERY,
-        progress=False,
-        desc=f"{model} seed {seed}",
+    config = preset.train_config(
+        seed, log_every=CHECKPOINT_EVERY, progress=False, desc=f"{model} seed {seed}"
     )
     trainer = Trainer(network, objective_for(model, network, preset), data, config)
     losses: list = []
     resumed = 0
     last = out / "last.pt"
     if last.exists():
-        ck = load_checkpoint(last, model=model, preset=preset, data_sha256=data_sha256)
+        ck = load_model_checkpoint(last, model=model, preset=preset, data_sha256=data_sha256)
         trainer.load_state_dict(
             {
                 "model": ck["weights"],
@@ -159,7 +156,7 @@ def train_model(
 
     def checkpoint(step: int, loss: float) -> None:
         losses.append([step, round(loss, 6)])
-        save_checkpoint(
+        save_model_checkpoint(
             last,
             model=model,
             preset=preset,
@@ -187,44 +184,32 @@ def evaluate_model(steering: SteeringModel, references: list[Reference], preset:
         r.pop("steer")
         r["expert_w_cmd"] = round(expert_whiteness(ref), 5)
         routes.append(r)
-    return {"routes": routes, "summary": summarize(routes)}
+    return {"routes": routes, "summary": summarize_routes(routes)}
 
 
-def summarize(routes: list[dict]) -> dict:
-    """One run's routes pooled: crashes, distance, crashes per km, W_cmd (pooled over the commands'
-    changes), the swerve rate over every side-road section driven, and the number of passes."""
-    crashes = sum(r["crashes"] for r in routes)
-    dist = sum(r["distance_m"] for r in routes)
-    n = sum(r["steps"] - 1 for r in routes)
-    w = float(np.sqrt(sum((r["steps"] - 1) * r["w_cmd"] ** 2 for r in routes) / n)) if n else float("nan")
-    scores = [s for r in routes for s in r["swerve_score"] if s is not None]
-    return {
-        "crashes": crashes,
-        "distance_m": round(dist, 2),
-        "crashes_per_km": round(crashes_per_km(crashes, dist), 4) if dist > 0 else None,
-        "w_cmd": round(w, 5),
-        "swerve_rate": round(float(np.mean(scores)), 4) if scores else None,
-        "passes": len(scores),
-        "timeouts": sum(bool(r["timeout"]) for r in routes),
-    }
+@dataclass
+class StudyInputs:
+    """What every run of a study shares (made once per process): the data, the routes, the Fig. 5 window."""
+
+    dataset: DemoDataset
+    """The rendered demonstrations."""
+    data_sha256: str
+    """Their content checksum (``DemoLog.checksum``), stored in every checkpoint."""
+    references: list[Reference]
+    """The expert's drives of the evaluation routes."""
+    window_obs: dict | None
+    """The observations of the Fig. 5 window (None: no trace)."""
 
 
 def run_one(
-    model: str,
-    seed: int,
-    out,
-    preset: SteeringPreset,
-    dataset: DemoDataset,
-    references: list[Reference],
-    window_obs: dict | None,
-    data_sha256: str,
-    keep_final: bool,
+    model: str, seed: int, out, preset: SteeringPreset, inputs: StudyInputs, keep_final: bool
 ) -> dict:
     """Train, evaluate, trace; write the run's files (``eval.json`` last) and return its ``eval.json``."""
     d = run_dir(out, model, seed)
+    dataset, data_sha256, window_obs = inputs.dataset, inputs.data_sha256, inputs.window_obs
     steering, losses, seconds, resumed = train_model(model, seed, dataset, preset, d, data_sha256=data_sha256)
     te = time.perf_counter()
-    ev = evaluate_model(steering, references, preset)
+    ev = evaluate_model(steering, inputs.references, preset)
     arrays = {}
     if window_obs is not None:
         arrays["steer"] = steering.steer(window_obs).numpy().astype(np.float32)  # (T,)
@@ -233,7 +218,7 @@ def run_one(
             arrays["scores"] = scores.numpy().astype(np.float32)  # (T, G)
     write_npz(d / TRACE, arrays)
     if keep_final:
-        save_checkpoint(
+        save_model_checkpoint(
             d / "final.pt",
             model=model,
             preset=preset,
@@ -250,7 +235,7 @@ def run_one(
         resumed_from_step=resumed,
         eval_seconds=round(time.perf_counter() - te, 1),
     )
-    atomic_write_bytes(d / EVAL, json.dumps(ev, indent=1).encode())  # last: with it the run is finished
+    write_json(d / EVAL, ev)  # last: with it the run is finished
     (d / "last.pt").unlink(missing_ok=True)
     return ev
 
@@ -259,10 +244,7 @@ def read_eval(path) -> dict:
     """A run's ``eval.json``, checked; ValueError naming the file otherwise."""
     path = Path(path)
     fix = f"delete {path.parent} and re-run the same command to make that run again"
-    try:
-        ev = json.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise ValueError(f"{path} is damaged ({type(exc).__name__}): {fix}") from None
+    ev = read_json(path, fix)
     if (
         not isinstance(ev, dict)
         or not isinstance(ev.get("routes"), list)

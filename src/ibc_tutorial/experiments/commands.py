@@ -1,0 +1,217 @@
+"""The sub-commands' work, each a function of the arguments ``ibc_tutorial.cli`` parsed and checked.
+
+The CLI owns the command line: it parses it, checks the paths it names (before any work), and sets
+``args.command_line`` for the provenance. Each function here turns the arguments into the
+library's settings (a preset with its ``--set`` overrides: ``ValueError`` before any work), prints
+what a user reads, and returns the exit code. Nothing here reads ``sys.argv``. Each imports its
+modules when called, so that ``ibc-tutorial evaluate`` does not load the training code.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import math
+import time
+
+import torch
+
+from ibc_tutorial.utils import atomic_write_bytes, check_choice, check_device, check_int
+
+
+def _threads(args: argparse.Namespace) -> int:
+    return check_int("--threads", args.threads, minimum=0)
+
+
+def collect(args: argparse.Namespace) -> int:
+    """``ibc-tutorial collect``: drive the expert, store the demonstrations in ``--out``."""
+    from ibc_tutorial.driving.collect import CollectConfig
+    from ibc_tutorial.driving.collect import collect as collect_demonstrations
+
+    config = CollectConfig(
+        town=args.town,
+        routes=args.routes,
+        seed=args.seed,
+        min_minutes=args.min_minutes,
+        max_minutes=args.max_minutes,
+        routeless=args.routeless,
+        steer_noise=args.steer_noise,
+        brake_noise=args.brake_noise,
+    )
+    t0 = time.perf_counter()
+    log = collect_demonstrations(config)
+    seconds = time.perf_counter() - t0
+    path = log.save(args.out)
+    eps = log.meta["episodes"]
+    dist = sum(e["distance_m"] for e in eps)
+    inf = sum(e["red_light_infractions"] for e in eps)
+    ends = sum(e["end"] != "completed" for e in eps)
+    print(
+        f"{len(log)} samples in {len(eps)} episodes of {config.town}: {dist / 1000:.1f} km, "
+        f"{inf} red-light infractions, {ends} episodes ended early; "
+        f"{seconds:.1f} s; written to {path}"
+    )
+    return 0
+
+
+def train(args: argparse.Namespace) -> int:
+    """``ibc-tutorial train``: the preset and its overrides, the data and the folder checked, then train."""
+    from ibc_tutorial.driving.dataset import DemoLog
+    from ibc_tutorial.experiments.agents import train as training
+    from ibc_tutorial.experiments.agents.presets import get_preset, with_overrides
+    from ibc_tutorial.experiments.agents.run_folder import clear_run, inspect_run
+
+    preset = get_preset(args.preset)
+    if args.epochs is not None:
+        preset = dataclasses.replace(preset, epochs=check_int("--epochs", args.epochs, minimum=1))
+    preset = with_overrides(preset, getattr(args, "overrides", ()))
+    seed = check_int("--seed", args.seed, minimum=0)
+    threads = _threads(args)
+    device = check_device("--device", getattr(args, "device", "cpu"))
+    force = bool(getattr(args, "force", False))
+    demo = DemoLog.load(args.data)
+    if not force:
+        state = inspect_run(args.out, args.method, preset, seed, demo.checksum(), args.data)
+        if state.status == "done":
+            print(
+                f"{args.out} holds this run trained to epoch {state.epoch} already: nothing to do "
+                "(--epochs N to train on, --force to start over)"
+            )
+            return 0
+    else:
+        clear_run(args.out)
+    if threads:
+        torch.set_num_threads(threads)
+    result = training.train_agent(args.method, args.data, preset, seed, args.out, device=device)
+    if not result.metrics or result.metrics[-1]["epoch"] != preset.epochs:
+        raise ValueError(
+            f"{args.out}: the run ended at epoch {result.metrics[-1]['epoch'] if result.metrics else 0}, "
+            f"not {preset.epochs}"
+        )
+    again = f" (resumed after epoch {result.resumed_from})" if result.resumed_from else ""
+    print(
+        f"trained {args.method} (seed {seed}) to epoch {preset.epochs}{again} in {result.seconds:.0f} s; "
+        f"checkpoints in {result.out}"
+    )
+    return 0
+
+
+def evaluate(args: argparse.Namespace) -> int:
+    """``ibc-tutorial evaluate``: drive a checkpoint's agent, print each episode, write ``--out``."""
+    from ibc_tutorial import __version__
+    from ibc_tutorial.experiments.agents.checkpoints import load_agent, training_seed
+    from ibc_tutorial.experiments.agents.crossings import crossing_rows, ended_crossing_energies
+    from ibc_tutorial.experiments.agents.evaluate import episode_rows, evaluate_agent, summarize_episodes
+    from ibc_tutorial.experiments.runs import git_commit, machine
+
+    seed = check_int("--seed", args.seed, minimum=0)
+    threads = _threads(args)
+    device = check_device("--device", getattr(args, "device", "cpu"))
+    for name in ("episodes", "steps"):
+        if getattr(args, name) is not None:
+            check_int(f"--{name}", getattr(args, name), minimum=1)
+    if args.policy_seed is not None:
+        check_int("--policy-seed", args.policy_seed, minimum=0)
+    crossings = getattr(args, "crossings", False)
+    agent, ckpt = load_agent(args.checkpoint)
+    agent.to(device)  # loaded onto the CPU (map_location="cpu"), then moved
+    episodes = args.episodes or agent.preset.final_episodes
+    steps = args.steps or agent.preset.final_steps
+    policy_seed = args.policy_seed if args.policy_seed is not None else training_seed(ckpt)
+    if policy_seed is None:
+        raise ValueError(f"{args.checkpoint} does not record its training seed: pass --policy-seed")
+    routeless = not getattr(args, "routed", False)
+    if threads:
+        torch.set_num_threads(threads)
+    protocol = {"seed": seed, "policy_seed": policy_seed, "routeless": routeless}
+    results = evaluate_agent(agent, args.town, episodes, steps, **protocol, record_steps=crossings)
+    rows = episode_rows(results)
+    energy_steer = None
+    if crossings:
+        for row, r in zip(rows, results, strict=True):
+            row["junction_crossings"] = crossing_rows(args.town, r)
+        if agent.method != "bc":
+            energy_steer = ended_crossing_energies(agent, args.town, rows, steps=steps, **protocol)
+    print(
+        f"{ckpt['method']} agent (epoch {ckpt['epoch']}) in {args.town}, {episodes} "
+        f"{'routeless' if routeless else 'routed'} episodes of {steps} steps from seed {seed}, "
+        f"policy seed {policy_seed}:"
+    )
+    print(f"{'episode':>8} {'seed':>6} {'steps':>6} {'distance m':>11} {'infractions':>12} {'score':>8}  end")
+    for k, r in enumerate(rows):
+        print(
+            f"{k:>8} {r['seed']:>6} {r['steps']:>6} {r['distance_m']:>11.1f} "
+            f"{r['red_light_infractions']:>12} "
+            f"{r['score']:>8.1f}  {r['termination'] or '-'}"
+        )
+    s = summarize_episodes(rows)
+    print(
+        f"mean score {s['score_mean']:.1f} ± {s['score_std']:.1f}, distance {s['distance_m_mean']:.1f} m, "
+        f"infractions {s['red_light_infractions_mean']:.2f}"
+    )
+    if args.out:
+        payload = {
+            "checkpoint": str(args.checkpoint),
+            "method": ckpt["method"],
+            "town": args.town,
+            "steps": steps,
+            "seed": seed,
+            "policy_seed": policy_seed,
+            "routeless": routeless,
+            "package_version": __version__,
+            "commit": git_commit(),
+            "machine": machine(),
+            "summary": s,
+            "episodes": rows,
+        }
+        if energy_steer is not None:  # the steering values of the ended crossings' energy_by_steer
+            payload["energy_steer_grid"] = [round(float(v), 4) for v in energy_steer]
+        atomic_write_bytes(args.out, json.dumps(payload, indent=1).encode())
+    return 0 if all(math.isfinite(r["score"]) for r in rows) else 1
+
+
+def replicate(args: argparse.Namespace) -> int:
+    """``ibc-tutorial replicate``: the preset (ablation, overrides) and the folder checked, then replicate."""
+    from ibc_tutorial.experiments.agents import replicate as replication
+    from ibc_tutorial.experiments.agents.ablations import ablation_preset
+    from ibc_tutorial.experiments.agents.presets import get_preset, with_overrides
+
+    preset = get_preset(args.preset)
+    if getattr(args, "ablation", None):
+        preset = ablation_preset(preset, args.ablation)
+    overrides = list(getattr(args, "overrides", ()))
+    preset = with_overrides(preset, overrides)
+    threads = _threads(args)
+    workers = check_int("--workers", args.workers, minimum=1)
+    device = check_device("--device", getattr(args, "device", "cpu"))
+    if getattr(args, "force", False):
+        replication.clear_folder(args.out)
+    replication.check_folder(args.out, preset)  # before any work
+    if threads:
+        torch.set_num_threads(threads)
+    command = getattr(args, "command_line", "")
+    replication.replicate(
+        preset, args.out, command=command, overrides=overrides, workers=workers, device=str(device)
+    )
+    return 0
+
+
+def replicate_steering(args: argparse.Namespace) -> int:
+    """``ibc-tutorial replicate-steering``: the preset (overrides) and the folder checked, then the study."""
+    from ibc_tutorial.experiments.steering import replicate as study
+    from ibc_tutorial.experiments.steering.presets import get_preset, with_overrides
+
+    overrides = list(getattr(args, "overrides", ()))
+    preset = with_overrides(get_preset(args.preset), overrides)
+    threads = _threads(args)
+    workers = check_int("--workers", args.workers, minimum=1)
+    check_choice("--device", args.device, ("cpu",))
+    if getattr(args, "force", False):
+        study.clear_folder(args.out)
+    study.check_folder(args.out, preset)  # before any work
+    if threads:
+        torch.set_num_threads(threads)
+    command = getattr(args, "command_line", "")
+    study.replicate(preset, args.out, command=command, overrides=overrides, workers=workers)
+    return 0

@@ -1,0 +1,61 @@
+"""``--set FIELD=VALUE``: one setting of a preset changed from the command line, checked before any work.
+
+A preset (``experiments.agents.presets.Preset``, ``experiments.steering.presets.SteeringPreset``) is
+a frozen dataclass whose ``__post_init__`` builds and so validates the library configs it makes
+(``CollectConfig``, ``DFOConfig``, ...). ``with_overrides(preset, ["dfo.n_samples=1024"], aliases)``
+returns the preset with those fields replaced: a name is a field of the preset (``dfo_samples``) or
+the library config's own name for it (``dfo.n_samples``, via the preset's ``CONFIG_FIELDS``); the
+value is read as the field's type (an integer, a number, a word, a comma-separated tuple). An unknown
+field, an unreadable value or a value the configs refuse is a ``ValueError`` naming ``--set`` and the
+field, raised before any work.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+
+def _parse(name: str, text: str, current):
+    """``text`` read as the type of ``current`` (the field's present value)."""
+    text = text.strip()
+    try:
+        if isinstance(current, bool):
+            if text.lower() not in ("true", "false", "1", "0"):
+                raise ValueError
+            return text.lower() in ("true", "1")
+        if isinstance(current, int):
+            return int(text)
+        if isinstance(current, float):
+            return float(text)
+        if isinstance(current, tuple):
+            items = json.loads(text) if text.startswith("[") else [t for t in text.split(",") if t.strip()]
+            kind = type(current[0]) if current else str
+            return tuple(kind(x.strip() if isinstance(x, str) else x) for x in items)
+    except (ValueError, TypeError, json.JSONDecodeError):
+        raise ValueError(
+            f"--set {name}: cannot read {text!r} as {type(current).__name__} (the field's type)"
+        ) from None
+    return text
+
+
+def with_overrides(preset, overrides, aliases: dict[str, str] | None = None):
+    """``preset`` with each ``"FIELD=VALUE"`` of ``overrides`` applied (see the module docstring)."""
+    aliases = aliases or {}
+    names = [f.name for f in dataclasses.fields(preset) if f.name != "name"]
+    changes = {}
+    for item in overrides or ():
+        if not isinstance(item, str) or "=" not in item:
+            raise ValueError(f"--set must be FIELD=VALUE, got {item!r}")
+        key, text = (part.strip() for part in item.split("=", 1))
+        field = aliases.get(key, key)
+        if field not in names:
+            known = sorted(set(names) | set(aliases))
+            raise ValueError(f"--set: unknown field {key!r}; the fields are {', '.join(known)}")
+        changes[field] = _parse(key, text, getattr(preset, field))
+    if not changes:
+        return preset
+    try:
+        return dataclasses.replace(preset, **changes)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"--set {', '.join(overrides)}: {exc}") from None
