@@ -36,13 +36,32 @@ def test_study_metrics_refuses_empty_inputs():
 def test_fig5_analogue_panels_images_and_lines():
     t = np.arange(5) * 0.1
     grid = np.linspace(-1, 1, 7)
-    scores = {"ebm": np.random.default_rng(0).normal(size=(5, 7))}
-    steer = {"ebm": np.zeros(5), "regression": np.full(5, 0.2)}
-    fig = plot_fig5_analogue(t, grid, steer, scores, np.zeros(5), titles={"ebm": "EBM"}, junction_s=0.2)
+    rng = np.random.default_rng(0)
+    scores = {"ebm": rng.normal(size=(5, 7)), "mdn": 50 * rng.normal(size=(5, 7))}
+    steer = {"ebm": np.zeros(5), "mdn": np.zeros(5), "regression": np.full(5, 0.2)}
+    bev = np.zeros((5, 32, 32), np.float32)
+    fig = plot_fig5_analogue(
+        t, grid, steer, scores, np.zeros(5), bev=bev, titles={"ebm": "EBM"}, junction_s=0.2, clip_nats=10
+    )
     panels = [ax for ax in fig.axes if ax.get_title()]
-    assert [ax.get_title() for ax in panels] == ["EBM", "regression"]
-    assert len(panels[0].images) == 1 and len(panels[1].images) == 0
-    assert np.allclose(panels[1].lines[0].get_ydata(), 0.2)
-    assert panels[0].get_xlabel() == "time (s)"
+    assert [ax.get_title() for ax in panels] == [
+        "the observation at the junction entry",
+        "EBM",
+        "mdn",
+        "regression",
+    ]
+    assert len(panels[1].images) == 1 and len(panels[3].images) == 0
+    # the paper's layout: steering across, time down; the regression's output on the same axes
+    assert panels[1].get_xlabel().startswith("steering") and panels[1].get_ylabel() == "time (s)"
+    assert np.allclose(panels[3].lines[0].get_xdata(), 0.2)
+    assert panels[3].get_ylim()[0] > panels[3].get_ylim()[1]  # time runs down
+    # one colour scale for every scored panel, in nats above each time step's minimum
+    assert [im.get_clim() for ax in panels[1:3] for im in ax.images] == [(0.0, 10.0), (0.0, 10.0)]
+    row = panels[2].images[0].get_array()[0]
+    assert float(np.min(row)) == 0.0
     with pytest.raises(ValueError, match="steer"):
         plot_fig5_analogue(t, grid, {}, {}, np.zeros(5))
+    with pytest.raises(ValueError, match="clip_nats"):
+        plot_fig5_analogue(t, grid, steer, scores, np.zeros(5), clip_nats=0)
+    with pytest.raises(ValueError, match="shape"):
+        plot_fig5_analogue(t, grid, steer, {"ebm": np.zeros((4, 7))}, np.zeros(5))

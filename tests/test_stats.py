@@ -216,3 +216,50 @@ def test_exit_test_is_calibrated_under_the_null():
         b = visits(*[(ap, str(rng.choice(["left", "right"]))) for ap in range(4) for _ in range(4)])
         wrong += stats.exit_spread_test(a, b, n_permutations=400, seed=k).verdict == "holds"
     assert wrong <= 12  # 5 expected; P(> 12) < 0.5 % for a calibrated test
+
+
+# --------------------------------------------------------------------------- Welch's t (few seeds)
+def test_student_t_quantile_matches_scipy():
+    sp = pytest.importorskip("scipy.stats")
+    for df in (1, 2, 2.7, 5, 30, 300):
+        for q in (0.025, 0.4, 0.5, 0.9, 0.975, 0.995):
+            assert abs(stats.student_t_quantile(q, df) - sp.t.ppf(q, df)) < 1e-5 * max(
+                1, abs(sp.t.ppf(q, df))
+            )
+    for bad in ({"q": 0.0, "df": 2}, {"q": 1.0, "df": 2}, {"q": 0.9, "df": 0.5}, {"q": 0.9, "df": -1}):
+        with pytest.raises(ValueError, match="q|df"):
+            stats.student_t_quantile(**bad)
+
+
+def test_welch_interval_matches_scipy_and_refuses_bad_input():
+    sp = pytest.importorskip("scipy.stats")
+    rng = np.random.default_rng(1)
+    for _ in range(20):
+        a, b = rng.normal(size=3), rng.normal(0.5, 2.0, size=4)
+        ci = sp.ttest_ind(a, b, equal_var=False).confidence_interval(0.95)
+        got = stats.welch_interval(a, b)
+        assert got.n_resamples == 0
+        assert np.allclose([got.low, got.high], [ci.low, ci.high], atol=1e-5)
+    # no spread in either group: the interval is the observed difference
+    assert str(stats.welch_interval([0, 0, 0], [0, 0, 0])) == "0.00 [0.00, 0.00]"
+    with pytest.raises(ValueError, match="values_a"):
+        stats.welch_interval([1.0], [1, 2])
+    with pytest.raises(ValueError, match="values_b"):
+        stats.welch_interval([1, 2], [1, np.nan])
+
+
+def test_welch_covers_at_three_seeds_where_the_percentile_bootstrap_does_not():
+    # normal data, 3 units per group, true difference 0: Welch's 95 % interval covers about 95 %;
+    # the percentile bootstrap over 3 units (10 distinct resample means each) covers far less
+    rng = np.random.default_rng(0)
+    welch = boot = 0
+    trials = 300
+    for i in range(trials):
+        a, b = rng.normal(size=3), rng.normal(size=3)
+        welch += stats.welch_interval(a, b).contains(0.0)
+        boot += stats.difference_interval(a[:, None], b[:, None], n_resamples=2000, seed=i).contains(0.0)
+    assert welch / trials > 0.9
+    assert boot / trials < 0.85
+    j = stats.compare_few([1, 2, 3], [0, 0.5, 0.2], "a above b")
+    assert j.verdict == stats.CANNOT_TELL and j.interval.n_resamples == 0
+    assert stats.compare_few([10, 11, 12], [0, 0.5, 0.2]).verdict == stats.HOLDS

@@ -2,9 +2,10 @@
 
 - ``plot_study_metrics``: one panel per metric (crashes per km, W_cmd, swerve rate), a bar per
   model for the mean over seeds, a dot per seed, and the paper's value as a black tick;
-- ``plot_fig5_analogue``: the off-policy figure like the paper's Fig. 5, one panel per model
-  along 5 s of an expert pass of a side road: its energy over steering (or −log of its density)
-  as an image, its steering output as a line, the expert's as a dashed line.
+- ``plot_fig5_analogue``: the off-policy figure in the layout of the paper's Fig. 5 (steering
+  across, time down, the observation beside), one panel per model along 5 s of an expert pass of
+  a side road: its energy over steering (or −log of its density) on one shared colour scale, its
+  steering output as a line, the expert's as a dashed line.
 """
 
 from __future__ import annotations
@@ -32,7 +33,7 @@ def plot_study_metrics(
         raise ValueError("models must name at least one model")
     fig, axes = plt.subplots(1, n, figsize=(4.4 * n, 3.8), squeeze=False)
     x = np.arange(len(models))
-    for ax, (ylabel, values) in zip(axes[0], metrics.items()):
+    for ax, (ylabel, values) in zip(axes[0], metrics.items(), strict=True):
         means = [float(np.mean(as_array(values[m], float))) for m in models]
         ax.bar(x, means, width=0.7, color=[f"C{i}" for i in range(len(models))], alpha=0.7)
         for i, m in enumerate(models):
@@ -70,57 +71,90 @@ def plot_fig5_analogue(
     scores: dict,
     expert,
     *,
+    bev=None,
     titles: dict | None = None,
     junction_s: float | None = None,
+    clip_nats: float = 30.0,
     title: str = "Steering along 5 s of an expert pass of a side road",
 ):
-    """One panel per model: its scores over the steering grid against time, and its output.
+    """The paper's Fig. 5 layout: one panel per model, steering across, time running down.
+
+    Each scored model's panel is an image of its score over the steering grid (energy, or −log
+    density: lower = preferred), shown as nats above that time step's minimum on ONE colour scale
+    shared by every scored panel, so that a colour means the same gap in every panel. Every panel
+    (the regression's too, on the same axes) draws the model's output as a line and the expert's
+    as a dashed line, and a horizontal line where the expert enters the junction.
 
     Args:
-        time_s: (T,) seconds along the window.
-        grid: (G,) the steering values the scores are given at.
+        time_s: (T,) seconds along the window (the vertical axis, downwards).
+        grid: (G,) the steering values the scores are given at (the horizontal axis).
         steer: {model: (T,) its steering output}; one panel per entry.
-        scores: {model: (T, G) energy (or −log density; lower = preferred)}; models without an
-            entry (the regression) get the output line only.
+        scores: {model: (T, G) energy or −log density}; models without an entry get the lines only.
         expert: (T,) the expert's steering along the window.
+        bev: optional (5, S, S) observation shown in a first panel (the paper's camera image).
         titles: optional {model: panel title}.
-        junction_s: optional time (s) at which the expert enters the junction (a vertical line).
+        junction_s: optional time (s) at which the expert enters the junction.
+        clip_nats: the top of the shared colour scale (nats above the minimum); larger gaps saturate.
     """
     n = check_panels("steer", steer)
     t = as_array(time_s, float)
     g = as_array(grid, float)
     ex = as_array(expert, float)
-    cols = min(3, n)
-    rows = (n + cols - 1) // cols
-    fig, axes = plt.subplots(rows, cols, figsize=(4.6 * cols, 3.4 * rows), squeeze=False)
+    if not (isinstance(clip_nats, (int, float)) and clip_nats > 0):
+        raise ValueError(f"clip_nats must be a positive number of nats, got {clip_nats!r}")
+    missing = [m for m in scores if m not in steer]
+    if missing:
+        raise ValueError(f"scores has models without a steering output in steer: {missing}")
+    first = 1 if bev is not None else 0
+    panels = n + first
+    cols = min(4, panels)
+    rows = (panels + cols - 1) // cols
+    fig, axes = plt.subplots(rows, cols, figsize=(3.6 * cols, 3.6 * rows), squeeze=False)
+    flat = [ax for row in axes for ax in row]
+    if bev is not None:
+        from ibc_tutorial.plotting.town import draw_bev
+
+        draw_bev(flat[0], bev)
+        flat[0].set_title("the observation at the junction entry", fontsize=9)
     dt = float(t[1] - t[0]) if len(t) > 1 else 0.1
+    image = None
     for k, (model, out) in enumerate(steer.items()):
-        ax = axes[k // cols][k % cols]
+        ax = flat[first + k]
         if model in scores:
             e = as_array(scores[model], float)  # (T, G)
-            # per time step, the scores relative to their minimum: each column shows its own shape
-            rel = e - e.min(axis=1, keepdims=True)
-            im = ax.imshow(
-                rel.T,
-                origin="lower",
+            if e.shape != (len(t), len(g)):
+                raise ValueError(f"scores[{model!r}] must have shape {(len(t), len(g))}, got {e.shape}")
+            rel = e - e.min(axis=1, keepdims=True)  # (T, G) nats above each time step's minimum
+            image = ax.imshow(
+                rel,
+                origin="upper",
                 aspect="auto",
                 cmap="viridis_r",
-                extent=(t[0] - dt / 2, t[-1] + dt / 2, g[0], g[-1]),
+                extent=(g[0], g[-1], t[-1] + dt / 2, t[0] - dt / 2),
                 vmin=0.0,
-                vmax=max(float(np.percentile(rel, 90)), 1e-6),
+                vmax=float(clip_nats),
             )
-            fig.colorbar(im, ax=ax, label="score − its minimum")
-        ax.plot(t, as_array(out, float), color="r", lw=1.5, label="model's output")
-        ax.plot(t, ex, color="w" if model in scores else "k", ls="--", lw=1.2, label="expert")
+        ax.plot(as_array(out, float), t, color="r", lw=1.5, label="model's output")
+        ax.plot(ex, t, color="w" if model in scores else "k", ls="--", lw=1.2, label="expert")
+        ax.axvline(0.0, color="0.6", lw=0.6)
         if junction_s is not None:
-            ax.axvline(junction_s, color="0.5", lw=1, ls=":", label="junction entered")
-        ax.set_ylim(-1.0, 1.0)
-        ax.set_xlabel(TIME_LABEL)
-        ax.set_ylabel(STEER_LABEL, fontsize=8)
+            ax.axhline(junction_s, color="0.5", lw=1, ls=":", label="junction entered")
+        ax.set_xlim(-1.0, 1.0)
+        ax.set_ylim(t[-1] + dt / 2, t[0] - dt / 2)
+        ax.set_xlabel(STEER_LABEL, fontsize=8)
+        ax.set_ylabel(TIME_LABEL)
         ax.set_title((titles or {}).get(model, model), fontsize=9)
         ax.legend(fontsize=7, loc="lower left")
-    for k in range(n, rows * cols):
-        axes[k // cols][k % cols].axis("off")
+    for ax in flat[first + n :]:
+        ax.axis("off")
     fig.suptitle(title)
     fig.tight_layout()
+    if image is not None:
+        fig.colorbar(
+            image,
+            ax=flat,
+            extend="max",
+            shrink=0.8,
+            label="score above its minimum at that time (nats)",
+        )
     return fig
