@@ -32,6 +32,7 @@ import numpy as np
 import torch
 
 from ibc_tutorial import stats
+from ibc_tutorial.driving.analysis import junction_crossings
 from ibc_tutorial.driving.energy_profiles import beta_shape, boltzmann_sides, low_range, valleys
 from ibc_tutorial.driving.stems import (
     decision_window,
@@ -39,6 +40,7 @@ from ibc_tutorial.driving.stems import (
     red_stops,
     steering_onset,
     stem_crossings,
+    stem_exit_counts,
 )
 from ibc_tutorial.experiments.agents.checkpoints import load_agent
 from ibc_tutorial.experiments.agents.results import git_commit, machine, now, write_json
@@ -344,7 +346,40 @@ def fig6_states(files: dict[str, dict], method: str = "da-ibc") -> dict:
     return out
 
 
-def summarise(out) -> dict:
+def demonstrations(path) -> dict:
+    """The stem crossings of the demonstrations (a ``DemoLog`` file): exits per stem, the expert's onsets."""
+    from ibc_tutorial.driving.dataset import DemoLog
+
+    log = DemoLog.load(path)
+    crossings, onsets = [], {"left": [], "right": []}
+    for e in np.unique(log.episode):
+        sel = log.episode == e
+        steer, poses = log.action[sel][:, 0], log.pose[sel]
+        for c in stem_crossings(log.town, log.lane[sel], steer):
+            crossings.append(c)
+            if c["finished"] and c["turn"] in onsets:
+                onsets[c["turn"]].append(steering_onset(c, poses, steer))
+    exits = {str(k): v for k, v in sorted(stem_exit_counts(crossings).items())}
+    return {
+        "town": log.town,
+        "samples": len(log),
+        "junction_crossings": sum(
+            len(junction_crossings(log.town, log.lane[log.episode == e], log.action[log.episode == e][:, 0]))
+            for e in np.unique(log.episode)
+        ),
+        "stem_crossings": len(crossings),
+        "left": sum(d["left"] for d in exits.values()),
+        "right": sum(d["right"] for d in exits.values()),
+        "per_stem": exits,
+        "stems_both_ways": [a for a, d in exits.items() if d["left"] and d["right"]],
+        "onset_m": {
+            t: {"n": len(v), "median": round(float(np.nanmedian(v)), 2) if v else None}
+            for t, v in onsets.items()
+        },
+    }
+
+
+def summarise(out, data=None) -> dict:
     """``summary.json``: ``method_summary`` per method and the expert, the Fig. 6 states."""
     out = Path(out)
     files = {p.stem: json.loads(p.read_text()) for p in sorted((out / "analysis").glob("*.json"))}
@@ -354,6 +389,8 @@ def summarise(out) -> dict:
         if fs:
             summary["methods"][m] = method_summary(fs)
     summary["fig6"] = fig6_states(files)
+    if data is not None:
+        summary["demonstrations"] = demonstrations(data)
     summary["made"] = {"commit": git_commit(), "at": now()}
     write_json(out / "summary.json", summary)
     return summary
@@ -374,7 +411,7 @@ def main(argv=None) -> int:
     torch.set_num_threads(1)
     if not args.summary_only:
         run_analysis(args.folder, args.out)
-    summarise(args.out)
+    summarise(args.out, Path(args.folder) / "data" / "town01.npz")
     return 0
 
 
