@@ -201,14 +201,18 @@ def analyse_agent(name: str, checkpoint: Path | None, drive_path: Path) -> dict:
 
 
 def run_analysis(folder, out, log=print) -> list[str]:
-    """``analyse_agent`` for every drive file in ``out/drives`` without its ``out/analysis`` file."""
+    """``analyse_agent`` for every drive file in ``out/drives`` without its ``out/analysis`` file.
+
+    Each invocation that analyses something is recorded in ``out/analysis/provenance.json``
+    (commit, command, machine, CPU seconds per agent)."""
     out = Path(out)
-    prov_path = out / "provenance.json"
-    prov = json.loads(prov_path.read_text()) if prov_path.exists() else {}
-    inv = {"command": "python -m ibc_tutorial.experiments.agents.stem_analysis " + " ".join(sys.argv[1:]),
-           "commit": git_commit(), "machine": machine(), "started": now()}  # fmt: skip
-    prov.setdefault("analyses", []).append(inv)
-    write_json(prov_path, prov)
+    prov_path = out / "analysis" / "provenance.json"
+    inv = {
+        "command": "python -m ibc_tutorial.experiments.agents.stem_analysis " + " ".join(sys.argv[1:]),
+        "commit": git_commit(),
+        "machine": machine(),
+        "started": now(),
+    }
     done = []
     for name, ck in drivers(folder):
         src, dst = out / "drives" / f"{name}.npz", out / "analysis" / f"{name}.json"
@@ -217,12 +221,13 @@ def run_analysis(folder, out, log=print) -> list[str]:
         t0 = time.process_time()
         write_json(dst, analyse_agent(name, ck, src))
         inv.setdefault("cpu_seconds", {})[name] = round(time.process_time() - t0, 1)
+        inv["finished"] = now()
+        prov = json.loads(prov_path.read_text()) if prov_path.exists() else {"invocations": []}
+        prov["invocations"] = [i for i in prov["invocations"] if i["started"] != inv["started"]] + [inv]
         write_json(prov_path, prov)
         done.append(name)
         if log:
             log(f"{now()} analysed {name}", flush=True)
-    inv["finished"] = now()
-    write_json(prov_path, prov)
     return done
 
 
