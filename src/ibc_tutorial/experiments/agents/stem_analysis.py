@@ -241,7 +241,16 @@ def _minority(p):
 
 
 def method_summary(files: list[dict], seed: int = 0) -> dict:
-    """Per-method measures with agents x episodes bootstrap intervals, and the state readings pooled."""
+    """Per-method measures with agents x episodes bootstrap intervals, and the state readings pooled.
+
+    Shares are pooled over events (``stats.ratio_of_sums_interval``): ``left_share`` and
+    ``minority_share`` (min(p, 1 - p)) over finished stem crossings, ``mode_coverage`` over stems
+    crossed at least twice in an episode; per-episode means (``stats.mean_interval``):
+    ``distinct_approaches``, ``lanes_covered``, ``circling`` (the share of episodes that circle).
+    The state groups: ``stem_approach`` (the ``LEAD`` states before a stem's entry), ``stem_window``
+    (``decision_window``), ``stem_entry`` (its first state; ``_left``, ``_right`` by the exit taken),
+    ``stem_window_unfinished`` (crossings the record ended inside: turn "ended"), ``red_stop``.
+    """
     left, cross = _table(files, lambda e: e["left"]), _table(files, lambda e: e["stem_crossings"])
     out: dict = {"agents": len(files), "episodes": int(left.size), "stem_crossings": int(cross.sum()),
                  "left": int(left.sum())}  # fmt: skip
@@ -272,11 +281,12 @@ def method_summary(files: list[dict], seed: int = 0) -> dict:
     states = [s for f in files for s in f["states"]]
     out["states"] = {}
     for label, sel in (
+        ("stem_approach", lambda s: s["kind"] == "stem" and s["rel"] < 0),
         ("stem_window", lambda s: s["kind"] == "stem" and s["window"]),
         ("stem_entry", lambda s: s["kind"] == "stem" and s["rel"] == 0),
         ("stem_entry_left", lambda s: s["kind"] == "stem" and s["rel"] == 0 and s["turn"] == "left"),
         ("stem_entry_right", lambda s: s["kind"] == "stem" and s["rel"] == 0 and s["turn"] == "right"),
-        ("stem_window_ended", lambda s: s["kind"] == "stem" and s["window"] and s["turn"] == "ended"),
+        ("stem_window_unfinished", lambda s: s["kind"] == "stem" and s["window"] and s["turn"] == "ended"),
         ("red_stop", lambda s: s["kind"] == "red"),
     ):
         out["states"][label] = pooled_readings([s for s in states if sel(s)])
