@@ -476,3 +476,13 @@ def test_force_clears_only_a_replication(shared, tmp_path):
     replicate_module.clear_folder(from_tiny)
     assert sorted(p.name for p in from_tiny.iterdir()) == [".hidden-editor-file"]
     replicate_module.check_folder(from_tiny, LAPTOP)  # now free for another preset
+
+
+def test_stems_refuses_a_folder_without_runs_before_any_work(tmp_path, capsys):
+    out = tmp_path / "stems"
+    code = cli.main(["stems", "drive", "--folder", str(tmp_path / "nowhere"), "--out", str(out)])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1
+    assert "--folder must be a replication folder with runs/" in err
+    assert not out.exists()
+    assert cli.main(["stems", "sideways"]) == 2  # not a step

@@ -138,6 +138,10 @@ def check_paths(command: str, args: argparse.Namespace) -> None:
         check_input_file("--checkpoint", args.checkpoint, "agent checkpoint (.pt)")
     elif command in ("replicate", "replicate-steering"):
         check_output_dir("--out", args.out)
+    elif command == "stems":
+        if not Path(args.folder, "runs").is_dir():
+            raise UserError(f"--folder must be a replication folder with runs/, got {args.folder}")
+        check_output_dir("--out", args.out)
 
 
 THREADS_HELP = "torch CPU threads (default 0: torch's choice; 1 is fastest on a busy machine)"
@@ -320,6 +324,25 @@ def _replicate_steering_arguments(p: argparse.ArgumentParser) -> None:
     )
 
 
+def _stems_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "step",
+        choices=("drive", "analyse"),
+        help="drive: free driving of every shipped agent and the expert (resumable); analyse: the energy, "
+        "Beta and DFO readings at every stem crossing and red stop, then summary.json (resumable)",
+    )
+    p.add_argument("--folder", default="book/results/laptop", help="replication folder with runs/ and data/")
+    p.add_argument(
+        "--out", default="book/results/laptop/stems", help="where drives/, analysis/ and summary.json go"
+    )
+    p.add_argument("--episodes", type=int, default=5, help="free-driving episodes per driver (drive)")
+    p.add_argument("--steps", type=int, default=3000, help="steps per episode, 10 per second (drive)")
+    p.add_argument("--only", nargs="*", default=None, help="drive only these (e.g. da-ibc-seed0 expert)")
+    p.add_argument(
+        "--summary-only", action="store_true", help="analyse: only pool the analysis files into summary.json"
+    )
+
+
 COMMANDS = "ibc_tutorial.experiments.commands"
 """The module holding each sub-command's work, a function of the parsed arguments."""
 
@@ -349,6 +372,11 @@ SUBCOMMANDS: dict[str, tuple[str, object, str]] = {
         "replicate_steering",
         _replicate_steering_arguments,
         "the steering-EBM paper's road-following study: every result of chapter 10",
+    ),
+    "stems": (
+        "stems",
+        _stems_arguments,
+        "the stems of the T-junctions: every shipped agent driven freely, the energy where it chooses",
     ),
 }
 

@@ -202,10 +202,51 @@ def ratio_interval(
     return _interval(x.mean() / ex.mean(), np.concatenate(reps), level)
 
 
+def ratio_of_sums_interval(
+    numerators,
+    denominators,
+    *,
+    transform=None,
+    n_resamples: int = DEFAULT_RESAMPLES,
+    seed=0,
+    level: float = LEVEL,
+) -> Interval:
+    """sum(numerators) / sum(denominators) over a method's (A, E) episodes, with its two-level interval.
+
+    For a share pooled over events that episodes hold in different numbers (left turns of an
+    episode's stem crossings: ``numerators``, its stem crossings: ``denominators``), each resample
+    draws agents and then episodes as ``bootstrap_means`` does and divides the drawn sums, so an
+    episode with many events weighs more, and events of one episode or agent are resampled
+    together. ``transform`` (a vectorised function of the share, e.g. ``lambda p: np.minimum(p, 1 - p)``)
+    is applied to the estimate and to every resample. Resamples whose drawn denominators sum to 0
+    are left out (``n_resamples`` of the result counts those kept); at least one must remain.
+    """
+    num = check_scores("numerators", numerators)
+    den = check_scores("denominators", denominators)
+    if num.shape != den.shape:
+        raise ValueError(f"numerators and denominators must have one shape, got {num.shape} and {den.shape}")
+    if (den < 0).any() or den.sum() <= 0:
+        raise ValueError("denominators must be >= 0 with a positive sum")
+    level = _check_level(level)
+    n_resamples = check_int("n_resamples", n_resamples, minimum=1)
+    rng = _rng(seed)
+    a, e = num.shape
+    reps = []
+    for agents, episodes in _draws(a, e, n_resamples, rng):
+        idx = (agents[..., None], episodes)
+        top, bottom = num[idx].sum(axis=(1, 2)), den[idx].sum(axis=(1, 2))  # (r,)
+        reps.append(top[bottom > 0] / bottom[bottom > 0])
+    reps = np.concatenate(reps)
+    if not len(reps):
+        raise ValueError("every resample drew denominators summing to 0")
+    f = (lambda p: p) if transform is None else transform
+    return _interval(float(f(num.sum() / den.sum())), np.asarray(f(reps), dtype=float), level)
+
+
 # --------------------------------------------------------------------------- few seeds: Welch's t
 def student_t_quantile(q: float, df: float) -> float:
     """The q-quantile of Student's t distribution with ``df`` degrees of freedom (df >= 1, may be
-    fractional, as Welch's are): the density integrated numerically (Simpson's rule on a grid in
+    fractional, as Welch's are): the density integrated numerically (the trapezoid rule on a fine grid in
     the variable u = atan(t), which maps the whole line onto a bounded interval) and the CDF
     inverted by interpolation. Accurate to about 1e-6 against scipy (tests/test_stats.py)."""
     q = check_probability("q", q)

@@ -215,3 +215,21 @@ def replicate_steering(args: argparse.Namespace) -> int:
     command = getattr(args, "command_line", "")
     study.replicate(preset, args.out, command=command, overrides=overrides, workers=workers)
     return 0
+
+
+def stems(args: argparse.Namespace) -> int:
+    """``ibc-tutorial stems drive|analyse``: the stem analysis of a replication folder (resumable)."""
+    from pathlib import Path
+
+    from ibc_tutorial.experiments.agents import stem_analysis
+    from ibc_tutorial.experiments.agents import stems as stem_drives
+
+    command = getattr(args, "command_line", "")
+    torch.set_num_threads(1)
+    if args.step == "drive":
+        stem_drives.run_drives(args.folder, args.out, args.episodes, args.steps, args.only, command=command)
+        return 0
+    if not args.summary_only:
+        stem_analysis.run_analysis(args.folder, args.out, command=command)
+    stem_analysis.summarise(args.out, Path(args.folder) / "data" / "town01.npz")
+    return 0

@@ -1,0 +1,165 @@
+"""Free driving of every shipped agent (and the expert) in town02, recorded for the stem analysis (issue 23).
+
+The protocol is chapter 09's free driving (the DA-IBC paper's Fig. 5): routeless episodes of
+``STEPS`` steps (300 s at 10 Hz) from ``reset(seed=EVAL_SEED + i)``, policy seed 0, in town02;
+here for **every** agent of each method (``runs/<method>/seed<k>/final.pt``), not one, and for the
+PID expert, whose routeless drive picks a stem's exits at random.
+
+Each drive is written to ``<out>/drives/<method>-seed<k>.npz`` (``expert.npz``) atomically, one file
+per agent, so an interrupted run resumes where it stopped. A file holds, per episode ``i``, the
+per-state record (``e<i>_lane``, ``_pose``, ``_speed``, ``_red_ahead``, ``_entry_dist``,
+``_actions``) and, for an agent, the observations of the states the energy analysis looks at
+(``driving.stems.kept_states``: every junction crossing from a stem, from ``LEAD`` states before
+its entry, and one state per stop at a red light): ``obs_episode``, ``obs_t``, ``obs_bev``
+(the BEV, whose values are 0 or 1 with the agents' "flag" light encoding, bit-packed along its
+last axis: ``np.unpackbits(obs_bev, axis=-1)`` restores it) and ``obs_state``.
+
+    ibc-tutorial stems drive --folder book/results/laptop \
+        --out book/results/laptop/stems --episodes 5
+
+``analyse`` (``experiments.agents.stem_energy``) then reads these files.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ibc_tutorial.driving.stems import kept_states
+from ibc_tutorial.experiments.agents.checkpoints import load_agent
+from ibc_tutorial.experiments.agents.evaluate import EVAL_SEED, episode_rows, evaluate_agent
+from ibc_tutorial.experiments.runs import git_commit, machine, now, write_json, write_npz
+from ibc_tutorial.utils import check_int
+
+TOWN = "town02"
+"""Where the free driving happens (unseen in training), as in chapter 09."""
+STEPS = 3000
+"""Steps per episode: 300 s at 10 Hz, chapter 09's ``routeless_steps``."""
+EPISODES = 5
+"""Episodes per agent (the first of chapter 09's ten starts): what 25 minutes of one core allow 16 drivers."""
+POLICY_SEED = 0
+"""Seed of the agents' DFO draws, as in chapter 09's free driving."""
+METHODS = ("bc", "ibc", "da-ibc")
+"""The methods whose every shipped agent drives."""
+TRACE = ("lane", "pose", "speed", "red_ahead", "entry_dist", "actions")
+"""The per-state record kept of each episode."""
+
+
+def drivers(folder) -> list[tuple[str, Path | None]]:
+    """(name, checkpoint) of every agent under ``folder/runs``, by method then seed, then ("expert", None)."""
+    folder = Path(folder)
+    out = []
+    for m in METHODS:
+        for ck in sorted((folder / "runs" / m).glob("seed*/final.pt"), key=lambda p: int(p.parent.name[4:])):
+            out.append((f"{m}-{ck.parent.name}", ck))
+    if not out:
+        raise ValueError(
+            f"folder must hold runs/<method>/seed<k>/final.pt checkpoints, found none in {folder}"
+        )
+    return out + [("expert", None)]
+
+
+def drive(checkpoint: Path | None, episodes: int, steps: int, seed: int = EVAL_SEED) -> dict:
+    """Drive one agent (``checkpoint``; None: the expert) for ``episodes`` free-driving episodes.
+
+    Returns the arrays of its drive file (see the module's docstring)."""
+    agent = "expert" if checkpoint is None else load_agent(checkpoint)[0]
+    packed: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
+
+    def keep(t: int, running: list[int], batch: dict) -> None:
+        bev = batch["bev"]  # (B, 5, S, S) float32, 0 or 1 with the "flag" encoding
+        if not np.isin(bev, (0.0, 1.0)).all():
+            raise ValueError("the BEV holds values other than 0 and 1: it cannot be bit-packed")
+        bits = np.packbits(bev.astype(np.uint8), axis=-1)  # (B, 5, S, S / 8)
+        for k, i in enumerate(running):
+            packed[(i, t)] = (bits[k], batch["state"][k].astype(np.float32))
+
+    results = evaluate_agent(
+        agent,
+        TOWN,
+        episodes,
+        steps,
+        seed=seed,
+        policy_seed=POLICY_SEED,
+        record_steps=True,
+        show_progress=False,
+        on_step=None if checkpoint is None else keep,
+    )
+    arrays: dict[str, np.ndarray] = {}
+    obs_ep, obs_t, obs_bev, obs_state = [], [], [], []
+    for i, r in enumerate(results):
+        tr = r.trace
+        for k in TRACE:
+            arrays[f"e{i}_{k}"] = np.asarray(tr[k])
+        if checkpoint is not None:
+            for t in kept_states(TOWN, tr["lane"], tr["speed"], tr["red_ahead"], tr["entry_dist"]):
+                if (i, t) in packed:  # the last state of an episode was never shown to the policy
+                    obs_ep.append(i)
+                    obs_t.append(t)
+                    obs_bev.append(packed[(i, t)][0])
+                    obs_state.append(packed[(i, t)][1])
+    if checkpoint is not None:
+        arrays["obs_episode"] = np.array(obs_ep, dtype=np.int16)
+        arrays["obs_t"] = np.array(obs_t, dtype=np.int32)
+        arrays["obs_bev"] = np.stack(obs_bev) if obs_bev else np.zeros((0,), np.uint8)
+        arrays["obs_state"] = np.stack(obs_state) if obs_state else np.zeros((0, 3), np.float32)
+    arrays["rows"] = np.array(json.dumps(episode_rows(results)))
+    return arrays
+
+
+def run_drives(
+    folder, out, episodes: int = EPISODES, steps: int = STEPS, only=None, log=print, command: str = ""
+) -> list[str]:
+    """Drive each agent of ``folder``, and the expert, without a file in ``out/drives``; the names driven.
+
+    ``command``: the command line, recorded in ``out/provenance.json`` (``ibc-tutorial stems drive``)."""
+    episodes = check_int("episodes", episodes, minimum=1)
+    steps = check_int("steps", steps, minimum=1)
+    out = Path(out)
+    prov_path = out / "provenance.json"
+    prov = json.loads(prov_path.read_text()) if prov_path.exists() else {"invocations": []}
+    same = {"episodes": episodes, "steps": steps, "town": TOWN, "seed": EVAL_SEED, "policy_seed": POLICY_SEED}
+    if prov.get("protocol", same) != same:
+        raise ValueError(f"{out} holds drives of another protocol {prov['protocol']}: use another --out")
+    prov["protocol"] = same
+    inv = {"command": command, "commit": git_commit(), "machine": machine(), "started": now()}
+    prov["invocations"].append(inv)
+    write_json(prov_path, prov)
+    done = []
+    for name, ck in drivers(folder):
+        if only and name not in only:
+            continue
+        path = out / "drives" / f"{name}.npz"
+        if path.exists():
+            continue
+        t0 = time.process_time()
+        arrays = drive(ck, episodes, steps)
+        write_npz(path, arrays)
+        cpu = time.process_time() - t0
+        inv.setdefault("cpu_seconds", {})[name] = round(cpu, 1)
+        write_json(prov_path, prov)
+        done.append(name)
+        if log:
+            log(f"{now()} {name}: {cpu:.0f} s of CPU", flush=True)
+    inv["finished"] = now()
+    write_json(prov_path, prov)
+    return done
+
+
+def load_drive(path) -> dict:
+    """A drive file: ``{"rows", "episodes": [{lane, pose, ...}], "obs": {episode, t, bev, state} or None}``"""
+    with np.load(path) as z:
+        rows = json.loads(str(z["rows"]))
+        eps = [{k: z[f"e{i}_{k}"] for k in TRACE} for i in range(len(rows))]
+        obs = None
+        if "obs_t" in z.files:
+            obs = {"episode": z["obs_episode"], "t": z["obs_t"], "bev": z["obs_bev"], "state": z["obs_state"]}
+    return {"rows": rows, "episodes": eps, "obs": obs}
+
+
+def unpack_bev(bits: np.ndarray) -> np.ndarray:
+    """(N, 5, S, S) float32 BEVs from the bit-packed (N, 5, S, S / 8) of a drive file."""
+    return np.unpackbits(bits, axis=-1).astype(np.float32)
