@@ -16,6 +16,7 @@ from ibc_tutorial.experiments.counter_examples import (
     negatives_histogram,
     run,
     train_config,
+    valid_mass,
 )
 from ibc_tutorial.negatives import ExpertSampler, UniformSampler
 from ibc_tutorial.toy import JunctionWorld
@@ -40,6 +41,8 @@ def test_evaluate_of_the_expert_density_reaches_the_floor():
 
     out = evaluate(Oracle(), heldout, problem, config)
     assert abs(out["nll"] - expert_nll(problem, heldout)) < 0.05 and out["hit"] == 1.0
+    # the expert's own density puts (nearly) all its mass within 0.15 of a valid action
+    assert (valid_mass(Oracle(), heldout["obs"], problem) > 0.99).all()
 
 
 def test_negatives_histogram_and_mode_masses():
@@ -65,6 +68,14 @@ def test_negatives_histogram_and_mode_masses():
     m = mode_masses(Flat(), torch.tensor([[0.0, 1.0, 0.0, 0.5]]), problem, grid_n=41, radius=0.15)
     # a flat landscape puts on each disc of radius 0.15 about its share of the box: π 0.15² / 4
     torch.testing.assert_close(m, torch.full((1, 3), math.pi * 0.15**2 / 4), atol=0.004, rtol=0)
+    # valid_mass counts only the valid actions: three discs at a junction, one when cruising
+    both = torch.tensor([[0.0, 1.0, 0.0, 0.5], [0.0, 0.0, 0.0, 0.5]])
+    v = valid_mass(Flat(), both, problem, grid_n=41, radius=0.15)
+    torch.testing.assert_close(v, torch.tensor([3.0, 1.0]) * math.pi * 0.15**2 / 4, atol=0.012, rtol=0)
+    with pytest.raises(ValueError, match="radius"):
+        valid_mass(Flat(), both, problem, radius=0.0)
+    with pytest.raises(ValueError, match="obs"):
+        valid_mass(Flat(), torch.zeros(2, 3), problem)
 
 
 def test_a_short_run_records_its_measures():

@@ -142,6 +142,11 @@ def test_multimodality_figures():
     assert_labelled(fig)
     with pytest.raises(ValueError, match="reference"):
         multimodality.plot_command_traces(0.1, {"a": np.zeros(10)}, reference="b")
+    # the measured window, shaded in every panel
+    fig = multimodality.plot_command_traces(0.1, {"a": np.zeros(10), "b": np.ones(10)}, shade=(0.0, 0.5))
+    assert all(len(ax.patches) == 1 for ax in fig.axes)
+    with pytest.raises(ValueError, match="shade"):
+        multimodality.plot_command_traces(0.1, {"a": np.zeros(10)}, shade=(0.5, 0.1))
     assert_labelled(
         multimodality.plot_density_fits(
             torch.rand(30) * 2 - 1, actions, {"flat": torch.full((21,), 0.5)}, title="t"
@@ -167,7 +172,7 @@ def test_rollout_figures_share_one_drawing():
     assert len(fig.axes[0].lines) == 2 and "collided or neither" in fig.axes[0].get_title()
     assert_labelled(fig)
     fig = multimodality.plot_rollout_grid(road, {"a": r_road}, title="grid", ncols=1)
-    assert fig.axes[0].get_title().startswith("a: main")
+    assert fig.axes[0].get_title().startswith("a: of 3: main 0")  # counts, not rounded shares
     assert_labelled(fig)
     assert multimodality.rollout_colors(tree, r_tree) == [
         multimodality.TREE_SIDE_COLORS[int(v)] for v in tree.pass_side(r_tree)

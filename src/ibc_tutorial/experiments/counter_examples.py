@@ -13,8 +13,11 @@ observations (``evaluate``):
   within ``hit_radius`` of one of the expert's valid actions: what an exhaustive optimiser
   would make the car do.
 
-``negatives_histogram`` shows where a sampler's counter-examples land in the action box, and
-``mode_masses`` how much of p_θ lies near each of the expert's three actions at a junction.
+``negatives_histogram`` shows where a sampler's counter-examples land in the action box,
+``mode_masses`` how much of p_θ lies near each of the expert's three actions at a junction, and
+``valid_mass`` how much of it lies near any valid action: the chance that a policy acting by a draw
+from p_θ takes an action the expert could have taken, a measure of behaviour that can still tell two
+models apart when both hit rates are 1.
 Chapters 05 and 06 reuse the world and these measures.
 """
 
@@ -114,7 +117,8 @@ def make_model(world: JunctionWorld, config: CounterExampleConfig, seed: int) ->
 def evaluate(
     model: EnergyModel, heldout: dict, world: JunctionWorld, config: CounterExampleConfig
 ) -> dict[str, float]:
-    """Held-out ``nll`` (nats, lower is better) and ``hit`` rate (higher is better); see the module docstring."""
+    """Held-out ``nll`` (nats, lower is better) and ``hit`` rate (higher is better); see the module
+    docstring."""
     grid = action_grid(config.grid_n, 2)  # (G, 2)
     z = model.embed(heldout["obs"])  # (B, E)
     e_grid = grid_energies(model, z, grid)  # (B, G)
@@ -209,3 +213,23 @@ def mode_masses(
     modes, _ = world.modes(obs)  # (B, 3, 2)
     near = (grid[None, :, None, :] - modes[:, None, :, :]).norm(dim=-1) <= radius  # (B, G, 3)
     return (p[:, :, None] * near).sum(dim=1)  # (B, 3)
+
+
+@torch.no_grad()
+def valid_mass(
+    model: EnergyModel, obs: torch.Tensor, world: JunctionWorld, *, grid_n: int = 51, radius: float = 0.15
+) -> torch.Tensor:
+    """Probability p_θ(y|x) puts within ``radius`` of any of the expert's valid actions at ``obs``.
+
+    p_θ is normalised over a ``grid_n`` × ``grid_n`` grid of the box, as in ``evaluate``. This is the
+    probability that an action drawn from p_θ (the DA-IBC paper's inference ends with such a draw,
+    Algorithm 1) lies within ``radius`` of an action the expert takes there. Returns (B,) in [0, 1].
+    """
+    check_positive("radius", radius)
+    check_tensor("obs", obs, shape=(None, world.obs_dim))
+    grid = action_grid(check_int("grid_n", grid_n, minimum=2), 2)  # (G, 2)
+    p = torch.softmax(-grid_energies(model, model.embed(obs), grid), dim=1)  # (B, G)
+    modes, valid = world.modes(obs)  # (B, 3, 2), (B, 3)
+    near = (grid[None, :, None, :] - modes[:, None, :, :]).norm(dim=-1) <= radius  # (B, G, 3)
+    near_valid = (near & valid[:, None, :]).any(dim=-1)  # (B, G)
+    return (p * near_valid).sum(dim=1)  # (B,)

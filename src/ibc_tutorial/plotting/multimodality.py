@@ -237,12 +237,15 @@ def _side_road_shares(world, r) -> str:
 
 
 def _grid_shares(world, r) -> str:
+    """Counts of the episodes' outcomes, "k of n" (a rounded share would call 199 of 200 "100 %")."""
     hit = r.collided.numpy()
+    n = len(hit)
     if hasattr(world, "pass_side"):
         side = world.pass_side(r).numpy()
-        return f"collided {hit.mean():.0%}, left {np.mean(side == -1):.0%}, right {np.mean(side == 1):.0%}"
+        left, right = int(np.sum(side == -1)), int(np.sum(side == 1))
+        return f"collided {int(hit.sum())} of {n}, left {left}, right {right}"
     main, took = world.stayed_on_main_road(r).numpy(), world.took_side_road(r).numpy()
-    return f"main {main.mean():.0%}, side road {took.mean():.0%}, off road {hit.mean():.0%}"
+    return f"of {n}: main {int(main.sum())}, side road {int(took.sum())}, off road {int(hit.sum())}"
 
 
 # =========================================================================== chapter 01: the tree
@@ -602,6 +605,7 @@ def plot_command_traces(
     title: str = "Steering commands of one episode",
     ylabel: str = "steering command",
     reference: str | None = None,
+    shade: tuple[float, float] | None = None,
 ):
     """Command sequences over time (to see what whiteness measures), one panel per policy, stacked
     on a shared time axis, so that traces that nearly coincide stay apart and readable.
@@ -611,8 +615,12 @@ def plot_command_traces(
         traces: {label: (T,) commands}, one panel each, in order.
         reference: a key of ``traces`` (e.g. the experts) drawn thin and grey in every other
             panel as well, to compare against; None = no reference.
+        shade: (start, end) in seconds, shaded in every panel (e.g. the window a measure uses);
+            None = nothing shaded.
     """
     check_panels("traces", traces)
+    if shade is not None and not (len(shade) == 2 and 0 <= shade[0] < shade[1]):
+        raise ValueError(f"shade must be (start, end) seconds with 0 <= start < end, got {shade!r}")
     if reference is not None and reference not in traces:
         raise ValueError(f"reference must be one of the keys of traces {list(traces)}, got {reference!r}")
     n = len(traces)
@@ -624,6 +632,8 @@ def plot_command_traces(
             ax.plot(np.arange(len(ref)) * dt, ref, color="0.6", lw=0.9, label=reference)
         ax.plot(np.arange(len(x)) * dt, x, color=f"C{i}", lw=1.4, label=label)
         ax.axhline(0.0, color="0.85", lw=0.6, zorder=0)
+        if shade is not None:
+            ax.axvspan(*shade, color="0.92", zorder=-1, label="measured" if i == 0 else None)
         ax.set_ylim(-1.1, 1.1)
         ax.legend(loc="upper left", fontsize=7, ncol=2, frameon=False)
     axes[-1, 0].set_xlabel(TIME_LABEL)
