@@ -75,7 +75,7 @@ def test_fit_ebm_the_same_in_a_worker_process(demos):
     calls = [(demos.training_data(), 1, objective, seed) for seed in (0, 1)]
     here = parallel.parallel_map(toy_runs.fit_ebm, calls, steps=5, width=8, workers=1)
     there = parallel.parallel_map(toy_runs.fit_ebm, calls, steps=5, width=8, workers=2)
-    for (m1, c1), (m2, c2) in zip(here, there):
+    for (m1, c1), (m2, c2) in zip(here, there, strict=True):
         assert isinstance(m1, EnergyModel) and m1.hidden == 8
         assert same_weights(m1, m2) and c1.losses == c2.losses
     assert not same_weights(here[0][0], here[1][0])

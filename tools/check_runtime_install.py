@@ -37,7 +37,8 @@ def main() -> int:
                 f"ibc-tutorial {' '.join(args)}: exit {done.returncode}: {done.stderr.strip()[-300:]}"
             )
     print(
-        f"runtime install: imported {len(names)} modules, ran {len(commands)} --help commands, {len(failures)} failures"
+        f"runtime install: imported {len(names)} modules, ran {len(commands)} --help commands,"
+        f" {len(failures)} failures"
     )
     for f in failures:
         print("  " + f)

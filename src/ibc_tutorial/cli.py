@@ -262,24 +262,29 @@ def _evaluate_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--device", default="cpu", help=DEVICE_HELP)
 
 
-def _replicate_arguments(p: argparse.ArgumentParser) -> None:
-    from ibc_tutorial.experiments.agents.ablations import ABLATIONS  # deferred: loads torch
-    from ibc_tutorial.experiments.agents.presets import PRESETS
-
-    p.add_argument("--preset", default="laptop", choices=PRESETS, help="settings (default: %(default)s)")
+def _study_arguments(p: argparse.ArgumentParser, presets: tuple, study: str, runs: str) -> None:
+    """What both studies' commands share: --preset, --out, --force, --threads and --workers."""
+    p.add_argument("--preset", default="laptop", choices=presets, help="settings (default: %(default)s)")
     p.add_argument(
         "--out",
         required=True,
         help="folder for the data, runs, results and provenance; an interrupted "
-        "replication of the same preset there is resumed",
+        f"{study} of the same preset there is resumed",
     )
-    p.add_argument("--force", action="store_true", help="start over: delete the replication already in --out")
+    p.add_argument("--force", action="store_true", help=f"start over: delete the {study} already in --out")
     p.add_argument(
         "--threads", type=int, default=0, help=THREADS_HELP.replace("threads", "threads per process", 1)
     )
     p.add_argument(
-        "--workers", type=int, default=1, help="training runs in parallel processes (default: %(default)s)"
+        "--workers", type=int, default=1, help=f"{runs} in parallel processes (default: %(default)s)"
     )
+
+
+def _replicate_arguments(p: argparse.ArgumentParser) -> None:
+    from ibc_tutorial.experiments.agents.ablations import ABLATIONS  # deferred: loads torch
+    from ibc_tutorial.experiments.agents.presets import PRESETS
+
+    _study_arguments(p, tuple(PRESETS), "replication", runs="training runs")
     p.add_argument(
         "--ablation",
         default=None,
@@ -295,20 +300,7 @@ def _replicate_arguments(p: argparse.ArgumentParser) -> None:
 def _replicate_steering_arguments(p: argparse.ArgumentParser) -> None:
     from ibc_tutorial.experiments.steering.presets import PRESETS  # deferred: loads torch
 
-    p.add_argument(
-        "--preset", default="laptop", choices=tuple(PRESETS), help="settings (default: %(default)s)"
-    )
-    p.add_argument(
-        "--out",
-        required=True,
-        help="folder for the data, runs, results and provenance; an interrupted "
-        "study of the same preset there is resumed",
-    )
-    p.add_argument("--force", action="store_true", help="start over: delete the study already in --out")
-    p.add_argument(
-        "--threads", type=int, default=0, help=THREADS_HELP.replace("threads", "threads per process", 1)
-    )
-    p.add_argument("--workers", type=int, default=1, help="runs in parallel processes (default: %(default)s)")
+    _study_arguments(p, tuple(PRESETS), "study", runs="runs")
     p.add_argument(
         "--set",
         action="append",

@@ -102,7 +102,9 @@ def check_probability(name: str, value) -> float:
 
 
 def check_fraction(name: str, value) -> float:
-    """Return ``value`` as a float in [0, 1] (a share or a scale, not a probability), or raise ValueError naming ``name``."""
+    """Return ``value`` as a float in [0, 1] (a share or a scale, not a probability).
+
+    Raise ValueError naming ``name`` otherwise."""
     return _check_unit_interval(name, value, "a fraction")
 
 
@@ -117,13 +119,15 @@ def check_choice(name: str, value, choices: Iterable) -> str:
 def check_tensor(
     name: str, x, *, ndim: int | None = None, shape: tuple | None = None, finite: bool = True
 ) -> torch.Tensor:
-    """Check a tensor's rank, shape (``None`` entries are free) and finiteness; raise ValueError naming ``name``."""
+    """Check a tensor's rank, shape (``None`` entries are free) and finiteness.
+
+    Raise ValueError naming ``name`` otherwise."""
     if not isinstance(x, torch.Tensor):
         raise ValueError(f"{name} must be a torch.Tensor, got {type(x).__name__}")
     if ndim is not None and x.ndim != ndim:
         raise ValueError(f"{name} must have {ndim} dimensions, got shape {tuple(x.shape)}")
     if shape is not None:
-        if x.ndim != len(shape) or any(s is not None and s != d for s, d in zip(shape, x.shape)):
+        if x.ndim != len(shape) or any(s is not None and s != d for s, d in zip(shape, x.shape, strict=True)):
             want = "(" + ", ".join("*" if s is None else str(s) for s in shape) + ")"
             raise ValueError(f"{name} must have shape {want}, got {tuple(x.shape)}")
     if finite and x.is_floating_point() and not torch.isfinite(x).all():

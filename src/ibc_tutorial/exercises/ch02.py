@@ -19,18 +19,13 @@ import math
 
 import torch
 
-from ibc_tutorial.exercises.core import Feedback, close, correct, hint, run_check
+from ibc_tutorial.exercises.core import Feedback, close, correct, hint, mistake_hint, run_check, scalar_answer
 
 
 def _scalar(out, name: str) -> torch.Tensor | Feedback:
-    if not isinstance(out, torch.Tensor):
-        return hint(f"{name} must return a torch.Tensor (a scalar), got {type(out).__name__}.")
-    if out.ndim != 0:
-        return hint(
-            f"{name} must return a scalar (0-dimensional tensor), got shape {tuple(out.shape)}: "
-            "reduce over the action dimensions and over the batch as the equation does."
-        )
-    return out
+    return scalar_answer(
+        out, name, "reduce over the action dimensions and over the batch as the equation does."
+    )
 
 
 # --------------------------------------------------------------------------- Beta NLL (eq. 1)
@@ -207,9 +202,8 @@ def check_beta_nll(fn) -> Feedback:
                     "which exponent goes with α and which with β: α belongs to y', β to (1 - y').",
                 )
             )
-            for value, what in mistakes:
-                if close(out, value, rtol=1e-3, atol=1e-3):
-                    return hint(f"close, but check {what}")
+            if (mistake := mistake_hint(out, mistakes, rtol=1e-3, atol=1e-3)) is not None:
+                return mistake
             if _clamped_too_wide(fn):
                 return hint(TOO_WIDE)
             return hint(
@@ -379,9 +373,8 @@ def check_mdn_nll(fn) -> Feedback:
                     "the Gaussian: stds are standard deviations, not variances.",
                 )
             )
-            for value, what in mistakes:
-                if close(out, value, rtol=1e-3, atol=1e-3):
-                    return hint(f"close, but check {what}")
+            if (mistake := mistake_hint(out, mistakes, rtol=1e-3, atol=1e-3)) is not None:
+                return mistake
             return hint(
                 f"your loss is {float(out):.4g} on a random test batch where the mixture gives "
                 f"{float(ref):.4g}; compare your formula with log Σ_k π_k N(y; μ_k, σ_k²) term by term."

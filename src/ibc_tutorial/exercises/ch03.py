@@ -22,7 +22,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from ibc_tutorial.exercises.core import Feedback, close, correct, hint, run_check
+from ibc_tutorial.exercises.core import Feedback, close, correct, hint, mistake_hint, run_check, scalar_answer
 from ibc_tutorial.toy import TreeConfig, TreeWorld
 
 
@@ -32,14 +32,7 @@ def _as_scalar(out, name: str) -> torch.Tensor | Feedback:
             f"{name} returned a Python number: return a torch.Tensor (a scalar) so that training can "
             "back-propagate through it."
         )
-    if not isinstance(out, torch.Tensor):
-        return hint(f"{name} must return a torch.Tensor (a scalar), got {type(out).__name__}.")
-    if out.ndim != 0:
-        return hint(
-            f"{name} must return a scalar (0-dimensional tensor), got shape {tuple(out.shape)}: average the "
-            "per-sample terms over the batch."
-        )
-    return out
+    return scalar_answer(out, name, "average the per-sample terms over the batch.")
 
 
 # --------------------------------------------------------------------------- InfoNCE (eqs. 2-3, 5)
@@ -92,9 +85,8 @@ def check_info_nce(fn) -> Feedback:
                     "not at the counter-examples.",
                 ),
             ]
-            for value, what in mistakes:
-                if close(out, value):
-                    return hint(f"close, but check {what}")
+            if (mistake := mistake_hint(out, mistakes)) is not None:
+                return mistake
             return hint(
                 f"your loss is {float(out):.4g} on a test batch where eqs. 2-3 give {float(ref):.4g}; write "
                 "−log p̃ for one sample by hand and compare."

@@ -19,7 +19,7 @@ import math
 
 import torch
 
-from ibc_tutorial.exercises.core import Feedback, close, correct, hint, run_check
+from ibc_tutorial.exercises.core import Feedback, close, correct, hint, mistake_hint, run_check
 
 _EXPERT = torch.tensor([[0.0, 0.4], [0.1, 0.5], [-0.5, 0.3], [0.4, -0.6], [0.0, 0.45]])
 
@@ -209,9 +209,8 @@ def check_grid_nll(fn) -> Feedback:
                     "the overall sign: this is the *negative* log-likelihood.",
                 ),
             ]
-            for value, what in mistakes:
-                if close(out, value):
-                    return hint(f"close, but check {what}")
+            if (mistake := mistake_hint(out, mistakes)) is not None:
+                return mistake
             return hint(
                 f"your NLL of the first sample is {float(out[0]):.4g} where −log p = E + log Σ e^(−E_g) + "
                 f"log ΔA gives {float(ref[0]):.4g}."

@@ -16,7 +16,7 @@ import math
 
 import torch
 
-from ibc_tutorial.exercises.core import Feedback, close, correct, hint, run_check, tensor_answer
+from ibc_tutorial.exercises.core import Feedback, close, correct, hint, mistake_hint, run_check, tensor_answer
 from ibc_tutorial.kde import inverse_density_weights
 
 
@@ -89,9 +89,8 @@ def check_kde_1d(fn) -> Feedback:
                     "how the bandwidth enters: u = (x − x_j) / h, with h itself, not h².",
                 ),
             ]
-            for value, what in mistakes:
-                if close(out, value, atol=1e-12):
-                    return hint(f"close, but check {what}")
+            if (mistake := mistake_hint(out, mistakes, atol=1e-12)) is not None:
+                return mistake
             i = int((out - ref).abs().argmax())
             return hint(
                 f"at x = {float(x[i]):.2f} your density is {float(out[i]):.4g} where eq. 4 gives "

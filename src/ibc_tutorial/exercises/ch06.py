@@ -27,32 +27,41 @@ def _out(out, shape: tuple, name: str = "dfo_step") -> torch.Tensor | Feedback:
     return tensor_answer(out, name, shape, ": keep N samples of D dimensions")
 
 
-def _generator_check(fn, samples, energies) -> Feedback | None:
-    """Two calls with equally seeded generators, σ > 0, the global generator reseeded differently
-    before each, must agree; calls with differently seeded generators must not. The reader's global
-    random state is restored afterwards."""
+def _uses_generator(draw, seeds, name: str, same: str, other: str) -> Feedback | None:
+    """``draw(generator)`` three times, the global generator reseeded with ``seeds[i][0]`` before each
+    and the passed one seeded with ``seeds[i][1]``: the first two seeds give equally seeded generators
+    and must agree (else the hint ``same``), the third a differently seeded one and must not (else
+    ``other``). The reader's global random state is restored afterwards."""
     state = torch.random.get_rng_state()
     try:
         outs = []
-        for global_seed, seed in ((11, 0), (12, 0), (11, 1)):
+        for global_seed, seed in seeds:
             torch.manual_seed(global_seed)
-            out = fn(samples.clone(), energies.clone(), 0.1, -1.0, 1.0, torch.Generator().manual_seed(seed))
+            out = draw(torch.Generator().manual_seed(seed))
             outs.append(out.detach() if isinstance(out, torch.Tensor) else out)
     finally:
         torch.random.set_rng_state(state)
     if not all(isinstance(o, torch.Tensor) for o in outs):
-        return hint("dfo_step must return a torch.Tensor every time it is called.")
+        return hint(f"{name} must return a torch.Tensor every time it is called.")
     if not torch.equal(outs[0], outs[1]):
-        return hint(
-            "two calls with equally seeded generators gave different results (with σ > 0): draw every random "
-            "number, the resampling's and the noise's, from the `generator` argument."
-        )
+        return hint(same)
     if torch.equal(outs[0], outs[2]):
-        return hint(
-            "calls with differently seeded generators gave the same result: draw the random numbers from the "
-            "`generator` argument (not from a generator of your own seeded inside the function)."
-        )
+        return hint(other)
     return None
+
+
+def _generator_check(fn, samples, energies) -> Feedback | None:
+    """Two calls with equally seeded generators, σ > 0, the global generator reseeded differently
+    before each, must agree; calls with differently seeded generators must not."""
+    return _uses_generator(
+        lambda g: fn(samples.clone(), energies.clone(), 0.1, -1.0, 1.0, g),
+        ((11, 0), (12, 0), (11, 1)),
+        "dfo_step",
+        "two calls with equally seeded generators gave different results (with σ > 0): draw every random "
+        "number, the resampling's and the noise's, from the `generator` argument.",
+        "calls with differently seeded generators gave the same result: draw the random numbers from the "
+        "`generator` argument (not from a generator of your own seeded inside the function).",
+    )
 
 
 def _gaussian_check(z: torch.Tensor) -> Feedback | None:
@@ -242,32 +251,18 @@ def _draw_shares(fn, generator) -> torch.Tensor | Feedback:
 
 def _select_generator_check(fn) -> Feedback | None:
     """Equally seeded generators give the same draws whatever the global generator does; differently
-    seeded ones give other draws. The reader's global random state is restored."""
-    state = torch.random.get_rng_state()
-    try:
-        runs = []
-        for global_seed, seed in ((21, 5), (22, 5), (21, 6)):
-            torch.manual_seed(global_seed)
-            g = torch.Generator().manual_seed(seed)
-            runs.append(
-                torch.stack(
-                    [fn(SELECT_SAMPLES.clone(), SELECT_ENERGIES.clone(), "sample", g) for _ in range(40)]
-                )
-            )
-    finally:
-        torch.random.set_rng_state(state)
-    if not torch.equal(runs[0], runs[1]):
-        return hint(
-            "two runs with equally seeded generators drew different actions: draw from the `generator` "
-            "argument (torch.multinomial(..., generator=generator)), so that the choice is reproducible."
-        )
-    if torch.equal(runs[0], runs[2]):
-        return hint(
-            "runs with differently seeded generators drew the same actions: draw from the `generator` "
-            "argument, "
-            "not from a generator of your own."
-        )
-    return None
+    seeded ones give other draws."""
+    return _uses_generator(
+        lambda g: torch.stack(
+            [fn(SELECT_SAMPLES.clone(), SELECT_ENERGIES.clone(), "sample", g) for _ in range(40)]
+        ),
+        ((21, 5), (22, 5), (21, 6)),
+        "select_action",
+        "two runs with equally seeded generators drew different actions: draw from the `generator` "
+        "argument (torch.multinomial(..., generator=generator)), so that the choice is reproducible.",
+        "runs with differently seeded generators drew the same actions: draw from the `generator` "
+        "argument, not from a generator of your own.",
+    )
 
 
 def check_select_action(fn) -> Feedback:

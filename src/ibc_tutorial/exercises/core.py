@@ -84,6 +84,27 @@ def tensor_answer(out, name: str, shape: tuple, what: str = "") -> torch.Tensor 
     return out.detach()
 
 
+def scalar_answer(out, name: str, advice: str) -> torch.Tensor | Feedback:
+    """The reader's ``out`` as a scalar tensor, or the hint that says why it is not one; ``advice`` ends
+    the hint for a tensor of another shape (how to reduce it)."""
+    if not isinstance(out, torch.Tensor):
+        return hint(f"{name} must return a torch.Tensor (a scalar), got {type(out).__name__}.")
+    if out.ndim != 0:
+        return hint(
+            f"{name} must return a scalar (0-dimensional tensor), got shape {tuple(out.shape)}: {advice}"
+        )
+    return out
+
+
+def mistake_hint(out, mistakes, rtol: float = 1e-4, atol: float = 1e-4) -> Feedback | None:
+    """The hint "close, but check ..." for the first ``(value, what)`` of ``mistakes`` that ``out`` is
+    ``close`` to (within ``rtol`` and ``atol``), or None when it is close to none of them."""
+    for value, what in mistakes:
+        if close(out, value, rtol=rtol, atol=atol):
+            return hint(f"close, but check {what}")
+    return None
+
+
 def close(a, b, rtol: float = 1e-4, atol: float = 1e-4) -> bool:
     """Whether the reader's ``a`` and the reference ``b`` (tensors, arrays or numbers) have the same
     shape and are finite and equal within ``rtol`` and ``atol`` (compared in float64)."""

@@ -182,19 +182,8 @@ def replicate(args: argparse.Namespace) -> int:
         preset = ablation_preset(preset, args.ablation)
     overrides = list(getattr(args, "overrides", ()))
     preset = with_overrides(preset, overrides)
-    threads = _threads(args)
-    workers = check_int("--workers", args.workers, minimum=1)
     device = check_device("--device", getattr(args, "device", "cpu"))
-    if getattr(args, "force", False):
-        replication.clear_folder(args.out)
-    replication.check_folder(args.out, preset)  # before any work
-    if threads:
-        torch.set_num_threads(threads)
-    command = getattr(args, "command_line", "")
-    replication.replicate(
-        preset, args.out, command=command, overrides=overrides, workers=workers, device=str(device)
-    )
-    return 0
+    return _run_study(args, replication, preset, overrides, device=str(device))
 
 
 def replicate_steering(args: argparse.Namespace) -> int:
@@ -204,16 +193,22 @@ def replicate_steering(args: argparse.Namespace) -> int:
 
     overrides = list(getattr(args, "overrides", ()))
     preset = with_overrides(get_preset(args.preset), overrides)
+    check_choice("--device", args.device, ("cpu",))
+    return _run_study(args, study, preset, overrides)
+
+
+def _run_study(args: argparse.Namespace, study, preset, overrides: list, **settings) -> int:
+    """What both studies' commands do once their preset is made: ``--threads`` and ``--workers``
+    checked, the folder cleared (``--force``) and checked before any work, then ``study.replicate``."""
     threads = _threads(args)
     workers = check_int("--workers", args.workers, minimum=1)
-    check_choice("--device", args.device, ("cpu",))
     if getattr(args, "force", False):
         study.clear_folder(args.out)
     study.check_folder(args.out, preset)  # before any work
     if threads:
         torch.set_num_threads(threads)
     command = getattr(args, "command_line", "")
-    study.replicate(preset, args.out, command=command, overrides=overrides, workers=workers)
+    study.replicate(preset, args.out, command=command, overrides=overrides, workers=workers, **settings)
     return 0
 
 

@@ -6,7 +6,8 @@ modules here are three such searches:
 - ``optimizers.grid``: exhaustive search over a fixed grid (the steering-EBM paper; chapter 03):
   ``action_grid``, ``grid_energies``, ``grid_argmin``, ``GridOptimizer``.
 - ``optimizers.dfo``: derivative-free optimisation, Algorithm 1 of the DA-IBC paper (chapter 06):
-  ``DFOConfig``, ``dfo`` (one observation or B), ``dfo_trace``, ``DFOOptimizer``, ``dfo_policy``.
+  ``DFOConfig``, ``dfo`` (one observation or B), ``dfo_trace``, ``DFOOptimizer``, ``dfo_policy``
+  (a ``DFOPolicy``, whose call runs ``dfo`` itself).
 - ``optimizers.langevin``: the original IBC's gradient-based "Langevin MCMC" (chapter 06):
   ``LangevinConfig``, ``langevin``, ``langevin_trace``, ``polynomial_schedule``.
 - ``optimizers.common``: what DFO and Langevin share (the action box, the initial population
@@ -15,13 +16,15 @@ modules here are three such searches:
 
 This package itself defines how a model acts through a search: the ``ActionOptimizer`` protocol
 (``GridOptimizer``, ``DFOOptimizer``) and ``EnergyPolicy``, the closed-loop policy that every
-energy model of the book drives with (``policies.GridArgminPolicy``, ``dfo_policy``, the
-driving ``Agent``). Import the functions from their modules
+energy model of the book drives with (``policies.GridArgminPolicy``, ``dfo_policy``), with
+``eval_mode`` and ``embedded_energy`` (each observation embedded once; the driving ``Agent`` uses
+it too). Import the functions from their modules
 (``from ibc_tutorial.optimizers.dfo import dfo``).
 """
 
 from __future__ import annotations
 
+from contextlib import contextmanager
 from typing import Protocol, runtime_checkable
 
 import torch
@@ -63,14 +66,29 @@ class EnergyPolicy:
         self.model, self.optimizer, self.generator = model, optimizer, generator
 
     def __call__(self, obs) -> torch.Tensor:
-        was_training = getattr(self.model, "training", False)
-        if was_training:
-            self.model.eval()
-        try:
+        with eval_mode(self.model):
             return self.optimizer.infer(self.model, obs, generator=self.generator)  # (B, D)
-        finally:
-            if was_training:
-                self.model.train()
 
 
-__all__ = ["ActionOptimizer", "EnergyPolicy"]
+@contextmanager
+def eval_mode(model):
+    """``model`` in eval mode inside the block, restored to training mode after it if it was in it."""
+    was_training = getattr(model, "training", False)
+    if was_training:
+        model.eval()
+    try:
+        yield model
+    finally:
+        if was_training:
+            model.train()
+
+
+def embedded_energy(model, obs):
+    """``(energy_fn, B)``: each of the B observations embedded once (``model.embed``), and
+    ``energy_fn(actions (B, N, D)) -> (B, N)`` running only the action part of the head
+    (``model.energy_from_embedding``). B is the embedding's length, so dict observations work too."""
+    z = model.embed(obs)  # (B, E), once per observation
+    return (lambda actions: model.energy_from_embedding(z, actions)), len(z)
+
+
+__all__ = ["ActionOptimizer", "EnergyPolicy", "embedded_energy", "eval_mode"]

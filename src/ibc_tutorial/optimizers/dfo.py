@@ -4,7 +4,8 @@
 - ``dfo``: one call for one observation (``n_obs=None``) or B observations at once (``n_obs=B``).
 - ``dfo_trace``: the same draws for one observation, keeping every iteration's population.
 - ``initial_weights`` / ``initial_samples``: the initialisation (Algorithm 1 line 2).
-- ``DFOOptimizer`` (an ``ActionOptimizer``) and ``dfo_policy``: DFO on an energy model, for rollouts.
+- ``DFOOptimizer`` (an ``ActionOptimizer``) and ``dfo_policy`` (a ``DFOPolicy``): DFO on an energy
+  model, for rollouts.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from dataclasses import dataclass
 import torch
 
 from ibc_tutorial.kde import DEFAULT_BANDWIDTH
-from ibc_tutorial.optimizers import EnergyPolicy
+from ibc_tutorial.optimizers import EnergyPolicy, embedded_energy, eval_mode
 from ibc_tutorial.optimizers.common import (  # INITS and the initialisation: importable from here too
     INITS,
     SELECTIONS,
@@ -35,6 +36,7 @@ __all__ = [
     "DFOConfig",
     "DFOTrace",
     "DFOOptimizer",
+    "DFOPolicy",
     "dfo",
     "dfo_policy",
     "dfo_trace",
@@ -252,18 +254,31 @@ class DFOOptimizer:
         """(B, D) actions for a batch of B observations (a tensor, or a dict of tensors).
 
         Each observation is embedded once (``model.embed``); only the action part of the head
-        runs per candidate (``model.energy_from_embedding``). B is the embedding's length, so
-        dict observations work too.
+        runs per candidate (``model.energy_from_embedding``), with the model in eval mode: the
+        decision of a ``DFOPolicy``.
         """
-        z = model.embed(obs)  # (B, E), once per observation
-        return dfo(
-            lambda a: model.energy_from_embedding(z, a),
-            self.expert_actions,
-            self.config,
-            n_obs=len(z),
-            init_weights=self.init_weights,
-            generator=generator,
-        )  # (B, D)
+        return DFOPolicy(model, self, generator)(obs)  # (B, D)
+
+
+class DFOPolicy(EnergyPolicy):
+    """``dfo_policy``'s closed-loop policy: ``policy(obs) -> dfo(...)``, (B, D), on a ``DFOOptimizer``'s
+    expert actions, settings and initial weights, with the model in eval mode for each decision."""
+
+    optimizer: DFOOptimizer
+
+    @torch.no_grad()
+    def __call__(self, obs) -> torch.Tensor:
+        opt = self.optimizer
+        with eval_mode(self.model):
+            energy_fn, n_obs = embedded_energy(self.model, obs)  # (B, N, D) -> (B, N)
+            return dfo(  # Algorithm 1 of the DA-IBC paper
+                energy_fn,
+                opt.expert_actions,
+                opt.config,
+                n_obs=n_obs,
+                init_weights=opt.init_weights,
+                generator=self.generator,
+            )  # (B, D)
 
 
 def dfo_policy(
@@ -273,13 +288,13 @@ def dfo_policy(
     *,
     init_weights: torch.Tensor | None = None,
     generator: torch.Generator | None = None,
-) -> EnergyPolicy:
+) -> DFOPolicy:
     """A closed-loop policy ``policy(obs) -> actions (B, D)`` running ``dfo`` on ``model`` in eval mode.
 
     ``model`` is an energy model with ``embed(obs) -> z`` and ``energy_from_embedding(z, actions
     (B, N, D)) -> (B, N)`` (see ``DFOOptimizer.infer``); ``obs`` is a batch of observations, a
     tensor or a dict of tensors. The initial weights over ``expert_actions`` are computed once,
     here. The model is put in eval mode for each decision and restored after it
-    (``optimizers.EnergyPolicy`` with a ``DFOOptimizer``).
+    (``DFOPolicy``: an ``optimizers.EnergyPolicy`` with a ``DFOOptimizer`` that calls ``dfo`` itself).
     """
-    return EnergyPolicy(model, DFOOptimizer(expert_actions, config, init_weights=init_weights), generator)
+    return DFOPolicy(model, DFOOptimizer(expert_actions, config, init_weights=init_weights), generator)

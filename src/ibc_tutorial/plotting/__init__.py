@@ -5,14 +5,19 @@
 writes one to a file (e.g. the README's). Every figure function gives its axes titles, labels and
 units, and returns the ``Figure``; import it from the module of its part of the book:
 
-| module | chapters | figures |
-| --- | --- | --- |
-| ``plotting.common`` | several | lines, grouped bars, learning curves over seeds; shared labels and helpers |
-| ``plotting.multimodality`` | 01-03 (Part I) | tree and side-road scenes, rollouts, action histograms, constant losses, Beta shapes, action distributions, density fits, energy landscapes and curves, command traces |
-| ``plotting.ingredients`` | 04-06 (Part II) | counter-examples, σ sweep, 2-D energies, KDE, inverse weights, DFO iterations, valley shares, populations, DFO rollouts |
-| ``plotting.town`` | 07 | towns, junctions, lights, the car's step and turn, BEV channels, drives, routes, the dataset |
-| ``plotting.agents`` | 08-09 | the agents' network, training and loss curves, trajectories, energy landscapes |
-| ``plotting.steering`` | 10 | the road-following study's metrics per model beside the paper's, the Fig. 5 analogue |
+- ``plotting.common`` (several chapters): lines, grouped bars, learning curves over seeds; shared
+  labels and helpers.
+- ``plotting.multimodality`` (01-03, Part I): tree and side-road scenes, rollouts, action histograms,
+  constant losses, Beta shapes, action distributions, density fits, energy landscapes and curves,
+  command traces.
+- ``plotting.ingredients`` (04-06, Part II): counter-examples, σ sweep, 2-D energies, KDE, inverse
+  weights, DFO iterations, valley shares, populations, DFO rollouts.
+- ``plotting.town`` (07): towns, junctions, lights, the car's step and turn, BEV channels, drives,
+  routes, the dataset.
+- ``plotting.agents`` (08-09): the agents' network, training and loss curves, trajectories, energy
+  landscapes.
+- ``plotting.steering`` (10): the road-following study's metrics per model beside the paper's, the
+  Fig. 5 analogue.
 
 Steering is drawn in the book's convention: −1 turns left, +1 turns right
 (``common.STEER_LABEL``); positions in a right-handed world frame (y > 0 to the left).

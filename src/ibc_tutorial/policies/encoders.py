@@ -8,6 +8,7 @@ chapters (``BEVStateEncoder``, the DA-IBC paper's Fig. 2).
 
 from __future__ import annotations
 
+import numpy as np
 import torch
 from torch import nn
 
@@ -110,3 +111,18 @@ class BEVStateEncoder(ObservationEncoder):
         )  # (3,), on the state's device
         st = state.float() * scale  # (B, 3), speed rescaled
         return torch.cat([self.cnn(x), self.state_mlp(st)], dim=1)  # (B, 2 E)
+
+
+def to_tensor_obs(obs, device: torch.device | str | None = None) -> dict[str, torch.Tensor]:
+    """A numpy or torch ``{"bev", "state"}`` batch (``BEVStateEncoder``'s input) as torch tensors (the
+    BEV's dtype kept, the state float32), moved to ``device`` if given."""
+    bev, state = obs["bev"], obs["state"]
+    bev = torch.from_numpy(np.ascontiguousarray(bev)) if isinstance(bev, np.ndarray) else bev
+    state = (
+        torch.from_numpy(np.asarray(state, dtype=np.float32))
+        if isinstance(state, np.ndarray)
+        else state.float()
+    )
+    if device is not None:
+        bev, state = bev.to(device), state.to(device)
+    return {"bev": bev, "state": state}

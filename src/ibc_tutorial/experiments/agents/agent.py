@@ -30,8 +30,9 @@ from torch import nn
 from ibc_tutorial.driving.rollout import DrivingPolicy
 from ibc_tutorial.experiments.agents.presets import METHODS, Preset
 from ibc_tutorial.kde import inverse_density_weights
-from ibc_tutorial.optimizers.dfo import DFOConfig, DFOOptimizer
-from ibc_tutorial.policies.encoders import BEVStateEncoder
+from ibc_tutorial.optimizers import embedded_energy
+from ibc_tutorial.optimizers.dfo import DFOConfig, dfo
+from ibc_tutorial.policies.encoders import BEVStateEncoder, to_tensor_obs
 from ibc_tutorial.policies.energy import EnergyModel
 from ibc_tutorial.policies.explicit import BetaPolicy
 from ibc_tutorial.utils import check_choice, check_device, check_tensor
@@ -92,21 +93,6 @@ def network_from_architecture(arch: dict) -> nn.Module:
 def build_network(method: str, preset: Preset) -> nn.Module:
     """The Fig. 2 network for ``method``: a ``BetaPolicy`` (bc) or an ``EnergyModel`` (ibc, da-ibc)."""
     return network_from_architecture(architecture(method, preset))
-
-
-def to_tensor_obs(obs, device: torch.device | str | None = None) -> dict[str, torch.Tensor]:
-    """Numpy or torch ``{"bev", "state"}`` batches -> torch tensors (float32 BEV and state), moved to
-    ``device`` if given."""
-    bev, state = obs["bev"], obs["state"]
-    bev = torch.from_numpy(np.ascontiguousarray(bev)) if isinstance(bev, np.ndarray) else bev
-    state = (
-        torch.from_numpy(np.asarray(state, dtype=np.float32))
-        if isinstance(state, np.ndarray)
-        else state.float()
-    )
-    if device is not None:
-        bev, state = bev.to(device), state.to(device)
-    return {"bev": bev, "state": state}
 
 
 def dfo_config(method: str, preset: Preset) -> DFOConfig | None:
@@ -170,11 +156,19 @@ class Agent:
         if self.method == "bc":
             return self.network.act(obs, mode="mean").cpu()  # (B, 2)
         weights = self.init_weights if self.method == "da-ibc" else None
-        optimizer = DFOOptimizer(self.expert_actions, self.dfo_config, init_weights=weights)
-        return optimizer.infer(self.network, obs, generator=generator).cpu()  # (B, 2)
+        energy_fn, n_obs = embedded_energy(self.network, obs)  # (B, N, 2) -> (B, N)
+        actions = dfo(  # Algorithm 1 of the DA-IBC paper
+            energy_fn,
+            self.expert_actions,
+            self.dfo_config,
+            n_obs=n_obs,
+            init_weights=weights,
+            generator=generator,
+        )
+        return actions.cpu()  # (B, 2)
 
     def policy(self, seed: int = 0) -> DrivingPolicy:
-        """The seeded ``driving.rollout.DrivingPolicy`` of this agent: numpy obs batch -> numpy actions (B, 2).
+        """The seeded ``driving.rollout.DrivingPolicy`` of this agent: numpy obs batch -> actions (B, 2).
 
         Its DFO draws come from a CPU generator seeded with ``seed``, whatever the agent's device."""
         gen = torch.Generator().manual_seed(int(seed))

@@ -205,8 +205,16 @@ def judge_claims(folder) -> ClaimVerdicts:
     folder, res, ls, preset = _check_folder(folder)
     evaluations = [ev for ev in EVALUATIONS if ev == "final" or preset.heldout_episodes > 0]
 
-    def table(method, key, ev):  # (agents, episodes) values of one method
-        return episode_table(folder, method, key, ev).values
+    def on_each_start_set(above: str, below: str, key: str, claim: str, unit: str) -> tuple:
+        """``above``'s mean ``key`` (in ``unit``) against ``below``'s, one comparison per set of starts."""
+        return tuple(
+            stats.compare(  # (agents, episodes) values of each method
+                episode_table(folder, above, key, ev).values,
+                episode_table(folder, below, key, ev).values,
+                f"{claim} ({STARTS[ev]}, {unit})",
+            )
+            for ev in evaluations
+        )
 
     claims: dict[int, ClaimVerdict] = {}
 
@@ -217,22 +225,10 @@ def judge_claims(folder) -> ClaimVerdicts:
         for m in ("ibc", "da-ibc")
     )
     # claim 2 (the table): DA-IBC's mean distance above IBC's, on each set of starts
-    parts2 = tuple(
-        stats.compare(
-            table("da-ibc", "distance_m", ev),
-            table("ibc", "distance_m", ev),
-            f"DA-IBC drives farther than IBC ({STARTS[ev]}, m)",
-        )
-        for ev in evaluations
-    )
+    parts2 = on_each_start_set("da-ibc", "ibc", "distance_m", "DA-IBC drives farther than IBC", "m")
     # claim 3 (the table): DA-IBC's mean red lights run per episode above BC's, on each set of starts
-    parts3 = tuple(
-        stats.compare(
-            table("da-ibc", "red_light_infractions", ev),
-            table("bc", "red_light_infractions", ev),
-            f"DA-IBC runs more red lights than BC ({STARTS[ev]}, per episode)",
-        )
-        for ev in evaluations
+    parts3 = on_each_start_set(
+        "da-ibc", "bc", "red_light_infractions", "DA-IBC runs more red lights than BC", "per episode"
     )
     for k, parts in ((1, parts1), (2, parts2), (3, parts3)):
         claims[k] = ClaimVerdict(k, CLAIMS[k], combine(*(j.verdict for j in parts)), parts)

@@ -40,7 +40,7 @@ from ibc_tutorial.experiments.agents.agent import Agent, build_network
 from ibc_tutorial.experiments.agents.bookkeeping import RunBook, TrainingData, finished_run, open_run
 from ibc_tutorial.experiments.agents.presets import METHODS, Preset
 from ibc_tutorial.experiments.agents.run_folder import clear_run, inspect_run, read_metrics
-from ibc_tutorial.negatives import ExpertSampler, UniformSampler
+from ibc_tutorial.negatives import ExpertSampler, NegativeSampler, UniformSampler
 from ibc_tutorial.objectives import info_nce_objective, likelihood_objective
 from ibc_tutorial.training import Objective, Trainer
 from ibc_tutorial.utils import check_choice, check_device, check_int
@@ -50,6 +50,7 @@ __all__ = [
     "RunResult",
     "TrainingData",
     "clear_run",
+    "counter_examples",
     "inspect_run",
     "objective_for",
     "read_metrics",
@@ -94,12 +95,21 @@ class DemoBatches:
         return {"obs": obs, "actions": actions.to(self.device)}
 
 
-def objective_for(method: str, network: torch.nn.Module, preset: Preset) -> Objective:
-    """The training objective of a method (see the module docstring)."""
+def counter_examples(method: str, preset: Preset) -> NegativeSampler | None:
+    """The counter-example sampler of a method: uniform for IBC, expert + noise for DA-IBC, None for BC."""
     check_choice("method", method, METHODS)
     if method == "bc":
+        return None
+    return UniformSampler(-1.0, 1.0) if method == "ibc" else ExpertSampler(preset.neg_sigma)
+
+
+def objective_for(method: str, network: torch.nn.Module, preset: Preset) -> Objective:
+    """The training objective of a method (see the module docstring), as ``train_agent`` builds it.
+
+    For code that trains outside ``train_agent`` (tests, benchmarks)."""
+    sampler = counter_examples(method, preset)
+    if sampler is None:
         return likelihood_objective(network)  # eq. 1
-    sampler = UniformSampler(-1.0, 1.0) if method == "ibc" else ExpertSampler(preset.neg_sigma)
     return info_nce_objective(network, sampler, preset.n_neg)  # eq. 2
 
 
@@ -172,7 +182,12 @@ def train_agent(
     n_steps = steps_per_epoch(len(run.data.dataset), preset.batch_size)
     config = preset.train_config(n_steps, seed, progress=show_progress, desc=f"{method} seed {seed}")
     batches = DemoBatches(run.data.dataset, device)  # minibatch indices drawn on the CPU, with probs (M,)
-    trainer = Trainer(network, objective_for(method, network, preset), batches, config, sample_probs=probs)
+    sampler = counter_examples(method, preset)  # None for BC: no counter-examples
+    if sampler is None:
+        objective = likelihood_objective(network)  # eq. 1 of the DA-IBC paper
+    else:
+        objective = info_nce_objective(network, sampler, preset.n_neg)  # eq. 2
+    trainer = Trainer(network, objective, batches, config, sample_probs=probs)
     book = RunBook(out, agent, seed, run.data_sha256, log)
     if run.status == "resume":
         book.resume(trainer, n_steps)

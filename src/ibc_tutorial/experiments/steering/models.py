@@ -22,13 +22,12 @@ steering command in [-1, 1] (+1 = right):
 
 from __future__ import annotations
 
-import numpy as np
 import torch
 from torch import nn
 
 from ibc_tutorial.objectives import grid_objective, likelihood_objective
 from ibc_tutorial.optimizers.grid import action_grid, grid_argmin, grid_energies
-from ibc_tutorial.policies.encoders import BEVStateEncoder
+from ibc_tutorial.policies.encoders import BEVStateEncoder, to_tensor_obs
 from ibc_tutorial.policies.energy import EnergyModel
 from ibc_tutorial.policies.explicit import ClassifierPolicy, MDNPolicy, RegressionPolicy
 from ibc_tutorial.training import Objective
@@ -90,18 +89,6 @@ def uses_pairs(name: str) -> bool:
     return check_choice("name", name, MODELS) == "ebm-smooth"
 
 
-def to_torch(obs) -> dict:
-    """A numpy or torch ``{"bev", "state"}`` batch as torch tensors (the BEV's dtype kept)."""
-    bev, state = obs["bev"], obs["state"]
-    bev = torch.from_numpy(np.ascontiguousarray(bev)) if isinstance(bev, np.ndarray) else bev
-    state = (
-        torch.from_numpy(np.asarray(state, dtype=np.float32))
-        if isinstance(state, np.ndarray)
-        else state.float()
-    )
-    return {"bev": bev, "state": state}
-
-
 class SteeringModel:
     """A trained network of one of ``MODELS`` and how it steers.
 
@@ -120,7 +107,7 @@ class SteeringModel:
 
     @torch.no_grad()
     def steer(self, obs) -> torch.Tensor:
-        obs = to_torch(obs)
+        obs = to_tensor_obs(obs)
         net = self.network
         if self.name in EBMS:
             return grid_argmin(net, obs, self.grid)[:, 0]  # (B,)
@@ -128,7 +115,7 @@ class SteeringModel:
 
     @torch.no_grad()
     def scores(self, obs) -> torch.Tensor | None:
-        obs = to_torch(obs)
+        obs = to_tensor_obs(obs)
         net = self.network
         if self.name in EBMS:
             return grid_energies(net, net.embed(obs), self.grid)  # (B, G)
