@@ -81,12 +81,11 @@ class SweepSettings:
     """The side-road shares (``SteeringPreset.side_road_share``); 0.5 is the limit where the side road is
     as likely as keeping straight (as the stems' left and right)."""
     models: tuple = ("ebm", "ebm-soft", "regression", "mdn")
-    """The models trained at every share. Budget (measured with ``time.process_time`` on the loaded
-    2-core machine, the laptop preset; see the module's report in ``sweep_budget``): of the study's six,
-    the grid EBM (the paper's subject), soft targets (the variant that keeps steering; temporal smoothing
-    at α = 1 collapses, and costs twice the steps' time), the MAE regression (the model the paper saw
-    swerve) and the MDN (the explicit multimodal model); the classifier's density is the MDN's
-    question asked again with bins."""
+    """The models trained at every share: four of the study's six, for the budget. The grid EBM (the
+    paper's subject), soft targets (the EBM variant that keeps steering: temporal smoothing at α = 1
+    collapsed in the chapter's study, and trains on pairs, twice the time per step), the MAE regression
+    (the model the paper saw swerve) and the MDN (the explicit multimodal model; the classifier asks the
+    same question of a density, with bins)."""
     seeds: tuple = (0, 1, 2)
     """Training seeds per model and share."""
     sessions: int = 3
@@ -139,7 +138,17 @@ def check_shares(shares) -> tuple:
 
 
 SWEEP = SweepSettings()
-"""The sweep of issue 24 at the laptop preset: 3 shares x 4 models x 3 seeds = 36 runs, 3 sessions each."""
+"""The sweep of issue 24 at the laptop preset: 3 shares x 4 models x 3 seeds = 36 runs, 3 sessions each.
+
+Its budget, about 60 minutes with ``--workers 2 --threads 1``, from CPU time (``time.process_time``)
+measured on a fraction of the work, on a loaded 2-core machine (AMD EPYC): 200 of the 3000 Adam steps
+took 5.85 s (grid EBM) and 5.06 s (regression) once the BEVs were cached (7.4 s and 7.9 s with the
+rendering), so about 90 s per model for 3000 steps; one session of loop-cw (about 2,050 steps) with
+the side-road mass took 8.0 s (EBM) and 8.6 s (MDN), so about 23 s for the four routes' 5,600 steps and
+70 s for 3 sessions. About 160 s per run, x 36 runs = 96 CPU minutes: 48 minutes on 2 workers, plus
+under a minute for the demonstrations (0.36 s per route) and the references (about 2 s per route and
+session). A 4th seed (48 runs) would take about 64 minutes, all six models (54 runs, smoothing at twice
+the training time) about 75."""
 
 
 def share_name(share: float) -> str:
