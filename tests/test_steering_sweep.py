@@ -100,6 +100,9 @@ def test_bad_shares_are_refused_before_any_work(tmp_path, capsys):
         assert not out.exists()
     assert _run("--preset", "tiny", "--models", "ebm,tree", "--out", str(tmp_path / "never")) == 2
     assert "models" in capsys.readouterr().err
+    assert _run("--preset", "tiny", "--set", "side_road_share=0.2", "--out", str(tmp_path / "never")) == 2
+    assert "--shares" in capsys.readouterr().err
+    assert not (tmp_path / "never").exists()
 
 
 def test_other_settings_in_the_folder_are_refused(swept, capsys):

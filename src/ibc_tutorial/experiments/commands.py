@@ -224,6 +224,8 @@ def sweep_steering(args: argparse.Namespace) -> int:
     from ibc_tutorial.experiments.steering.presets import get_preset, with_overrides
 
     overrides = list(getattr(args, "overrides", ()))
+    if any(str(o).split("=", 1)[0].strip() == "side_road_share" for o in overrides):
+        raise ValueError("--set side_road_share: the sweep sets the share from --shares")
     base = with_overrides(get_preset(args.preset), overrides)
     shares = study.check_shares(args.shares)
     models = tuple(m.strip() for m in str(args.models).split(",") if m.strip())
