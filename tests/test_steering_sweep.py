@@ -146,3 +146,19 @@ def test_kill_and_rerun_skips_the_finished_runs(tmp_path):
 def _split(name: str):
     share, model, seed = name.split("/")
     return float(share.removeprefix("share")), model, int(seed.removeprefix("seed"))
+
+
+def test_drive_route_measures_the_mass_of_a_scorer_at_the_junction():
+    """A straight-driving policy with hand-made scores: two equal valleys at full left and full right put
+    half the mass on the side road, whichever side it is on; one valley at straight ahead puts none."""
+    ref, _ = ev.expert_reference("y82-west", TINY)
+    grid = np.linspace(-1.0, 1.0, 21)
+    both = np.where(np.abs(grid) == 1.0, 0.0, 40.0)[None]  # (1, G)
+    straight = np.where(grid == 0.0, 0.0, 40.0)[None]
+    r2 = ev.drive_route(lambda obs: 0.0, ref, TINY, scorer=lambda obs: both, grid=grid)
+    r0 = ev.drive_route(lambda obs: 0.0, ref, TINY, scorer=lambda obs: straight, grid=grid)
+    assert len(r2["side_mass"]) == len(ref.sections) == 1 and len(r2["pass_mass"][0]) >= 10
+    assert r2["side_mass"][0] == pytest.approx(0.5, abs=1e-6)
+    assert r0["side_mass"][0] == pytest.approx(0.0, abs=1e-6)
+    assert r0["section_w_cmd"] == 0.0 and r0["section_changes"] >= 10  # a constant command does not jitter
+    assert "side_mass" not in ev.drive_route(lambda obs: 0.0, ref, TINY)  # no scorer, no mass

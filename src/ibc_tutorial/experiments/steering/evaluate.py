@@ -331,15 +331,15 @@ def drive_route(
     entry = int(round(SECTION_BEFORE_M / PATH_SPACING_M))  # path points from a section's start to the entry
     end = len(ref.path) - 2
     while j < end and t_total < budget:
-        x = steering_observation({"bev": obs["bev"][None], "state": obs["state"][None]})
-        steer = float(np.clip(policy(x), -1.0, 1.0))
+        seen = steering_observation({"bev": obs["bev"][None], "state": obs["state"][None]})  # (1, ...)
+        steer = float(np.clip(policy(seen), -1.0, 1.0))
         here = [p for p, (a, b, _s, _k) in enumerate(ref.sections) if a <= j <= b]
         if scorer is not None:
             for p in here:
                 a, _b, side, _k = ref.sections[p]
                 if j <= a + entry:
                     expert_steer = float(ref.steer[min(int(ref.path_step[j]), len(ref.steer) - 1)])
-                    scores = np.asarray(scorer(x), dtype=np.float64).reshape(1, -1)  # (1, G)
+                    scores = np.asarray(scorer(seen), dtype=np.float64).reshape(1, -1)  # (1, G)
                     masses[p].append(
                         float(side_road_mass(scores, grid, expert_steer, int(side), mass_threshold)[0])
                     )
@@ -391,10 +391,10 @@ def drive_route(
     # each section's offsets relative to the first (NaN: a restart skipped the whole section)
     peaks = np.array([max(tr) - tr[0] if tr else np.nan for tr in traces])  # (P,)
     scores = np.full(len(traces), np.nan)  # (P,)
-    seen = [p for p, tr in enumerate(traces) if tr]
-    if seen:
-        rel = _pad([[v - traces[p][0] for v in traces[p]] for p in seen])  # (P', T) NaN-padded
-        scores[seen] = swerve_rate(rel, slight=SLIGHT_M, clear=CLEAR_M, per_pass=True)
+    driven_passes = [p for p, tr in enumerate(traces) if tr]
+    if driven_passes:
+        rel = _pad([[v - traces[p][0] for v in traces[p]] for p in driven_passes])  # (P', T) NaN-padded
+        scores[driven_passes] = swerve_rate(rel, slight=SLIGHT_M, clear=CLEAR_M, per_pass=True)
     return {
         "route": ref.name,
         "crashes": crashes,
