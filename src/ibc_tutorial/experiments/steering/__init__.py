@@ -9,5 +9,6 @@ replicate-steering``).
 - ``train``: one run (train, evaluate, trace) with resumable checkpoints;
 - ``replicate``: the command, its results and provenance, ``load_results`` for the chapter;
 - ``junctions``: the sweep's measures at a side-road junction (probability on the side road, whiteness);
-- ``sweep``: ``ibc-tutorial sweep-steering``, the study at several side-road shares, in driving sessions.
+- ``sweep_settings``, ``sweep``: ``ibc-tutorial sweep-steering``, the study at several side-road shares,
+  each model driven in several sessions.
 """

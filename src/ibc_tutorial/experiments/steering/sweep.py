@@ -17,27 +17,25 @@ and a crash are still measured against keeping straight. The measures of each si
 the junction (``junctions.side_road_mass``: EBMs, classifier, MDN; not the regression), and the W of the
 commands inside the junction sections (``junctions.section_whiteness``).
 
-Folder: ``sweep.json`` (the settings), ``references.npz`` (the expert's drives of every route and
-session, shared by every share), ``share<p>/data/town01.npz`` (each share's demonstrations),
-``share<p>/runs/<model>/seed<k>/`` (``last.pt`` while training, then ``passes.npz``, the per-state traces
-of every pass, and ``eval.json``, written last), ``results.json``, ``provenance.json`` and
-``PROVENANCE.md``. Interrupted, the same command resumes: a run with its ``eval.json`` is skipped, an
-unfinished one continues from ``last.pt``. Other settings in the folder are refused before any work.
+The settings and the folder's names are in ``sweep_settings``. Folder: ``sweep.json`` (the settings),
+``references.npz`` (the expert's drives of every route and session, shared by every share),
+``share<p>/data/town01.npz`` (each share's demonstrations), ``share<p>/runs/<model>/seed<k>/``
+(``last.pt`` while training, then ``passes.npz``, the per-state traces of every pass, and ``eval.json``,
+written last), ``results.json``, ``provenance.json`` and ``PROVENANCE.md``. Interrupted, the same
+command resumes: a run with its ``eval.json`` is skipped, an unfinished one continues from ``last.pt``.
+Other settings in the folder are refused before any work.
 """
 
 from __future__ import annotations
 
 import functools
 import time
-from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 
 import numpy as np
 
 from ibc_tutorial.driving.dataset import DemoDataset, DemoLog
 from ibc_tutorial.experiments.runs import (
-    PROVENANCE,
-    PROVENANCE_MD,
     Provenance,
     check_only_entries,
     delete_entries,
@@ -49,135 +47,30 @@ from ibc_tutorial.experiments.runs import (
     write_npz,
 )
 from ibc_tutorial.experiments.steering import evaluate as ev
-from ibc_tutorial.experiments.steering.junctions import MASS_THRESHOLD
-from ibc_tutorial.experiments.steering.models import LABELS, MODELS
+from ibc_tutorial.experiments.steering.models import LABELS
 from ibc_tutorial.experiments.steering.presets import LAPTOP, SteeringPreset, differences
+from ibc_tutorial.experiments.steering.sweep_settings import (
+    ENTRIES,
+    EVAL,
+    MEASURES,
+    PASSES,
+    REFERENCES,
+    RESULTS,
+    SETTINGS,
+    SWEEP,
+    SweepSettings,
+    check_shares,
+    finished_runs,
+    planned,
+    run_dir,
+    run_name,
+    share_name,
+    share_preset,
+)
 from ibc_tutorial.experiments.steering.task import collect_demonstrations, side_road_counts
 from ibc_tutorial.experiments.steering.train import SteeringModel, train_model
 from ibc_tutorial.parallel import imap_unordered
-from ibc_tutorial.utils import check_choice, check_int, check_positive
-
-SETTINGS = "sweep.json"
-"""The sweep's settings (``SweepSettings`` and the base preset)."""
-REFERENCES = "references.npz"
-"""The expert's drives of every evaluation route in every session."""
-RESULTS = "results.json"
-"""The tables the chapter reads."""
-EVAL = "eval.json"
-"""A finished run's results (written last)."""
-PASSES = "passes.npz"
-"""A finished run's per-pass traces: offsets towards the side road and the probability on it, per state."""
-ENTRIES = (SETTINGS, REFERENCES, RESULTS, PROVENANCE, PROVENANCE_MD)
-"""The files of a sweep folder beside its ``share<p>`` folders."""
-MEASURES = ("peak_m", "side_mass", "section_w_cmd", "w_cmd", "crashes_per_km", "swerve_rate")
-"""What the table reports per share and model (``evaluate.summarize_routes``'s names)."""
-
-
-@dataclass(frozen=True)
-class SweepSettings:
-    """What the sweep varies and how much of it it runs (the base preset holds everything else)."""
-
-    shares: tuple = (0.15, 0.3, 0.5)
-    """The side-road shares (``SteeringPreset.side_road_share``); 0.5 is the limit where the side road is
-    as likely as keeping straight (as the stems' left and right)."""
-    models: tuple = ("ebm", "ebm-soft", "regression", "mdn")
-    """The models trained at every share: four of the study's six, for the budget. The grid EBM (the
-    paper's subject), soft targets (the EBM variant that keeps steering: temporal smoothing at α = 1
-    collapsed in the chapter's study, and trains on pairs, twice the time per step), the MAE regression
-    (the model the paper saw swerve) and the MDN (the explicit multimodal model; the classifier asks the
-    same question of a density, with bins)."""
-    seeds: tuple = (0, 1, 2)
-    """Training seeds per model and share."""
-    sessions: int = 3
-    """Driving sessions per trained model (``evaluate.SESSION_SHIFT_M``)."""
-    mass_threshold: float = MASS_THRESHOLD
-    """How far beyond the expert's steer (towards the side road) a steering value counts as the side
-    road's (``junctions.side_road_mass``)."""
-
-    def __post_init__(self):
-        check_shares(self.shares)
-        if not self.models or not self.seeds:
-            raise ValueError("models and seeds must name at least one each")
-        for m in self.models:
-            check_choice("models", m, MODELS)
-        for s in self.seeds:
-            check_int("seeds", s, minimum=0)
-        check_int("sessions", self.sessions, minimum=1)
-        check_positive("mass_threshold", self.mass_threshold, allow_zero=True)
-
-    def to_dict(self) -> dict:
-        return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
-
-    @classmethod
-    def from_dict(cls, d: dict) -> SweepSettings:
-        names = {f.name for f in fields(cls)}
-        if not isinstance(d, dict) or set(d) - names:
-            raise ValueError(f"not sweep settings: {d!r}")
-        return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
-
-
-def check_shares(shares) -> tuple:
-    """``shares`` (a tuple of numbers, or the text "0.15,0.3,0.5") as a tuple of distinct shares in (0, 1],
-    in the order given; ValueError naming ``--shares`` otherwise."""
-    if isinstance(shares, str):
-        try:
-            shares = tuple(float(x) for x in shares.split(",") if x.strip())
-        except ValueError:
-            raise ValueError(
-                f"--shares must be numbers separated by commas, e.g. 0.15,0.3,0.5, got {shares!r}"
-            ) from None
-    shares = tuple(shares)
-    if not shares:
-        raise ValueError("--shares must name at least one side-road share")
-    for s in shares:
-        if isinstance(s, bool) or not isinstance(s, (int, float)) or not 0.0 < float(s) <= 1.0:
-            raise ValueError(f"--shares: each share must be a number in (0, 1], got {s!r}")
-    if len({round(float(s), 6) for s in shares}) != len(shares):
-        raise ValueError(f"--shares: each share once, got {list(shares)}")
-    return tuple(float(s) for s in shares)
-
-
-SWEEP = SweepSettings()
-"""The sweep of issue 24 at the laptop preset: 3 shares x 4 models x 3 seeds = 36 runs, 3 sessions each.
-
-Its budget, about 60 minutes with ``--workers 2 --threads 1``, from CPU time (``time.process_time``)
-measured on a fraction of the work, on a loaded 2-core machine (AMD EPYC): 200 of the 3000 Adam steps
-took 5.85 s (grid EBM) and 5.06 s (regression) once the BEVs were cached (7.4 s and 7.9 s with the
-rendering), so about 90 s per model for 3000 steps; one session of loop-cw (about 2,050 steps) with
-the side-road mass took 8.0 s (EBM) and 8.6 s (MDN), so about 23 s for the four routes' 5,600 steps and
-70 s for 3 sessions. About 160 s per run, x 36 runs = 96 CPU minutes: 48 minutes on 2 workers, plus
-under a minute for the demonstrations (0.36 s per route) and the references (about 2 s per route and
-session). A 4th seed (48 runs) would take about 64 minutes, all six models (54 runs, smoothing at twice
-the training time) about 75."""
-
-
-def share_name(share: float) -> str:
-    """A share's folder name: ``share0.15``."""
-    return f"share{float(share):g}"
-
-
-def share_preset(base: SteeringPreset, share: float) -> SteeringPreset:
-    """The base preset at side-road share ``share``."""
-    return replace(base, side_road_share=float(share))
-
-
-def run_dir(out, share: float, model: str, seed: int) -> Path:
-    """Folder of one run."""
-    return Path(out) / share_name(share) / "runs" / model / f"seed{seed}"
-
-
-def planned(settings: SweepSettings) -> list[tuple[float, str, int]]:
-    """Every run, (share, model, seed), shares first (each share's data is then loaded once per worker)."""
-    return [(p, m, s) for p in settings.shares for s in settings.seeds for m in settings.models]
-
-
-def run_name(share: float, model: str, seed: int) -> str:
-    return f"{share_name(share)}/{model}/seed{seed}"
-
-
-def finished_runs(out, settings: SweepSettings) -> list[str]:
-    """The runs with their ``eval.json``, in planned order."""
-    return [run_name(*r) for r in planned(settings) if (run_dir(out, *r) / EVAL).exists()]
+from ibc_tutorial.utils import check_int
 
 
 def _stored(settings: SweepSettings, base: SteeringPreset) -> dict:
@@ -493,3 +386,22 @@ def load_results(out) -> dict:
     """``results.json`` and ``provenance.json`` of a sweep folder (ValueError naming a missing or damaged
     file)."""
     return read_folder(out, RESULTS, {}, "ibc-tutorial sweep-steering")
+
+
+__all__ = [
+    "EVAL",
+    "MEASURES",
+    "PASSES",
+    "SWEEP",
+    "SweepSettings",
+    "check_folder",
+    "check_shares",
+    "clear_folder",
+    "collect_results",
+    "finished_runs",
+    "load_results",
+    "read_eval",
+    "read_references",
+    "run_dir",
+    "sweep",
+]
