@@ -20,6 +20,7 @@ here raise ``UserError``, and ``main`` prints either. Ctrl-C prints one line too
     routeless
     ibc-tutorial replicate --preset laptop --out book/results/laptop
     ibc-tutorial replicate --preset tiny --set dfo.n_samples=64 --out /tmp/tiny
+    ibc-tutorial sweep-steering --preset laptop --out book/results/steering-sweep --workers 2 --threads 1
 """
 
 from __future__ import annotations
@@ -136,7 +137,7 @@ def check_paths(command: str, args: argparse.Namespace) -> None:
         if args.out:
             check_output_file("--out", args.out, force=force)
         check_input_file("--checkpoint", args.checkpoint, "agent checkpoint (.pt)")
-    elif command in ("replicate", "replicate-steering"):
+    elif command in ("replicate", "replicate-steering", "sweep-steering"):
         check_output_dir("--out", args.out)
     elif command == "stems":
         if not Path(args.folder, "runs").is_dir():
@@ -335,6 +336,35 @@ def _stems_arguments(p: argparse.ArgumentParser) -> None:
     )
 
 
+def _sweep_steering_arguments(p: argparse.ArgumentParser) -> None:
+    from ibc_tutorial.experiments.steering.sweep import SWEEP  # deferred: loads torch
+
+    def listed(values) -> str:
+        return ",".join(f"{v:g}" if isinstance(v, float) else str(v) for v in values)
+
+    _replicate_steering_arguments(p)
+    p.add_argument(
+        "--shares",
+        default=listed(SWEEP.shares),
+        help="side-road shares, comma-separated, each in (0, 1] (default: %(default)s)",
+    )
+    p.add_argument(
+        "--models", default=listed(SWEEP.models), help="models trained at every share (default: %(default)s)"
+    )
+    p.add_argument("--seeds", default=listed(SWEEP.seeds), help="training seeds (default: %(default)s)")
+    p.add_argument(
+        "--sessions",
+        type=int,
+        default=SWEEP.sessions,
+        help="driving sessions per trained model (default: %(default)s)",
+    )
+    for action in p._actions:  # the study's help, said of the sweep
+        if action.dest == "out":
+            action.help = "folder of the sweep; an interrupted sweep of the same settings there is resumed"
+        elif action.dest == "force":
+            action.help = "start over: delete the sweep already in --out"
+
+
 COMMANDS = "ibc_tutorial.experiments.commands"
 """The module holding each sub-command's work, a function of the parsed arguments."""
 
@@ -369,6 +399,11 @@ SUBCOMMANDS: dict[str, tuple[str, object, str]] = {
         "stems",
         _stems_arguments,
         "the stems of the T-junctions: every shipped agent driven freely, the energy where it chooses",
+    ),
+    "sweep-steering": (
+        "sweep_steering",
+        _sweep_steering_arguments,
+        "the road-following study at several side-road shares, each model driven in several sessions",
     ),
 }
 
@@ -414,7 +449,7 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         if debug:
             raise
-        resumable = args.command in ("train", "replicate", "replicate-steering")
+        resumable = args.command in ("train", "replicate", "replicate-steering", "sweep-steering")
         print(
             f"{prog}: interrupted; "
             + ("re-run the same command to resume" if resumable else "nothing was written"),

@@ -228,3 +228,50 @@ def stems(args: argparse.Namespace) -> int:
         stem_analysis.run_analysis(args.folder, args.out, command=command)
     stem_analysis.summarise(args.out, Path(args.folder) / "data" / "town01.npz")
     return 0
+
+
+def sweep_steering(args: argparse.Namespace) -> int:
+    """``ibc-tutorial sweep-steering``: shares, models, seeds, sessions and the preset checked, the folder
+    checked, then the sweep."""
+    from ibc_tutorial.experiments.steering import sweep as study
+    from ibc_tutorial.experiments.steering.presets import get_preset, with_overrides
+
+    overrides = list(getattr(args, "overrides", ()))
+    if any(str(o).split("=", 1)[0].strip() == "side_road_share" for o in overrides):
+        raise ValueError("--set side_road_share: the sweep sets the share from --shares")
+    base = with_overrides(get_preset(args.preset), overrides)
+    shares = study.check_shares(args.shares)
+    models = tuple(m.strip() for m in str(args.models).split(",") if m.strip())
+    try:
+        seeds = tuple(int(s) for s in str(args.seeds).split(",") if s.strip())
+    except ValueError:
+        raise ValueError(f"--seeds must be integers separated by commas, got {args.seeds!r}") from None
+    try:
+        settings = study.SweepSettings(
+            shares=shares,
+            models=models,
+            seeds=seeds,
+            sessions=args.sessions,
+            mass_threshold=study.SWEEP.mass_threshold,
+        )
+    except ValueError as exc:
+        raise ValueError(f"--{str(exc).lstrip('-')}") from None
+    threads = _threads(args)
+    workers = check_int("--workers", args.workers, minimum=1)
+    check_choice("--device", args.device, ("cpu",))
+    if getattr(args, "force", False):
+        study.clear_folder(args.out)
+    study.check_folder(args.out, settings, base)  # before any work
+    if threads:
+        torch.set_num_threads(threads)
+    command = getattr(args, "command_line", "")
+    study.sweep(
+        settings,
+        base,
+        args.out,
+        command=command,
+        overrides=overrides,
+        workers=workers,
+        threads=torch.get_num_threads(),
+    )
+    return 0

@@ -4,7 +4,11 @@ replicate-steering``).
 - ``presets``: the ``laptop`` and ``tiny`` settings;
 - ``task``: the steering-only task, its demonstrations (side roads rarely taken) and minibatches;
 - ``models``: the paper's six models from the library's heads and losses;
-- ``evaluate``: fixed town02 routes, crashes with restarts (VISTA's protocol), W_cmd, swerve rate;
+- ``evaluate``: fixed town02 routes (in driving sessions), crashes with restarts (VISTA's protocol), W_cmd,
+  swerve rate;
 - ``train``: one run (train, evaluate, trace) with resumable checkpoints;
-- ``replicate``: the command, its results and provenance, ``load_results`` for the chapter.
+- ``replicate``: the command, its results and provenance, ``load_results`` for the chapter;
+- ``junctions``: the sweep's measures at a side-road junction (probability on the side road, whiteness);
+- ``sweep_settings``, ``sweep``: ``ibc-tutorial sweep-steering``, the study at several side-road shares,
+  each model driven in several sessions.
 """

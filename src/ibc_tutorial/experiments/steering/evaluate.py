@@ -24,9 +24,16 @@ with that start, the rest of the route and the light phases shifted by the time 
 over the stretches between restarts, in the book's unit: steer per second (1/s), δt = 0.1 s. The
 paper's commands are steering-wheel angles spanning about ±250° (its Fig. 4) where ours span ±1,
 so **W in the paper's °/s ≈ 250 x W in 1/s** (``PAPER_DEG_PER_STEER``); in front-wheel angle, this
-car's ±0.6 rad, it is 34.4 x W (``FRONT_WHEEL_DEG_PER_STEER``). The paper decides every 33 ms,
-we every 100 ms: frame-to-frame jitter of the same size per decision gives a W 3 times smaller
-here.
+car's ±0.6 rad, it is 34.4 x W (``FRONT_WHEEL_DEG_PER_STEER``). The paper's stack decides at about
+12 Hz (its appendix; 33 ms is its camera's frame spacing), we every 100 ms: jitter of the same size per
+decision gives a W about 1.2 times smaller here.
+
+**Sessions** (``SESSION_SHIFT_M``): a route can be driven in several sessions, each starting a little
+further on with its own light phases; session 0 is the chapter's.
+
+**At the junctions** (``junctions``, the sweep's measures): the W of the commands decided inside the
+side-road sections (``section_w_cmd``: does argmin jitter between two modes there?), and, given the
+model's scores, the share of its probability on steering towards the side road (``side_mass``).
 
 **Swerve rate** (the paper's Table 2, ``metrics.swerve_rate``): a side-road section runs from
 ``SECTION_BEFORE_M`` = 15 m before the junction's entry to the end of the junction (the expert's
@@ -49,10 +56,16 @@ from ibc_tutorial.driving.env import DrivingEnv, EnvConfig
 from ibc_tutorial.driving.expert import Expert
 from ibc_tutorial.driving.routes import Route
 from ibc_tutorial.driving.towns import get_town
+from ibc_tutorial.experiments.steering.junctions import (
+    MASS_THRESHOLD,
+    pooled_whiteness,
+    section_whiteness,
+    side_road_mass,
+)
 from ibc_tutorial.experiments.steering.presets import EVAL_TOWN, ROUTES
 from ibc_tutorial.experiments.steering.task import longitudinal_config, steering_observation
 from ibc_tutorial.metrics import crashes_per_km, swerve_rate, whiteness
-from ibc_tutorial.utils import check_choice
+from ibc_tutorial.utils import check_choice, check_int
 
 END_MARGIN_M = 12.0
 """A route ends this far before the end of its last lane (before the next junction's stop line)."""
@@ -78,11 +91,17 @@ FIG5_STEPS = 50
 """Length of the off-policy window of the Fig. 5 analogue: 5 s."""
 FIG5_BEFORE = 30
 """Steps of that window before the expert enters the junction."""
+SESSION_SHIFT_M = 2.0
+"""Driving session k of a route starts ``k`` times this further along its first lane, with its own light
+phases (``light_offsets``): session 0 is the route as the chapter drives it. The car meets each side road
+at other moments of its control loop and of the lights, so a model's sessions differ as the paper's
+driving sessions of one network did (its Table 1's rows)."""
 
 
-def build_route(name: str) -> Route:
-    """The ``Route`` of ``ROUTES[name]`` in town02."""
+def build_route(name: str, session: int = 0) -> Route:
+    """The ``Route`` of ``ROUTES[name]`` in town02; session k starts ``k * SESSION_SHIFT_M`` further on."""
     check_choice("name", name, tuple(ROUTES))
+    session = check_int("session", session, minimum=0)
     town = get_town(EVAL_TOWN)
     a, b, s, turns = ROUTES[name]
     for lane in town.lanes:
@@ -91,7 +110,7 @@ def build_route(name: str) -> Route:
             and tuple(town.nodes[lane.from_node]) == a
             and tuple(town.nodes[lane.to_node]) == b
         ):
-            return Route(lane.id, s, turns)
+            return Route(lane.id, s + session * SESSION_SHIFT_M, turns)
     raise ValueError(f"route {name!r}: no road lane from {a} to {b} in {EVAL_TOWN}")
 
 
@@ -109,9 +128,11 @@ def route_env(preset) -> DrivingEnv:
     return DrivingEnv(config=EnvConfig(EVAL_TOWN, preset.bev_size, routeless=True, max_steps=10**6))
 
 
-def light_offsets(env: DrivingEnv, preset, name: str) -> np.ndarray:
-    """(J,) the light phases of route ``name`` (seeded by ``preset.eval_seed`` and the route's index)."""
-    rng = np.random.default_rng([preset.eval_seed, list(ROUTES).index(name)])
+def light_offsets(env: DrivingEnv, preset, name: str, session: int = 0) -> np.ndarray:
+    """(J,) the light phases of route ``name`` (seeded by ``preset.eval_seed``, the route's index and, from
+    session 1 on, the session)."""
+    key = [preset.eval_seed, list(ROUTES).index(name)] + ([int(session)] if session else [])
+    rng = np.random.default_rng(key)
     return env.sim.schedule.random_offsets(rng)
 
 
@@ -140,6 +161,8 @@ class Reference:
     sections: np.ndarray = field(default=None)
     """(P, 4) side-road sections: first and last path point, +1 (side road on the left) or -1
     (right), the step at which the expert entered the junction."""
+    session: int = 0
+    """The driving session (``SESSION_SHIFT_M``)."""
 
     def __post_init__(self):
         if self.path is None:
@@ -149,12 +172,18 @@ class Reference:
 
     def to_arrays(self) -> dict:
         keys = ("poses", "lanes", "speeds", "steer", "turns_done", "offsets", "path", "path_step", "sections")
-        return {f"{self.name}/{k}": getattr(self, k) for k in keys}
+        return {f"{reference_key(self.name, self.session)}/{k}": getattr(self, k) for k in keys}
 
     @classmethod
-    def from_arrays(cls, name: str, arrays) -> Reference:
+    def from_arrays(cls, name: str, arrays, session: int = 0) -> Reference:
         keys = ("poses", "lanes", "speeds", "steer", "turns_done", "offsets", "path", "path_step", "sections")
-        return cls(name, **{k: np.asarray(arrays[f"{name}/{k}"]) for k in keys})
+        key = reference_key(name, session)
+        return cls(name, **{k: np.asarray(arrays[f"{key}/{k}"]) for k in keys}, session=session)
+
+
+def reference_key(name: str, session: int = 0) -> str:
+    """The prefix of a reference's arrays: the route's name (session 0), or ``name#s<k>``."""
+    return name if not session else f"{name}#s{session}"
 
 
 def resample_path(xy: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarray]:
@@ -195,14 +224,14 @@ def side_road_sections(ref: Reference) -> np.ndarray:
 
 
 def expert_reference(
-    name: str, preset, keep_obs: tuple[int, int] | None = None
+    name: str, preset, keep_obs: tuple[int, int] | None = None, session: int = 0
 ) -> tuple[Reference, np.ndarray | None]:
-    """The expert drives route ``name``; returns its ``Reference`` (and the observations of steps
-    ``keep_obs`` = (first, end), as the models would see them, or None)."""
+    """The expert drives route ``name`` in driving session ``session``; returns its ``Reference`` (and the
+    observations of steps ``keep_obs`` = (first, end), as the models would see them, or None)."""
     env = route_env(preset)
-    route = build_route(name)
+    route = build_route(name, session)
     length = route_length(route, preset.route_cap_m)
-    offsets = light_offsets(env, preset, name)
+    offsets = light_offsets(env, preset, name, session)
     obs, info = env.reset(seed=preset.eval_seed, options={"route": route, "light_offsets": offsets})
     expert = Expert(env, longitudinal_config(preset.speed))
     town = env.town
@@ -227,7 +256,7 @@ def expert_reference(
             raise RuntimeError(
                 f"the expert did not complete route {name!r} ({info['termination'] or 'too long'})"
             )
-    ref = Reference(name, offsets=offsets, **{k: np.array(v) for k, v in rows.items()})
+    ref = Reference(name, offsets=offsets, session=session, **{k: np.array(v) for k, v in rows.items()})
     if keep_obs is None:
         return ref, None
     return ref, {
@@ -263,15 +292,33 @@ def _nearest(path: np.ndarray, xy, j: int, back: int = 20, ahead: int = 40) -> t
     return i, float(t[0] * r[1] - t[1] * r[0])  # z of t x r: > 0 left of the direction of travel
 
 
-def drive_route(policy, ref: Reference, preset, *, max_steps: int | None = None) -> dict:
-    """Drive route ``ref.name`` with ``policy`` (steering observations (1, ...) -> steer) under the
-    crash-and-restart protocol (module docstring); returns the route's metrics and traces.
+def drive_route(
+    policy,
+    ref: Reference,
+    preset,
+    *,
+    max_steps: int | None = None,
+    scorer=None,
+    grid=None,
+    mass_threshold: float = MASS_THRESHOLD,
+) -> dict:
+    """Drive route ``ref.name`` (session ``ref.session``) with ``policy`` (steering observations (1, ...)
+    -> steer) under the crash-and-restart protocol (module docstring); returns the route's metrics and
+    traces.
 
     The result: ``crashes``, ``distance_m`` (driven by the model), ``crashes_per_km``, ``w_cmd``
     (1/s), ``steps``, ``timeout`` (the step budget ran out), ``crash_steps``, ``swerve_peak_m`` (P,)
-    and ``swerve_score`` (P,) per side-road section, and ``steer`` (T,) the commands."""
+    and ``swerve_score`` (P,) per side-road section, ``section_w_cmd`` (1/s; ``junctions.section_whiteness``
+    of the commands decided inside the sections, pooled over the stretches between restarts) and
+    ``section_changes`` (how many changes it pools), ``pass_offsets`` (per pass, the offsets towards the
+    side road, relative to the first, of which ``swerve_peak_m`` is the maximum), and ``steer`` (T,) the
+    commands. With ``scorer``
+    (observations (1, ...) -> (1, G) scores over ``grid`` (G,), lower = preferred), also ``side_mass``
+    (P,): per pass, the mean over its states from the section's start to the junction's entry of
+    ``junctions.side_road_mass`` (beyond ``mass_threshold`` from the expert's steer there; None: no
+    such state driven) and ``pass_mass`` (per pass, the per-state shares it averages)."""
     env = route_env(preset)
-    route = build_route(ref.name)
+    route = build_route(ref.name, ref.session)
     town = env.town
     budget = max_steps if max_steps is not None else 3 * len(ref.poses) + 600
     obs, info = env.reset(seed=preset.eval_seed, options={"route": route, "light_offsets": ref.offsets})
@@ -279,15 +326,24 @@ def drive_route(policy, ref: Reference, preset, *, max_steps: int | None = None)
     j, t_total, crashes, crash_steps, driven = 0, 0, 0, [], 0.0
     segments, current = [], []
     traces = [[] for _ in ref.sections]
+    masses = [[] for _ in ref.sections]
+    in_section, flags = [], []  # per stretch between restarts: whether each command was decided in a section
+    entry = int(round(SECTION_BEFORE_M / PATH_SPACING_M))  # path points from a section's start to the entry
     end = len(ref.path) - 2
     while j < end and t_total < budget:
-        steer = float(
-            np.clip(
-                policy(steering_observation({"bev": obs["bev"][None], "state": obs["state"][None]})),
-                -1.0,
-                1.0,
-            )
-        )
+        seen = steering_observation({"bev": obs["bev"][None], "state": obs["state"][None]})  # (1, ...)
+        steer = float(np.clip(policy(seen), -1.0, 1.0))
+        here = [p for p, (a, b, _s, _k) in enumerate(ref.sections) if a <= j <= b]
+        if scorer is not None:
+            for p in here:
+                a, _b, side, _k = ref.sections[p]
+                if j <= a + entry:
+                    expert_steer = float(ref.steer[min(int(ref.path_step[j]), len(ref.steer) - 1)])
+                    scores = np.asarray(scorer(seen), dtype=np.float64).reshape(1, -1)  # (1, G)
+                    masses[p].append(
+                        float(side_road_mass(scores, grid, expert_steer, int(side), mass_threshold)[0])
+                    )
+        flags.append(bool(here))
         acc = float(expert.act()[1])
         current.append(steer)
         obs, _, terminated, _, info = env.step(np.array([steer, acc], dtype=np.float32))
@@ -303,7 +359,8 @@ def drive_route(policy, ref: Reference, preset, *, max_steps: int | None = None)
         crash_steps.append(t_total)
         driven += info["distance_m"]
         segments.append(current)
-        current = []
+        in_section.append(flags)
+        current, flags = [], []
         k = int(ref.path_step[j]) + int(round(RESTART_S / DT))
         while k < len(ref.lanes) and town.lanes[int(ref.lanes[k])].kind != "road":
             k += 1
@@ -322,16 +379,22 @@ def drive_route(policy, ref: Reference, preset, *, max_steps: int | None = None)
         j = int(np.searchsorted(ref.path_step, k, side="left"))
     driven += info["distance_m"]
     segments.append(current)
+    in_section.append(flags)
+    section_w = [
+        (section_whiteness(c, f, DT), int((np.asarray(f[1:]) & np.asarray(f[:-1])).sum()))
+        for c, f in zip(segments, in_section, strict=True)
+        if len(c) >= 2
+    ]
     segs = [np.array(c) for c in segments if len(c) >= 2]
     n = sum(len(c) - 1 for c in segs)
     w = math.sqrt(sum((len(c) - 1) * whiteness(c, DT) ** 2 for c in segs) / n) if n else float("nan")
     # each section's offsets relative to the first (NaN: a restart skipped the whole section)
     peaks = np.array([max(tr) - tr[0] if tr else np.nan for tr in traces])  # (P,)
     scores = np.full(len(traces), np.nan)  # (P,)
-    seen = [p for p, tr in enumerate(traces) if tr]
-    if seen:
-        rel = _pad([[v - traces[p][0] for v in traces[p]] for p in seen])  # (P', T) NaN-padded
-        scores[seen] = swerve_rate(rel, slight=SLIGHT_M, clear=CLEAR_M, per_pass=True)
+    driven_passes = [p for p, tr in enumerate(traces) if tr]
+    if driven_passes:
+        rel = _pad([[v - traces[p][0] for v in traces[p]] for p in driven_passes])  # (P', T) NaN-padded
+        scores[driven_passes] = swerve_rate(rel, slight=SLIGHT_M, clear=CLEAR_M, per_pass=True)
     return {
         "route": ref.name,
         "crashes": crashes,
@@ -343,8 +406,23 @@ def drive_route(policy, ref: Reference, preset, *, max_steps: int | None = None)
         "crash_steps": crash_steps,
         "swerve_peak_m": [None if np.isnan(p) else round(float(p), 4) for p in peaks],
         "swerve_score": [None if np.isnan(v) else float(v) for v in scores],
+        "section_w_cmd": _round_or_none(pooled_whiteness(section_w), 5),
+        "section_changes": int(sum(k for _w, k in section_w)),
+        "pass_offsets": [[round(v - tr[0], 4) for v in tr] for tr in traces],
+        **(
+            {
+                "side_mass": [round(float(np.mean(m)), 5) if m else None for m in masses],
+                "pass_mass": [[round(v, 5) for v in m] for m in masses],
+            }
+            if scorer is not None
+            else {}
+        ),
         "steer": np.concatenate([np.array(c) for c in segments if c]) if any(segments) else np.zeros(0),
     }
+
+
+def _round_or_none(x: float, digits: int):
+    return None if x is None or math.isnan(x) else round(float(x), digits)
 
 
 def _pad(rows: list[list[float]]) -> np.ndarray:
@@ -362,12 +440,25 @@ def expert_whiteness(ref: Reference) -> float:
 
 def summarize_routes(routes: list[dict]) -> dict:
     """One run's routes pooled: crashes, distance, crashes per km, W_cmd (pooled over the commands'
-    changes), the swerve rate over every side-road section driven, and the number of passes."""
+    changes), the swerve rate over every side-road section driven, and the number of passes; where the
+    routes have them, the sweep's measures: ``section_w_cmd`` (pooled over the sections' changes),
+    ``peak_m`` and ``side_mass`` (means over the passes)."""
     crashes = sum(r["crashes"] for r in routes)
     dist = sum(r["distance_m"] for r in routes)
     n = sum(r["steps"] - 1 for r in routes)
     w = float(np.sqrt(sum((r["steps"] - 1) * r["w_cmd"] ** 2 for r in routes) / n)) if n else float("nan")
     scores = [s for r in routes for s in r["swerve_score"] if s is not None]
+    extra = {}
+    if all("section_w_cmd" in r for r in routes):  # the sweep's measures (evaluations made since they exist)
+        sw = pooled_whiteness([(r["section_w_cmd"] or float("nan"), r["section_changes"]) for r in routes])
+        peaks = [p for r in routes for p in r["swerve_peak_m"] if p is not None]
+        extra.update(
+            section_w_cmd=_round_or_none(sw, 5),
+            peak_m=round(float(np.mean(peaks)), 4) if peaks else None,
+        )
+    if all("side_mass" in r for r in routes):
+        mass = [m for r in routes for m in r["side_mass"] if m is not None]
+        extra["side_mass"] = round(float(np.mean(mass)), 5) if mass else None
     return {
         "crashes": crashes,
         "distance_m": round(dist, 2),
@@ -376,4 +467,5 @@ def summarize_routes(routes: list[dict]) -> dict:
         "swerve_rate": round(float(np.mean(scores)), 4) if scores else None,
         "passes": len(scores),
         "timeouts": sum(bool(r["timeout"]) for r in routes),
+        **extra,
     }

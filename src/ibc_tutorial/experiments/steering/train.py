@@ -182,6 +182,7 @@ def evaluate_model(steering: SteeringModel, references: list[Reference], preset:
     for ref in references:
         r = drive_route(policy, ref, preset)
         r.pop("steer")
+        r.pop("pass_offsets")  # the sweep keeps these traces (``sweep``); this study its peaks
         r["expert_w_cmd"] = round(expert_whiteness(ref), 5)
         routes.append(r)
     return {"routes": routes, "summary": summarize_routes(routes)}
