@@ -11,9 +11,8 @@ it loads with ``torch.load(..., weights_only=True)``: no pickled code runs. It h
   recorded step's state and action, not the file's bytes, which carry the time it was written);
 - ``seed``: the training seed (also the policy seed of its evaluations; absent in older files,
   whose metrics record it);
-- ``epoch``, ``model`` (the state dict; float16 in a ``final.pt``), the expert actions and DFO initial weights
-the agent
-  acts with, and, for resuming, ``optimizer`` and ``generator`` states (``training.Trainer``)
+- ``epoch``, ``model`` (the state dict; float16 in a ``final.pt``), the expert actions and DFO
+  initial weights the agent acts with, and, for resuming, ``optimizer`` and ``generator`` states (``training.Trainer``)
   and the metrics so far.
 
 It is written atomically (``utils.atomic_torch_save``). ``load_checkpoint`` checks every field
