@@ -224,6 +224,7 @@ def route_evaluation(
         drives=preset.route_episodes,
         seed=ROUTE_SEED,
         policy_seed=policy_seed,
+        max_steps=preset.route_max_steps or None,
         show_progress=show_progress,
     )
     ev = dict(
