@@ -21,6 +21,7 @@ here raise ``UserError``, and ``main`` prints either. Ctrl-C prints one line too
     ibc-tutorial replicate --preset laptop --out book/results/laptop
     ibc-tutorial replicate --preset tiny --set dfo.n_samples=64 --out /tmp/tiny
     ibc-tutorial sweep-steering --preset laptop --out book/results/steering-sweep --workers 2 --threads 1
+    ibc-tutorial replicate --preset laptop --commands --out book/results/commands
 """
 
 from __future__ import annotations
@@ -296,6 +297,11 @@ def _replicate_arguments(p: argparse.ArgumentParser) -> None:
         "--set", action="append", default=[], metavar="FIELD=VALUE", dest="overrides", help=SET_HELP
     )
     p.add_argument("--device", default="cpu", help=DEVICE_HELP + "; every worker uses it")
+    p.add_argument(
+        "--commands",
+        action="store_true",
+        help="agents taking a route command, driven on the town02 routes (chapter 11; --set commands=true)",
+    )
 
 
 def _replicate_steering_arguments(p: argparse.ArgumentParser) -> None:

@@ -27,6 +27,7 @@ import numpy as np
 import torch
 
 from ibc_tutorial.driving.bev import HISTORY_LAGS, PAD, BEVRenderer, check_bev_size, get_raster
+from ibc_tutorial.driving.commands import log_commands
 from ibc_tutorial.driving.env import MAX_SPEED
 from ibc_tutorial.driving.lights import RED
 from ibc_tutorial.driving.towns import TOWNS, get_town
@@ -265,14 +266,26 @@ class DemoDataset(torch.utils.data.Dataset):
         cache: render every sample once, now, and keep the views packed one byte per pixel
             (N x S x S bytes: 86 MB for the paper-sized dataset at 64 x 64, 775 MB at 192), so
             that later epochs only unpack them.
+        commands: also give every sample's route command, ``obs["command"]`` (int64 index into
+            ``driving.commands.COMMANDS``), computed from the log (``driving.commands.log_commands``).
     """
 
-    def __init__(self, source, bev_size: int = 192, cache: bool = False, light_encoding: str = "intensity"):
+    def __init__(
+        self,
+        source,
+        bev_size: int = 192,
+        cache: bool = False,
+        light_encoding: str = "intensity",
+        commands: bool = False,
+    ):
         self.log = source if isinstance(source, DemoLog) else DemoLog.load(source)
         self.bev_size = check_bev_size(bev_size)
         self.renderer = BEVRenderer(get_raster(self.log.town), self.bev_size, light_encoding)
         self.states = torch.from_numpy(self.log.states())  # (N, 3) float32
         self.actions = torch.from_numpy(self.log.action.copy())  # (N, 2) float32
+        if not isinstance(commands, bool):
+            raise ValueError(f"commands must be True or False, got {commands!r}")
+        self.commands = torch.from_numpy(log_commands(self.log)) if commands else None  # (N,) int64
         self._packed = None
         if cache:
             packed = np.empty((len(self.log), self.bev_size, self.bev_size), dtype=np.uint8)  # (N, S, S)
@@ -298,7 +311,10 @@ class DemoDataset(torch.utils.data.Dataset):
             raise IndexError(f"index must be an integer in [-{n}, {n}), got {i!r}")
         i = int(i) % n
         packed = self._packed_of(np.array([i]))[0]
-        return {"bev": self._bev(packed), "state": self.states[i]}, self.actions[i]
+        obs = {"bev": self._bev(packed), "state": self.states[i]}
+        if self.commands is not None:
+            obs["command"] = self.commands[i]
+        return obs, self.actions[i]
 
     def batch(self, indices) -> tuple[dict[str, torch.Tensor], torch.Tensor]:
         """Stacked samples: ``({"bev": (B, 5, S, S), "state": (B, 3)}, actions (B, 2))``."""
@@ -306,9 +322,12 @@ class DemoDataset(torch.utils.data.Dataset):
         if len(idx) and (idx.min() < 0 or idx.max() >= len(self)):
             raise IndexError(f"indices must lie in [0, {len(self)})")
         packed = self._packed_of(idx.numpy())
-        return {"bev": self._bev(packed), "state": self.states[idx]}, self.actions[idx]
+        obs = {"bev": self._bev(packed), "state": self.states[idx]}
+        if self.commands is not None:
+            obs["command"] = self.commands[idx]  # (B,) int64
+        return obs, self.actions[idx]
 
     def __getitems__(self, indices):
         """Batched fetch for ``torch.utils.data.DataLoader`` (renders the batch in one call)."""
         obs, act = self.batch(indices)
-        return [({"bev": obs["bev"][k], "state": obs["state"][k]}, act[k]) for k in range(len(act))]
+        return [({key: v[k] for key, v in obs.items()}, act[k]) for k in range(len(act))]

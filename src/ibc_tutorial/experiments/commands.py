@@ -181,6 +181,8 @@ def replicate(args: argparse.Namespace) -> int:
     if getattr(args, "ablation", None):
         preset = ablation_preset(preset, args.ablation)
     overrides = list(getattr(args, "overrides", ()))
+    if getattr(args, "commands", False):
+        preset = dataclasses.replace(preset, commands=True)  # before the overrides: --set may still change it
     preset = with_overrides(preset, overrides)
     device = check_device("--device", getattr(args, "device", "cpu"))
     return _run_study(args, replication, preset, overrides, device=str(device))

@@ -69,10 +69,20 @@ class BEVStateEncoder(ObservationEncoder):
     ReLU, then a linear layer to ``embed_dim`` (the paper's 256-d BEV embedding); the state
     (speed in m/s, previous steer, previous acceleration) through a two-layer MLP to
     ``embed_dim`` (the paper's 256-d state embedding). z is their concatenation (sec. 3.3).
+
+    With ``n_commands`` > 0 (chapter 11: the DA-IBC paper's future work, a goal-directed agent) the
+    observation also holds ``"command"`` (B,) integer indices, one of CIL's high-level commands
+    (``driving.commands``), fed one-hot beside the state into the state MLP: E(x, c, y) for an energy head.
+    An observation without a command is refused by such an encoder, one with a command by a routeless one.
     """
 
     def __init__(
-        self, bev_size: int = 64, channels=(16, 32, 32, 64), embed_dim: int = 256, in_channels: int = 5
+        self,
+        bev_size: int = 64,
+        channels=(16, 32, 32, 64),
+        embed_dim: int = 256,
+        in_channels: int = 5,
+        n_commands: int = 0,
     ):
         super().__init__()
         self.bev_size = check_int("bev_size", bev_size, minimum=8)
@@ -89,8 +99,9 @@ class BEVStateEncoder(ObservationEncoder):
             c_in = c
         side = _conv_out(bev_size, len(channels))
         self.cnn = nn.Sequential(*convs, nn.Flatten(), nn.Linear(c_in * side * side, embed_dim), nn.ReLU())
+        self.n_commands = check_int("n_commands", n_commands, minimum=0)
         self.state_mlp = nn.Sequential(
-            nn.Linear(3, embed_dim), nn.ReLU(), nn.Linear(embed_dim, embed_dim), nn.ReLU()
+            nn.Linear(3 + self.n_commands, embed_dim), nn.ReLU(), nn.Linear(embed_dim, embed_dim), nn.ReLU()
         )
         self.branch_dim = embed_dim
         self.embed_dim = 2 * embed_dim
@@ -110,12 +121,28 @@ class BEVStateEncoder(ObservationEncoder):
             [1.0 / SPEED_SCALE, 1.0, 1.0], device=state.device
         )  # (3,), on the state's device
         st = state.float() * scale  # (B, 3), speed rescaled
+        if self.n_commands:
+            if "command" not in obs:
+                raise ValueError(
+                    f"obs must hold 'command' ((B,) indices of {self.n_commands} commands): this encoder "
+                    "takes a route command"
+                )
+            cmd = obs["command"]
+            check_tensor("obs['command']", cmd, shape=(len(bev),))
+            if cmd.is_floating_point() or (len(cmd) and (cmd.min() < 0 or cmd.max() >= self.n_commands)):
+                raise ValueError(f"obs['command'] must hold integer indices in [0, {self.n_commands})")
+            one_hot = nn.functional.one_hot(cmd.long(), self.n_commands).to(st.dtype)  # (B, C)
+            st = torch.cat([st, one_hot], dim=1)  # (B, 3 + C)
+        elif "command" in obs:
+            raise ValueError(
+                "obs holds a 'command', but this encoder is routeless (n_commands=0): it takes none"
+            )
         return torch.cat([self.cnn(x), self.state_mlp(st)], dim=1)  # (B, 2 E)
 
 
 def to_tensor_obs(obs, device: torch.device | str | None = None) -> dict[str, torch.Tensor]:
-    """A numpy or torch ``{"bev", "state"}`` batch (``BEVStateEncoder``'s input) as torch tensors (the
-    BEV's dtype kept, the state float32), moved to ``device`` if given."""
+    """A numpy or torch ``{"bev", "state"[, "command"]}`` batch (``BEVStateEncoder``'s input) as torch
+    tensors (the BEV's dtype kept, the state float32, the command int64), moved to ``device`` if given."""
     bev, state = obs["bev"], obs["state"]
     bev = torch.from_numpy(np.ascontiguousarray(bev)) if isinstance(bev, np.ndarray) else bev
     state = (
@@ -123,6 +150,10 @@ def to_tensor_obs(obs, device: torch.device | str | None = None) -> dict[str, to
         if isinstance(state, np.ndarray)
         else state.float()
     )
+    out = {"bev": bev, "state": state}
+    if "command" in obs:
+        cmd = obs["command"]
+        out["command"] = torch.as_tensor(cmd if isinstance(cmd, torch.Tensor) else np.asarray(cmd)).long()
     if device is not None:
-        bev, state = bev.to(device), state.to(device)
-    return {"bev": bev, "state": state}
+        out = {k: v.to(device) for k, v in out.items()}
+    return out

@@ -7,6 +7,7 @@ Modules, one concern each:
 - ``checkpoints``  saving and checked loading of agents (``load_agent``)
 - ``train``        one training run with periodic town02 evaluations (``ibc-tutorial train``)
 - ``evaluate``     the closed-loop evaluation protocol and its summaries (``ibc-tutorial evaluate``)
+- ``route_eval``   agents on the town02 routes with their commands (``replicate --commands``, chapter 11)
 - ``figures``      the Fig. 5 (free driving) and Fig. 6 (energy landscapes) analogues
 - ``results``      the replication folder: aggregation, provenance, ``load_results`` for the chapters
 - ``replicate``    the whole replication, resumable (``ibc-tutorial replicate``)

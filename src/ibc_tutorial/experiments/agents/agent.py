@@ -27,6 +27,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from ibc_tutorial.driving.commands import COMMANDS, N_COMMANDS
 from ibc_tutorial.driving.rollout import DrivingPolicy
 from ibc_tutorial.experiments.agents.presets import METHODS, Preset
 from ibc_tutorial.kde import inverse_density_weights
@@ -64,6 +65,8 @@ def architecture(method: str, preset: Preset) -> dict:
         "embed_dim": preset.embed_dim,
         "action_dim": ACTION_DIM,
     }
+    if preset.commands:  # recorded only when taken: a routeless architecture is that of older checkpoints
+        arch["commands"] = N_COMMANDS
     if method == "bc":
         arch.update(min_concentration=BC_MIN_CONCENTRATION)
     else:
@@ -82,7 +85,9 @@ def network_from_architecture(arch: dict) -> nn.Module:
         raise ValueError(
             f"arch must describe a BEVStateEncoder with a BetaPolicy or EnergyModel head, got {arch!r}"
         )
-    enc = BEVStateEncoder(arch["bev_size"], tuple(arch["cnn_channels"]), arch["embed_dim"])
+    enc = BEVStateEncoder(
+        arch["bev_size"], tuple(arch["cnn_channels"]), arch["embed_dim"], n_commands=arch.get("commands", 0)
+    )
     if arch["network"] == "BetaPolicy":
         return BetaPolicy(enc, action_dim=arch["action_dim"], min_concentration=arch["min_concentration"])
     return EnergyModel(
@@ -148,9 +153,31 @@ class Agent:
         self.expert_actions = self.expert_actions.to(device)  # (M, 2): the DFO population lives here
         return self
 
+    @property
+    def takes_command(self) -> bool:
+        """Whether the agent was trained with route commands (``Preset.commands``): its observations must
+        hold ``"command"``; a routeless agent's must not."""
+        return bool(self.preset.commands)
+
+    def check_command(self, obs) -> None:
+        """ValueError unless ``obs`` holds a ``"command"`` exactly when the agent takes one."""
+        has = isinstance(obs, dict) and "command" in obs
+        if self.takes_command and not has:
+            raise ValueError(
+                f"this {self.method} agent takes a route command (trained with commands): obs must hold "
+                f"'command', (B,) indices into {COMMANDS}; drive it on routes (driving.route_following)"
+            )
+        if has and not self.takes_command:
+            raise ValueError(
+                f"this {self.method} agent is routeless (trained without commands): obs must not hold "
+                "'command'; drive it without commands (route_following.drive_routes(..., commands=False))"
+            )
+
     @torch.no_grad()
     def act(self, obs, generator: torch.Generator | None = None) -> torch.Tensor:
-        """Actions (B, 2) in [-1, 1], on the CPU, for a batch of observations (numpy or torch dict)."""
+        """Actions (B, 2) in [-1, 1], on the CPU, for a batch of observations (numpy or torch dict; with
+        ``"command"`` exactly when the agent takes one, else ValueError: ``check_command``)."""
+        self.check_command(obs)
         obs = to_tensor_obs(obs, self.device)
         self.network.eval()
         if self.method == "bc":
@@ -168,7 +195,8 @@ class Agent:
         return actions.cpu()  # (B, 2)
 
     def policy(self, seed: int = 0) -> DrivingPolicy:
-        """The seeded ``driving.rollout.DrivingPolicy`` of this agent: numpy obs batch -> actions (B, 2).
+        """The seeded ``driving.rollout.DrivingPolicy`` of this agent: numpy obs batch -> numpy actions (B, 2)
+        (with ``"command"`` in the batch for an agent that takes one).
 
         Its DFO draws come from a CPU generator seeded with ``seed``, whatever the agent's device."""
         gen = torch.Generator().manual_seed(int(seed))
@@ -184,6 +212,7 @@ class Agent:
         steer]."""
         if self.method == "bc":
             raise ValueError("energy_grid needs an energy agent (ibc or da-ibc), got bc")
+        self.check_command(obs)
         obs = to_tensor_obs(obs, self.device)
         v = torch.linspace(-1.0, 1.0, n_per_dim)
         acc, steer = torch.meshgrid(v, v, indexing="ij")

@@ -33,6 +33,7 @@ from ibc_tutorial.experiments.agents.evaluate import (
     summarize_episodes,
 )
 from ibc_tutorial.experiments.agents.presets import Preset
+from ibc_tutorial.experiments.agents.route_eval import periodic_route_rows
 from ibc_tutorial.experiments.agents.run_folder import inspect_run, write_metrics, write_run_info
 from ibc_tutorial.kde import inverse_density_weights
 from ibc_tutorial.training import Trainer
@@ -58,11 +59,22 @@ class TrainingData:
         ds = data if isinstance(data, DemoDataset) else None
         if ds is None:
             log = data if isinstance(data, DemoLog) else DemoLog.load(data)
-            ds = DemoDataset(log, bev_size=preset.bev_size, cache=True, light_encoding=preset.light_encoding)
+            ds = DemoDataset(
+                log,
+                bev_size=preset.bev_size,
+                cache=True,
+                light_encoding=preset.light_encoding,
+                commands=preset.commands,
+            )
         if ds.renderer.light_encoding != preset.light_encoding:
             raise ValueError(
                 f"dataset must draw the lights as {preset.light_encoding!r}, "
                 f"got {ds.renderer.light_encoding!r}"
+            )
+        if (ds.commands is not None) != preset.commands:
+            raise ValueError(
+                f"dataset must {'' if preset.commands else 'not '}give the route commands "
+                f"(preset.commands is {preset.commands})"
             )
         if ds.bev_size != preset.bev_size:
             raise ValueError(f"dataset must be rendered at bev_size {preset.bev_size}, got {ds.bev_size}")
@@ -150,16 +162,19 @@ class RunBook:
 
         def callback(step: int, loss: float) -> None:
             te = time.perf_counter()
-            episodes = evaluate_agent(
-                a,
-                EVAL_TOWN,
-                p.eval_episodes,
-                p.eval_steps,
-                seed=EVAL_SEED,
-                policy_seed=self.seed,
-                show_progress=False,
-            )
-            rows = episode_rows(episodes)
+            if a.takes_command:  # the first eval_episodes town02 routes, eval_steps each, with their commands
+                rows = periodic_route_rows(a, p.eval_episodes, p.eval_steps, policy_seed=self.seed)
+            else:
+                episodes = evaluate_agent(
+                    a,
+                    EVAL_TOWN,
+                    p.eval_episodes,
+                    p.eval_steps,
+                    seed=EVAL_SEED,
+                    policy_seed=self.seed,
+                    show_progress=False,
+                )
+                rows = episode_rows(episodes)
             entry = {
                 "method": a.method,
                 "seed": self.seed,

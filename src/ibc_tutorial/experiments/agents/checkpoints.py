@@ -12,8 +12,8 @@ it loads with ``torch.load(..., weights_only=True)``: no pickled code runs. It h
 - ``seed``: the training seed (also the policy seed of its evaluations; absent in older files,
   whose metrics record it);
 - ``epoch``, ``model`` (the state dict; float16 in a ``final.pt``), the expert actions and DFO
-  initial weights the agent acts with, and, for resuming, ``optimizer`` and ``generator`` states (``training.Trainer``)
-  and the metrics so far.
+  initial weights the agent acts with, and, for resuming, ``optimizer`` and ``generator`` states
+  (``training.Trainer``) and the metrics so far.
 
 It is written atomically (``utils.atomic_torch_save``). ``load_checkpoint`` checks every field
 before anything uses it and refuses, with a ``ValueError`` naming the file and the field, a file

@@ -143,6 +143,16 @@ class Preset:
     """Free-driving episodes per agent for the Fig. 5 analogue (BC and DA-IBC); 0: no Fig. 5/6 analogues."""
     routeless_steps: int = 3000
     """Steps of each free-driving episode."""
+    commands: bool = False
+    """True: the agents take a route command (CIL's four, ``driving.commands``) one-hot through the state
+    MLP, are trained on the demonstrations' commands and evaluated on the town02 routes
+    (``driving.route_following``; chapter 11). False: routeless, the DA-IBC paper's agents (a preset stored
+    before this field existed is routeless)."""
+    route_episodes: int = 1
+    """With ``commands``: drives of every town02 route in the final evaluation (light phases seeded apart)."""
+    route_max_steps: int = 0
+    """With ``commands``: cap on the steps of every route drive of the final evaluation (0: none, each route's
+    own budget, ``driving.route_following.MIN_MEAN_SPEED``)."""
 
     def __post_init__(self):
         # the settings of the library's configs are checked by those configs (CONFIG_FIELDS)
@@ -168,6 +178,10 @@ class Preset:
             "routeless_steps",
         ):
             check_int(f, getattr(self, f), minimum=1)
+        if not isinstance(self.commands, bool):
+            raise ValueError(f"commands must be True or False, got {self.commands!r}")
+        check_int("route_episodes", self.route_episodes, minimum=1)
+        check_int("route_max_steps", self.route_max_steps, minimum=0)
         for f in ("routeless_episodes", "heldout_episodes"):
             check_int(f, getattr(self, f), minimum=0)
         if (
@@ -306,6 +320,7 @@ TINY = Preset(
     seeds=(0,),
     routeless_episodes=1,
     routeless_steps=20,
+    route_max_steps=20,  # with --commands: the routes' first 2 s
 )
 """A seconds-long preset for the tests and the chapters' live demonstrations."""
 

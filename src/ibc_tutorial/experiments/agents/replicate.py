@@ -1,6 +1,12 @@
 """One command from data to every table and figure of chapters 08-09: the closed-loop replication.
 
     ibc-tutorial replicate --preset laptop --out book/results/laptop
+    ibc-tutorial replicate --preset laptop --commands --out book/results/commands
+
+With ``--commands`` (``Preset.commands``: chapter 11) every method's agents take a route command, are
+trained on the same town01 demonstrations with their commands (``driving.commands``), and their final
+evaluation (and the expert's row) drives the town02 routes (``driving.route_following``, ``route_eval``)
+instead of the routeless episodes; there is no held-out set and no Fig. 5/6 analogue.
 
 Steps (the DA-IBC paper's secs. 4.1-4.3, at the preset's scale):
 
@@ -37,6 +43,7 @@ import torch
 
 from ibc_tutorial.driving.collect import collect
 from ibc_tutorial.driving.dataset import DemoLog
+from ibc_tutorial.driving.route_following import ROUTES
 from ibc_tutorial.experiments.agents.bookkeeping import TrainingData
 from ibc_tutorial.experiments.agents.checkpoints import load_agent
 from ibc_tutorial.experiments.agents.evaluate import (
@@ -62,6 +69,7 @@ from ibc_tutorial.experiments.agents.layout import (
 )
 from ibc_tutorial.experiments.agents.presets import PAPER, Preset, differences
 from ibc_tutorial.experiments.agents.results import collect_results, preset_results
+from ibc_tutorial.experiments.agents.route_eval import ROUTE_SEED, evaluate_on_routes, summarize_route_rows
 from ibc_tutorial.experiments.agents.run_folder import inspect_run
 from ibc_tutorial.experiments.agents.train import train_agent
 from ibc_tutorial.experiments.runs import (
@@ -147,7 +155,14 @@ _WORKER_DATA: dict = {}
 
 def _training_data(data: Path, preset: Preset) -> TrainingData:
     """The rendered demonstrations and their minibatch probabilities w ∝ 1 / ĝ, made once per process."""
-    key = (str(data), data.stat().st_mtime_ns, preset.bev_size, preset.kde_bandwidth, preset.light_encoding)
+    key = (
+        str(data),
+        data.stat().st_mtime_ns,
+        preset.bev_size,
+        preset.kde_bandwidth,
+        preset.light_encoding,
+        preset.commands,
+    )
     if key not in _WORKER_DATA:
         _WORKER_DATA[key] = TrainingData.of(data, preset)
     return _WORKER_DATA[key]
@@ -162,7 +177,10 @@ def final_evaluations(
     extra: dict | None = None,
 ) -> dict:
     """The table's evaluation (``final_eval.json``) and the held-out one (``heldout_eval.json``) of an agent
-    (an ``Agent`` or "expert") into ``out_dir``; returns the first."""
+    (an ``Agent`` or "expert") into ``out_dir``; returns the first. With ``preset.commands``: the town02
+    routes instead (``route_evaluation``)."""
+    if preset.commands:
+        return route_evaluation(agent, out_dir, preset, policy_seed, show_progress, extra)
     evals = {}
     for name, seed, episodes in (
         (EVALUATIONS["heldout"], HELDOUT_SEED, preset.heldout_episodes),
@@ -193,6 +211,33 @@ def final_evaluations(
         )
         write_json(out_dir / name, evals[name])  # final_eval.json last: once it exists, the run is finished
     return evals[FINAL_EVAL]
+
+
+def route_evaluation(
+    agent, out_dir: Path, preset: Preset, policy_seed: int, show_progress=False, extra: dict | None = None
+) -> dict:
+    """A command replication's final evaluation: ``preset.route_episodes`` drives of every town02 route
+    (``route_eval.evaluate_on_routes``) into ``final_eval.json``, its rows one per route drive; returns it."""
+    te = time.perf_counter()
+    rows = evaluate_on_routes(
+        agent,
+        drives=preset.route_episodes,
+        seed=ROUTE_SEED,
+        policy_seed=policy_seed,
+        max_steps=preset.route_max_steps or None,
+        show_progress=show_progress,
+    )
+    ev = dict(
+        extra or {},
+        town="town02",
+        routes=list(ROUTES),
+        start_seed=ROUTE_SEED,
+        summary=summarize_route_rows(rows),
+        episodes=rows,
+        eval_seconds=round(time.perf_counter() - te, 1),
+    )
+    write_json(out_dir / FINAL_EVAL, ev)
+    return ev
 
 
 def run_one(
@@ -264,7 +309,7 @@ def replicate(
     results = read_json_dict(res_file, "delete it and re-run") if res_file.exists() else {}
     provenance = Provenance(
         out,
-        title=f"the `{preset.name}` replication",
+        title=f"the `{preset.name}` replication" + (" with route commands" if preset.commands else ""),
         command=command or f"ibc-tutorial replicate --preset {preset.name} --out {out}",
         preset=preset.to_dict(),
         differences=differences(PAPER, preset),
@@ -324,6 +369,7 @@ def _work(
         s0 = preset.seeds[0]
         if (
             "free_driving" in results
+            or preset.commands  # command agents do not drive routeless
             or not preset.routeless_episodes
             or not set(FIGURE_METHODS) <= set(preset.methods)
             or not all((run_dir(out, m, s0) / FINAL_EVAL).exists() for m in FIGURE_METHODS)

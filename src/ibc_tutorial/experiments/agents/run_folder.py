@@ -84,6 +84,15 @@ def _identity(out: Path) -> tuple[dict, int, str]:
     return ident, epoch, source
 
 
+def _completed(stored: dict) -> dict:
+    """A stored preset dict with the fields added since it was written at their defaults (as
+    ``Preset.from_dict`` reads it); the dict itself if it is not a valid preset."""
+    try:
+        return Preset.from_dict(stored).to_dict()
+    except (TypeError, ValueError):
+        return stored
+
+
 def inspect_run(
     out, method: str, preset: Preset, seed: int, data_sha256: str | None, data_file=None
 ) -> RunState:
@@ -113,7 +122,7 @@ def inspect_run(
     if "preset" in ident:
         mine = {k: v for k, v in preset.to_dict().items() if k != "epochs"}
         theirs = (
-            {k: v for k, v in ident["preset"].items() if k != "epochs"}
+            {k: v for k, v in _completed(ident["preset"]).items() if k != "epochs"}
             if isinstance(ident["preset"], dict)
             else {}
         )

@@ -1,0 +1,363 @@
+"""Route following in town02: fixed routes, their commands, and how far a policy drives each (chapter 11).
+
+**The routes** (``ROUTES``, listed here once): six town02 routes, each at least 1 km long with 7 to 15
+junction crossings; together they take every exit of every junction approach of the town (48), so
+left, straight and right, and both exits of all eight stems. They were picked from routes drawn by
+``routes.random_route`` (greedy: first the fewest routes that take every stem exit, then those adding
+the most approach exits not yet taken); ``tests/test_route_following.py`` checks the properties.
+A route is a start on a road lane 3 m after its beginning and the turns at the T-junctions met; it
+ends ``END_MARGIN_M`` before the entry of the junction after its last turn (``route_length``).
+
+**Driving a route** (``drive_routes``): every route in its own environment (light phases seeded by the
+route's index and ``seed``), side by side; at each step the policy sees the observation and, if it takes
+one, the route's command (``driving.commands``). A ``RouteTracker`` follows the car along the route's
+lanes. A route ends
+
+* **completed**: the car has driven the route's length along it;
+* **wrong turn**: the car reaches a road lane that is not the route's next one (it left a junction by
+  another exit than the route's);
+* **collision or leaving the road**: the simulator's termination (a building, off the road);
+* **timeout**: after ``max_steps`` (the route's length at ``MIN_MEAN_SPEED`` m/s, lights included).
+
+Per route: **route completion** (the share of the route's length driven along it before it ended), red
+lights run (the simulator's rule), the **driving score** = completion x 0.7 ** (red lights) (CARLA's
+leaderboard score with only its red-light penalty, the factor the DA-IBC paper uses), the paper's score
+(distance x 0.7 ** red lights) and, per junction crossing of the route, the commanded exit and the exit
+taken ("" if the route ended inside the junction): the **success rate per command** is the share of
+crossings with that command whose commanded exit was taken (``junction_success``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ibc_tutorial.driving.commands import COMMANDS, FOLLOW, command_at
+from ibc_tutorial.driving.env import EnvConfig, make_env
+from ibc_tutorial.driving.expert import Expert
+from ibc_tutorial.driving.routes import Route
+from ibc_tutorial.driving.sim import SCORE_PENALTY, score
+from ibc_tutorial.driving.towns import Town, get_town
+from ibc_tutorial.utils import check_choice, check_int, check_positive, progress
+
+ROUTE_TOWN = "town02"
+"""The town the routes are in (the evaluation town, unseen in training)."""
+START_S = 3.0
+"""Every route starts this far (metres) along its first lane."""
+END_MARGIN_M = 12.0
+"""A route ends this far before the end of its last lane (before the next junction's stop line)."""
+MIN_MEAN_SPEED = 1.5
+"""A route's step budget: its length at this mean speed (m/s), waits at red lights included."""
+ROUTES: dict[str, tuple[int, tuple[str, ...]]] = {
+    "r1": (29, ("left", "left", "left", "right", "right", "right", "right", "left", "right", "left", "left",
+                "left", "right", "right", "left")),
+    "r2": (23, ("right", "right", "right", "left", "right", "left", "left", "left", "left", "right", "right",
+                "straight", "right", "straight")),
+    "r3": (17, ("left", "left", "right", "right", "left", "left", "straight", "left", "straight", "right")),
+    "r4": (28, ("straight", "right", "straight", "straight", "straight", "right", "straight")),
+    "r5": (20, ("left", "straight", "straight", "straight", "left", "straight", "straight")),
+    "r6": (14, ("straight", "left", "left", "left", "right", "right", "straight")),
+}  # fmt: skip
+"""name -> (town02 road lane the route starts on, its turns at the T-junctions met)."""
+
+
+def build_route(name: str) -> Route:
+    """The ``Route`` of ``ROUTES[name]``."""
+    lane, turns = ROUTES[check_choice("name", name, tuple(ROUTES))]
+    return Route(lane, START_S, turns)
+
+
+def route_lanes(route: Route, town: Town) -> list[int]:
+    """The lanes of ``route``, up to the approach lane of the junction after its last turn."""
+    return route.lanes(town, max_lanes=10_000)
+
+
+def route_length(route: Route, town=ROUTE_TOWN) -> float:
+    """Metres from the route's start to its end (``END_MARGIN_M`` before its last lane's end)."""
+    tw = get_town(town) if isinstance(town, str) else town
+    return float(sum(tw.lanes[k].length for k in route_lanes(route, tw)) - route.start_s - END_MARGIN_M)
+
+
+def route_crossings(route: Route, town=ROUTE_TOWN) -> list[tuple[int, str]]:
+    """(junction approach id, turn) of every junction crossing of the route, in order."""
+    tw = get_town(town) if isinstance(town, str) else town
+    lanes = route_lanes(route, tw)
+    out = []
+    for a, b in zip(lanes[:-1], lanes[1:], strict=True):
+        ap = tw.approach_of_lane.get(a)
+        if ap is not None and tw.approaches[ap].is_junction:
+            out.append((ap, tw.lanes[b].turn))
+    return out
+
+
+class RouteTracker:
+    """Follows a car along a route's lanes: progress (metres along the route), the command, wrong turns.
+
+    Call ``update(x, y, yaw)`` after every step (and once at the start); it returns the command for the
+    state the car is in. ``wrong_turn`` becomes True once the car is on a road lane that is neither the
+    route's current nor its next road lane; ``crossings`` lists, per junction of the route the car has
+    entered, ``{"approach", "command", "taken"}`` (taken "" until the car is on a road lane again)."""
+
+    def __init__(self, route: Route, town=ROUTE_TOWN):
+        self.town = get_town(town) if isinstance(town, str) else town
+        self.route = route
+        self.lanes = route_lanes(route, self.town)
+        starts = np.cumsum([0.0] + [self.town.lanes[k].length for k in self.lanes[:-1]])
+        self.lane_start = starts - route.start_s  # route metre at which each lane begins
+        self.length = route_length(route, self.town)
+        self.turns = {}  # position in self.lanes of a junction approach -> its turn
+        for p, (a, b) in enumerate(zip(self.lanes[:-1], self.lanes[1:], strict=True)):
+            ap = self.town.approach_of_lane.get(a)
+            if ap is not None and self.town.approaches[ap].is_junction:
+                self.turns[p] = self.town.lanes[b].turn
+        self.p = 0  # position in self.lanes of the lane the car is on
+        self.progress_m = 0.0
+        self.wrong_turn = False
+        self.crossings: list[dict] = []
+
+    @property
+    def completion(self) -> float:
+        """Share of the route driven along it, in [0, 1]."""
+        return float(min(max(self.progress_m / self.length, 0.0), 1.0))
+
+    @property
+    def completed(self) -> bool:
+        return self.progress_m >= self.length
+
+    def _next_road(self, p: int) -> int | None:
+        for q in range(p + 1, len(self.lanes)):
+            if self.town.lanes[self.lanes[q]].kind == "road":
+                return q
+        return None
+
+    def update(self, x: float, y: float, yaw: float) -> int:
+        """Advance along the route to the car's pose; return the command (index into ``COMMANDS``)."""
+        tw = self.town
+        lane, idx, _ = tw.localize(x, y, yaw)
+        kind = tw.lanes[lane].kind
+        if lane != self.lanes[self.p]:
+            window = self.lanes[self.p + 1 : self.p + 4]
+            if lane in window:
+                self.p += 1 + window.index(lane)
+            elif kind == "road" and not self.wrong_turn:
+                self.wrong_turn = True
+        on_route = lane == self.lanes[self.p]
+        if on_route:
+            ln = tw.lanes[lane]
+            s = idx * ln.length / len(ln.points)
+            self.progress_m = max(self.progress_m, self.lane_start[self.p] + s)
+        # junction crossings: entered once the car is past an approach lane of the route
+        for p, turn in self.turns.items():
+            if p < self.p and not any(c["pos"] == p for c in self.crossings):
+                ap = tw.approach_of_lane[self.lanes[p]]
+                self.crossings.append({"pos": p, "approach": int(ap), "command": turn, "taken": ""})
+        if kind == "road":
+            for c in self.crossings:
+                if not c["taken"] and (
+                    self.wrong_turn or lane == self.lanes[self._next_road(c["pos"]) or -1]
+                ):
+                    exits = tw.approaches[c["approach"]].exits
+                    c["taken"] = next((t for t, k in exits.items() if lane in tw.lanes[k].successors), "?")
+        next_turn = next((t for q, t in self.turns.items() if q >= self.p), None)
+        if next_turn is None and tw.lanes[self.lanes[self.p]].kind == "road":
+            return FOLLOW  # past the last turn: the route ends before the next junction
+        return command_at(tw, self.lanes[self.p], (x, y), next_turn)
+
+
+@dataclass
+class RouteResult:
+    """How one drive of one route went."""
+
+    route: str
+    """The route's name."""
+    seed: int
+    """Seeds the route's light phases."""
+    length_m: float
+    """The route's length."""
+    steps: int
+    """Steps driven."""
+    distance_m: float
+    """Distance driven (metres, along or off the route)."""
+    completion: float
+    """Share of the route driven along it before it ended, in [0, 1]."""
+    red_light_infractions: int
+    """Red lights run."""
+    end: str
+    """"completed", "wrong_turn", "building", "off_road" or "timeout"."""
+    crossings: list = field(default_factory=list)
+    """Per junction crossing: ``{"approach", "command", "taken"}``."""
+    xy: np.ndarray | None = field(default=None, repr=False)
+    """(steps + 1, 2) positions, if recorded."""
+
+    @property
+    def driving_score(self) -> float:
+        """completion x 0.7 ** (red lights run)."""
+        return float(self.completion) * SCORE_PENALTY ** int(self.red_light_infractions)
+
+    @property
+    def score(self) -> float:
+        """The DA-IBC paper's score: distance x 0.7 ** (red lights run)."""
+        return score(self.distance_m, self.red_light_infractions)
+
+    def row(self) -> dict:
+        """A JSON row (numbers rounded)."""
+        return {
+            "route": self.route,
+            "seed": int(self.seed),
+            "length_m": round(self.length_m, 1),
+            "steps": int(self.steps),
+            "distance_m": round(float(self.distance_m), 2),
+            "completion": round(float(self.completion), 4),
+            "red_light_infractions": int(self.red_light_infractions),
+            "driving_score": round(self.driving_score, 4),
+            "score": round(self.score, 2),
+            "end": self.end,
+            "termination": "" if self.end in ("completed", "timeout") else self.end,
+            "crossings": [{k: c[k] for k in ("approach", "command", "taken")} for c in self.crossings],
+        }
+
+
+RoutePolicy = Callable[[dict[str, np.ndarray]], np.ndarray]
+"""``policy({"bev": (B, 5, S, S), "state": (B, 3)[, "command": (B,) int64]}) -> (B, 2)`` actions."""
+
+
+def drive_routes(
+    policy: RoutePolicy | str,
+    routes,
+    *,
+    bev_size: int = 64,
+    light_encoding: str = "intensity",
+    seed: int = 0,
+    commands: bool = True,
+    max_steps: int | None = None,
+    record_xy: bool = False,
+    show_progress: bool | None = None,
+) -> list[RouteResult]:
+    """Drive every route of ``routes`` (names of ``ROUTES``, or ``(name, Route)`` pairs) side by side.
+
+    Args:
+        policy: a ``RoutePolicy`` or "expert" (the PID expert follows the route itself).
+        routes: the routes.
+        bev_size, light_encoding: the observation's (the agent's preset's).
+        seed: the light phases of route ``k`` are drawn from ``[seed, k]``.
+        commands: give the policy the route's command (``batch["command"]``, (B,) int64 indices into
+            ``driving.commands.COMMANDS``); False: a routeless policy, which sees no command.
+        max_steps: cap on every route's steps (None: its length at ``MIN_MEAN_SPEED``).
+        record_xy: keep the car's positions.
+    """
+    seed = check_int("seed", seed, minimum=0)
+    if isinstance(policy, str):
+        check_choice("policy", policy, ("expert",))
+    elif not callable(policy):
+        raise ValueError(f"policy must be a callable or 'expert', got {type(policy).__name__}")
+    if max_steps is not None:
+        check_int("max_steps", max_steps, minimum=1)
+    named = [(r, build_route(r)) if isinstance(r, str) else (str(r[0]), r[1]) for r in routes]
+    if not named:
+        raise ValueError("routes must name at least one route")
+    town = get_town(ROUTE_TOWN)
+    trackers = [RouteTracker(route, town) for _, route in named]
+    budgets = [
+        max_steps or math.ceil(check_positive("route length", t.length) / MIN_MEAN_SPEED * 10)
+        for t in trackers
+    ]
+    config = EnvConfig(ROUTE_TOWN, bev_size, True, max(budgets), light_encoding=light_encoding)
+    envs = [make_env(config=config) for _ in named]
+    obs, cmds, tracks = [], [], []
+    for k, (env, (_, route)) in enumerate(zip(envs, named, strict=True)):
+        offsets = env.sim.schedule.random_offsets(np.random.default_rng([seed, k]))
+        o, info = env.reset(seed=seed + k, options={"route": route, "light_offsets": offsets})
+        obs.append(o)
+        cmds.append(trackers[k].update(info["x"], info["y"], info["yaw"]))
+        tracks.append([(info["x"], info["y"])])
+    experts = [Expert(env) for env in envs] if policy == "expert" else None
+    ends = [""] * len(named)
+    infos: list[dict] = [env.sim.info() for env in envs]
+    active = list(range(len(named)))
+    bar = progress(total=max(budgets), desc=f"{len(named)} routes in {ROUTE_TOWN}", enabled=show_progress)
+    t = 0
+    while active:
+        if experts is not None:
+            actions = np.stack([experts[i].act() for i in active])  # (B, 2)
+        else:
+            batch = {
+                "bev": np.stack([obs[i]["bev"] for i in active]),  # (B, 5, S, S)
+                "state": np.stack([obs[i]["state"] for i in active]),  # (B, 3)
+            }
+            if commands:
+                batch["command"] = np.array([cmds[i] for i in active], dtype=np.int64)  # (B,)
+            actions = np.asarray(policy(batch), dtype=np.float64).reshape(len(active), 2)
+            with np.errstate(invalid="ignore"):
+                actions = np.where(np.isnan(actions), actions, np.clip(actions, -1.0, 1.0))
+        t += 1
+        still = []
+        for k, i in enumerate(active):
+            obs[i], _, terminated, _, infos[i] = envs[i].step(actions[k])
+            tr = trackers[i]
+            cmds[i] = tr.update(infos[i]["x"], infos[i]["y"], infos[i]["yaw"])
+            if record_xy:
+                tracks[i].append((infos[i]["x"], infos[i]["y"]))
+            if terminated:
+                ends[i] = infos[i]["termination"]
+            elif tr.wrong_turn:
+                ends[i] = "wrong_turn"
+            elif tr.completed:
+                ends[i] = "completed"
+            elif t >= budgets[i]:
+                ends[i] = "timeout"
+            if not ends[i]:
+                still.append(i)
+        active = still
+        bar.update(1)
+    bar.close()
+    out = []
+    for i, (name, _) in enumerate(named):
+        tr, info = trackers[i], infos[i]
+        out.append(
+            RouteResult(
+                name,
+                seed,
+                tr.length,
+                int(info["step"]),
+                float(info["distance_m"]),
+                1.0 if ends[i] == "completed" else tr.completion,
+                int(info["red_light_infractions"]),
+                ends[i],
+                list(tr.crossings),
+                np.array(tracks[i]) if record_xy else None,
+            )
+        )
+    return out
+
+
+def junction_success(rows) -> dict[str, dict]:
+    """Per command (left, straight, right, and "all"): crossings, those whose commanded exit was taken, and
+    their share. ``rows``: ``RouteResult.row()`` dicts (or their ``crossings`` lists' owners)."""
+    out = {c: {"crossings": 0, "taken": 0} for c in (*COMMANDS[1:], "all")}
+    for r in rows:
+        for c in r["crossings"]:
+            for key in (c["command"], "all"):
+                out[key]["crossings"] += 1
+                out[key]["taken"] += int(c["taken"] == c["command"])
+    for v in out.values():
+        v["rate"] = round(v["taken"] / v["crossings"], 4) if v["crossings"] else None
+    return out
+
+
+def summarize_routes(rows) -> dict:
+    """Mean route completion, driving score, red lights, and how the routes ended, over ``rows``
+    (``RouteResult.row()`` dicts)."""
+    if not rows:
+        raise ValueError("rows must hold at least one route")
+    out = {"routes": len(rows)}
+    for key in ("completion", "driving_score", "red_light_infractions", "score", "distance_m"):
+        v = np.array([r[key] for r in rows], dtype=float)
+        out[f"{key}_mean"] = round(float(v.mean()), 4)
+        out[f"{key}_std"] = round(float(v.std()), 4)
+    ends = ("completed", "wrong_turn", "building", "off_road", "timeout")
+    out["ends"] = {e: sum(r["end"] == e for r in rows) for e in ends}
+    out["junction_success"] = junction_success(rows)
+    return out

@@ -1,0 +1,96 @@
+"""Agents taking a route command (chapter 11): the network, the checkpoints' refusals, replicate."""
+
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from ibc_tutorial.experiments.agents.agent import Agent, architecture, build_network
+from ibc_tutorial.experiments.agents.checkpoints import load_agent, save_checkpoint
+from ibc_tutorial.experiments.agents.presets import TINY, Preset
+from ibc_tutorial.experiments.agents.route_eval import evaluate_on_routes
+
+SHIPPED = Path(__file__).parents[1] / "book" / "results" / "laptop" / "runs" / "da-ibc" / "seed0" / "final.pt"
+CMD = dataclasses.replace(TINY, commands=True)
+
+
+def _obs(b=3, command=True, size=32):
+    obs = {"bev": np.zeros((b, 5, size, size), np.float32), "state": np.zeros((b, 3), np.float32)}
+    if command:
+        obs["command"] = np.array([0, 1, 3][:b], dtype=np.int64)
+    return obs
+
+
+def _agent(method, preset):
+    torch.manual_seed(0)
+    return Agent(method, build_network(method, preset), preset, torch.rand(20, 2) * 2 - 1)
+
+
+@pytest.mark.parametrize("method", ["bc", "ibc", "da-ibc"])
+def test_the_command_changes_the_output_through_the_state_mlp(method):
+    agent = _agent(method, CMD)
+    assert architecture(method, CMD)["commands"] == 4 and "commands" not in architecture(method, TINY)
+    assert agent.network.encoder.state_mlp[0].in_features == 3 + 4
+    obs = {k: torch.from_numpy(v) for k, v in _obs().items()}
+    z = agent.network.encoder(obs)
+    obs2 = dict(obs, command=torch.tensor([2, 2, 2]))
+    assert not torch.allclose(z, agent.network.encoder(obs2))
+    assert torch.equal(
+        z[:, : agent.network.encoder.branch_dim], agent.network.encoder(obs2)[:, :16]
+    )  # BEV part
+    assert agent.act(_obs(), torch.Generator().manual_seed(0)).shape == (3, 2)
+
+
+@pytest.mark.parametrize("method", ["bc", "da-ibc"])
+def test_checkpoints_refuse_the_wrong_input(tmp_path, method):
+    for preset, name in ((CMD, "cmd.pt"), (TINY, "plain.pt")):
+        save_checkpoint(tmp_path / name, _agent(method, preset), data_sha256="0" * 64, epoch=1, seed=0)
+    cmd_agent, ckpt = load_agent(tmp_path / "cmd.pt")
+    assert cmd_agent.takes_command and ckpt["architecture"]["commands"] == 4
+    with pytest.raises(ValueError, match="takes a route command .*must hold 'command'"):
+        cmd_agent.act(_obs(command=False))
+    plain, _ = load_agent(tmp_path / "plain.pt")
+    assert not plain.takes_command
+    with pytest.raises(ValueError, match="is routeless .*must not hold 'command'"):
+        plain.act(_obs(command=True))
+    # driven on a route: a command agent without commands, a routeless one with them
+    with pytest.raises(ValueError, match="takes a route command"):
+        evaluate_on_routes(cmd_agent, ["r4"], commands=False, max_steps=2)
+    with pytest.raises(ValueError, match="is routeless"):
+        evaluate_on_routes(plain, ["r4"], commands=True, max_steps=2)
+    rows = evaluate_on_routes(plain, ["r4"], max_steps=3)  # routeless: no command, as trained
+    assert rows[0]["steps"] == 3 and rows[0]["end"] in ("timeout", "off_road", "building")
+
+
+@pytest.mark.skipif(not SHIPPED.exists(), reason="the shipped laptop agents")
+def test_shipped_checkpoints_load_as_routeless():
+    agent, ckpt = load_agent(SHIPPED)
+    assert not agent.takes_command and "commands" not in ckpt["architecture"]
+    assert Preset.from_dict(ckpt["preset"]).commands is False
+
+
+def test_replicate_with_commands_end_to_end(tmp_path, capsys):
+    from ibc_tutorial.cli import main
+
+    out = tmp_path / "cmd"
+    argv = ["replicate", "--preset", "tiny", "--commands", "--out", str(out), "--set", "route_max_steps=8"]
+    assert main(argv) == 0
+    res = json.loads((out / "results.json").read_text())
+    assert res["preset"]["commands"] is True and res["complete"] is True
+    assert set(res["table"]) == {"bc", "ibc", "da-ibc", "expert"}
+    for method in ("bc", "ibc", "da-ibc", "expert"):
+        d = out / "runs" / method / ("seed0" if method != "expert" else "")
+        ev = json.loads((d / "final_eval.json").read_text())
+        assert [r["route"] for r in ev["episodes"]] == ["r1", "r2", "r3", "r4", "r5", "r6"]
+        assert all(r["steps"] <= 8 for r in ev["episodes"])
+        assert {"completion_mean", "driving_score_mean", "junction_success", "ends"} <= set(ev["summary"])
+    agent, _ = load_agent(out / "runs" / "da-ibc" / "seed0" / "final.pt")
+    assert agent.takes_command
+    assert json.loads((out / "provenance.json").read_text())["complete"] is True
+    assert main(argv) == 0  # resumed: nothing left to do
+    # the same folder without --commands: another preset, refused before any work
+    assert main(["replicate", "--preset", "tiny", "--out", str(out), "--set", "route_max_steps=8"]) == 2
+    assert "differs in commands" in capsys.readouterr().err
