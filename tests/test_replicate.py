@@ -224,3 +224,25 @@ def test_compare_folders_reads_shared_seeds_and_counts_standstills(tmp_path):
     lone = _folder_of_episodes(tmp_path / "lone", "bc", {3: [(1, 0), (1, 0)]})
     with pytest.raises(ValueError, match="share no seed"):
         compare_folders(var, lone, methods=("bc",))
+
+
+def test_the_shipped_stem_analysis_is_complete_and_from_clean_ancestor_commits():
+    """``book/results/laptop/stems``: a drive and an analysis file for every shipped agent and the expert,
+    every invocation (drives, their resumption, the analyses) from a clean commit that is an ancestor."""
+    folder = SHIPPED / "stems"
+    if not (folder / "summary.json").exists():
+        pytest.skip("no shipped stem analysis")
+    names = sorted([f"{m}-seed{s}" for m in METHODS for s in LAPTOP.seeds] + ["expert"])
+    assert sorted(f.stem for f in (folder / "drives").glob("*.npz")) == names
+    assert sorted(f.stem for f in (folder / "analysis").glob("*.json") if f.stem != "provenance") == names
+    summary = json.loads((folder / "summary.json").read_text())
+    assert all(summary["methods"][m]["agents"] == len(LAPTOP.seeds) for m in METHODS)
+    root = SHIPPED.parents[2]
+    files = sorted(folder.glob("provenance*.json")) + [folder / "analysis" / "provenance.json"]
+    commits = {i["commit"] for f in files for i in json.loads(f.read_text())["invocations"]}
+    assert commits
+    for commit in commits:
+        assert "uncommitted" not in commit and re.fullmatch(r"[0-9a-f]{40}", commit), commit
+        if (root / ".git").exists():
+            ancestor = subprocess.run(["git", "-C", str(root), "merge-base", "--is-ancestor", commit, "HEAD"])
+            assert ancestor.returncode == 0, f"commit {commit} is not an ancestor of HEAD"
