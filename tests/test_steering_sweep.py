@@ -65,7 +65,7 @@ def test_tiny_sweep_files_and_tables(swept):
 def test_measures_are_recomputed_from_the_traces(swept):
     for share in (0.3, 0.5):
         d = S.run_dir(swept, share, "ebm", 0)
-        r = S.read_eval(d / S.EVAL)
+        r = S.read_sweep_eval(d / S.EVAL)
         with np.load(d / S.PASSES) as z:
             arrays = {k: z[k] for k in z.files}
         for s in r["sessions"]:

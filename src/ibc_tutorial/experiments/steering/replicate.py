@@ -44,7 +44,7 @@ from ibc_tutorial.experiments.runs import (
 from ibc_tutorial.experiments.steering import evaluate as ev
 from ibc_tutorial.experiments.steering.models import LABELS, MODELS
 from ibc_tutorial.experiments.steering.presets import LAPTOP, SteeringPreset, differences
-from ibc_tutorial.experiments.steering.task import collect_demonstrations, side_road_counts
+from ibc_tutorial.experiments.steering.task import preset_demonstrations, side_road_counts
 from ibc_tutorial.experiments.steering.train import EVAL, TRACE, StudyInputs, read_eval, run_dir, run_one
 from ibc_tutorial.parallel import imap_unordered
 from ibc_tutorial.utils import check_int
@@ -286,17 +286,7 @@ def replicate(
 
 
 def _work(out: Path, preset: SteeringPreset, results: dict, save, workers: int, log) -> None:
-    if not (out / DATA).exists():
-        demo = collect_demonstrations(
-            preset.routes,
-            preset.route_minutes,
-            preset.side_road_share,
-            speed=preset.speed,
-            steer_noise=preset.steer_noise,
-            seed=preset.collect_seed,
-        )
-        demo.save(out / DATA)
-    demo = DemoLog.load(out / DATA)
+    demo = preset_demonstrations(preset, out / DATA)
     counts = side_road_counts(demo)
     results.update(
         preset=preset.to_dict(),

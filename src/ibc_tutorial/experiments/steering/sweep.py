@@ -67,7 +67,7 @@ from ibc_tutorial.experiments.steering.sweep_settings import (
     share_name,
     share_preset,
 )
-from ibc_tutorial.experiments.steering.task import collect_demonstrations, side_road_counts
+from ibc_tutorial.experiments.steering.task import preset_demonstrations, side_road_counts
 from ibc_tutorial.experiments.steering.train import SteeringModel, train_model
 from ibc_tutorial.parallel import imap_unordered
 from ibc_tutorial.utils import check_int
@@ -107,7 +107,7 @@ def check_folder(out, settings: SweepSettings, base: SteeringPreset) -> None:
             )
     for r in planned(settings):
         if (run_dir(out, *r) / EVAL).exists():
-            read_eval(run_dir(out, *r) / EVAL)
+            read_sweep_eval(run_dir(out, *r) / EVAL)
 
 
 def clear_folder(out) -> None:
@@ -120,7 +120,7 @@ def clear_folder(out) -> None:
     delete_entries(out, ENTRIES + shares)
 
 
-def read_eval(path) -> dict:
+def read_sweep_eval(path) -> dict:
     """A run's ``eval.json``, checked; ValueError naming the file otherwise."""
     path = Path(path)
     fix = f"delete {path.parent} and re-run the same command to make that run again"
@@ -162,17 +162,7 @@ def _collect_one(out: str, share: float, base_d: dict) -> dict:
     """Collect one share's demonstrations (a worker's call); returns the side-road counts."""
     p = share_preset(SteeringPreset.from_dict(base_d), share)
     path = Path(out) / share_name(share) / "data" / "town01.npz"
-    if not path.exists():
-        demo = collect_demonstrations(
-            p.routes,
-            p.route_minutes,
-            p.side_road_share,
-            speed=p.speed,
-            steer_noise=p.steer_noise,
-            seed=p.collect_seed,
-        )
-        demo.save(path)
-    return {"share": share, "counts": side_road_counts(DemoLog.load(path))}
+    return {"share": share, "counts": side_road_counts(preset_demonstrations(p, path))}
 
 
 _WORKER: dict = {}
@@ -277,7 +267,7 @@ def collect_results(out: Path, settings: SweepSettings) -> dict:
         runs[sn], table[sn] = {}, {}
         for model in settings.models:
             done = {
-                str(seed): read_eval(run_dir(out, share, model, seed) / EVAL)
+                str(seed): read_sweep_eval(run_dir(out, share, model, seed) / EVAL)
                 for seed in settings.seeds
                 if (run_dir(out, share, model, seed) / EVAL).exists()
             }
@@ -400,7 +390,7 @@ __all__ = [
     "collect_results",
     "finished_runs",
     "load_results",
-    "read_eval",
+    "read_sweep_eval",
     "read_references",
     "run_dir",
     "sweep",

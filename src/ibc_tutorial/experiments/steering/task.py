@@ -26,6 +26,7 @@ from __future__ import annotations
 
 from collections import Counter
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -143,6 +144,24 @@ def collect_demonstrations(
     return rec.log(
         {"config": config, "routes": meta_routes, "episodes": ended, "expert": "longitudinal_config"}
     )
+
+
+def preset_demonstrations(preset, path) -> DemoLog:
+    """The demonstrations a steering preset asks for (``collect_demonstrations`` with its routes,
+    minutes, side-road share, speed, steering noise and seed), collected into ``path`` unless that
+    file already exists (a resumed study), then loaded from it."""
+    path = Path(path)
+    if not path.exists():
+        demo = collect_demonstrations(
+            preset.routes,
+            preset.route_minutes,
+            preset.side_road_share,
+            speed=preset.speed,
+            steer_noise=preset.steer_noise,
+            seed=preset.collect_seed,
+        )
+        demo.save(path)
+    return DemoLog.load(path)
 
 
 def side_road_counts(log: DemoLog) -> dict:
