@@ -159,6 +159,12 @@ def test_multimodality_figures():
     assert_labelled(fig)
     with pytest.raises(ValueError, match="shape"):
         multimodality.plot_response_map(prev, {"short": torch.zeros(3)}, title="t")
+    # the range of previous actions the demonstrations hold, shaded and in the legend
+    fig = multimodality.plot_response_map(prev, {"copy": prev}, title="t", seen=(-0.2, 0.2))
+    assert len(fig.axes[0].patches) == 1
+    assert "previous steering of the experts here" in [t.get_text() for t in fig.axes[0].get_legend().texts]
+    with pytest.raises(ValueError, match="seen"):
+        multimodality.plot_response_map(prev, {"copy": prev}, title="t", seen=(0.2, -0.2))
 
 
 def test_rollout_figures_share_one_drawing():

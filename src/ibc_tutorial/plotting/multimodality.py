@@ -649,6 +649,8 @@ def plot_response_map(
     title: str,
     xlabel: str = "previous steering (−1 left … +1 right)",
     ylabel: str = "next steering command (−1 left … +1 right)",
+    seen: tuple[float, float] | None = None,
+    seen_label: str = "previous steering of the experts here",
 ):
     """What a policy fed its previous action does with it: the next command against the previous
     one at one observation, one line per policy, with the diagonal of a policy that copies
@@ -657,9 +659,15 @@ def plot_response_map(
     Args:
         prev: (N,) previous actions.
         responses: {label: (N,) commands at those previous actions}.
+        seen: (low, high) previous actions shaded, labelled ``seen_label`` (e.g. the range the
+            demonstrations hold at this observation); None = nothing shaded.
     """
+    if seen is not None and not (len(seen) == 2 and -1 <= seen[0] < seen[1] <= 1):
+        raise ValueError(f"seen must be (low, high) with -1 <= low < high <= 1, got {seen!r}")
     x = as_array(prev, float).reshape(-1)
     fig, ax = plt.subplots(figsize=(5.6, 4.2))
+    if seen is not None:
+        ax.axvspan(*seen, color="0.9", zorder=-1, label=seen_label)
     ax.plot([-1, 1], [-1, 1], "--", color="0.5", lw=1.0, label="copies the previous action")
     for i, (label, y) in enumerate(responses.items()):
         y = as_array(y, float).reshape(-1)
