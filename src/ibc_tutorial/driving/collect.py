@@ -50,6 +50,9 @@ class CollectConfig:
     brake_noise: float = 0.0
     """Strength of the expert's braking perturbations during collection, in [0, 1] (0 = none;
     ``ExpertConfig``)."""
+    turn_hold_m: float = 0.0
+    """The expert's ``ExpertConfig.turn_hold_m``: > 0 makes every turn begin this far before the junction
+    entry, left and right alike (0: turns anticipated along the path, the right turns earlier)."""
 
     def __post_init__(self):
         check_choice("town", self.town, TOWNS)
@@ -63,6 +66,7 @@ class CollectConfig:
             )
         check_positive("steer_noise", self.steer_noise, allow_zero=True)
         check_fraction("CollectConfig.brake_noise", self.brake_noise)
+        check_positive("turn_hold_m", self.turn_hold_m, allow_zero=True)
 
 
 class Recorder:
@@ -121,7 +125,11 @@ def collect(config: CollectConfig = CollectConfig(), show_progress: bool | None 
     """Drive the expert over ``config.routes`` episodes and return the log."""
     c = config
     sim = DrivingSim(c.town)
-    expert = Expert(sim, ExpertConfig(steer_noise=c.steer_noise, brake_noise=c.brake_noise), seed=c.seed)
+    expert = Expert(
+        sim,
+        ExpertConfig(steer_noise=c.steer_noise, brake_noise=c.brake_noise, turn_hold_m=c.turn_hold_m),
+        seed=c.seed,
+    )
     rng = np.random.default_rng(c.seed)
     # durations spread evenly over [min, max] (stratified: one draw per 1/routes of the range, shuffled),
     # so the total stays close to routes x the mean duration: 600 steps per minute at 10 Hz

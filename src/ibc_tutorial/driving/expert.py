@@ -63,6 +63,11 @@ class ExpertConfig:
     """Distance to the steering target when a turn starts within ``turn_preview_m`` (LBC: 7.5)."""
     turn_preview_m: float = 10.0
     """How far ahead a turn slows the car and lengthens the lookahead (metres)."""
+    turn_hold_m: float = 0.0
+    """0: the steering target follows the path, so a turn is anticipated as soon as the target enters its
+    arc, and a tight right turn (7 m radius) steers earlier than a wide left one (11 m). > 0: until the car is
+    this close to the start of a turn's arc (the junction entry), the target is held on the straight line
+    of its lane, so every turn, left or right, begins at the same place (chapter 08's stem analysis)."""
     steer_gains: tuple[float, float, float] = (1.5, 0.05, 0.0)
     """(P, I, D) of the steering PID on the heading error in radians (LBC: 0.75, 0.05, 0.0)."""
     speed_gains: tuple[float, float, float] = (0.5, 0.025, 0.1)
@@ -105,6 +110,7 @@ class ExpertConfig:
         for name in ("lookahead_m", "turn_lookahead_m", "cruise_speed", "turn_speed", "stop_distance_m"):
             check_positive(f"ExpertConfig.{name}", getattr(self, name))
         check_positive("ExpertConfig.steer_noise", self.steer_noise, allow_zero=True)
+        check_positive("ExpertConfig.turn_hold_m", self.turn_hold_m, allow_zero=True)
         check_fraction("ExpertConfig.brake_noise", self.brake_noise)
         for name in ("noise_prob", "brake_prob", "hesitate_prob"):
             check_probability(f"ExpertConfig.{name}", getattr(self, name))
@@ -310,7 +316,7 @@ class Expert:
         turning = bool(self.turn_wp[self.idx : j + 1].any())
         look = c.turn_lookahead_m if turning else c.lookahead_m
         t = min(int(np.searchsorted(self.s, s_car + look)), len(self.s) - 1)
-        tx, ty = self.xy[t]
+        tx, ty = self._held_target(s_car, look, t) if c.turn_hold_m > 0 else self.xy[t]
         err = math.atan2(ty - y, tx - x) - yaw
         err = -math.atan2(
             math.sin(err), math.cos(err)
@@ -345,6 +351,21 @@ class Expert:
             "lane": self.current_lane,
         }
         return np.array([steer, acc], dtype=np.float32)
+
+    def _held_target(self, s_car: float, look: float, t: int) -> tuple[float, float]:
+        """The steering target with ``turn_hold_m``: on the straight extension of the lane while the next
+        turn's arc (its first waypoint, the junction entry) is more than ``turn_hold_m`` ahead; else
+        ``xy[t]``."""
+        ahead = np.flatnonzero(self.turn_wp[self.idx + 1 : t + 1])
+        if not len(ahead):
+            return self.xy[t]
+        k = self.idx + 1 + int(ahead[0])  # first waypoint of the arc
+        if self.turn_wp[k - 1] or self.s[k] - s_car <= self.config.turn_hold_m:
+            return self.xy[t]  # already in a turn, or close enough to begin it
+        d = self.xy[k] - self.xy[k - 1]
+        d = d / max(float(np.hypot(*d)), 1e-9)  # (2,) the lane's direction at the entry
+        tx, ty = self.xy[k] + d * (s_car + look - self.s[k])
+        return float(tx), float(ty)
 
     def _stop_distance(self, s_car: float, speed: float) -> float | None:
         """Distance from the front bumper to the stop line it must stop at, or None."""

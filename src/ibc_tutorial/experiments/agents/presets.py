@@ -80,6 +80,10 @@ class Preset:
     brake_noise: float = 0.0
     """Strength of the expert's braking perturbations while collecting, in [0, 1] (the paper: none;
     ``driving.expert``)."""
+    turn_hold_m: float = 0.0
+    """The expert begins every turn this far before the junction entry, left and right alike (0: as its
+    steering target enters the turn's arc, so right turns begin earlier; ``driving.expert``; the paper does
+    not say how its expert times its turns)."""
     # ---- network (the paper's Fig. 2)
     bev_size: int = 192
     """Side of the bird's-eye view in pixels (the paper: 192)."""
@@ -206,6 +210,7 @@ class Preset:
             min_minutes=self.min_minutes,
             max_minutes=self.max_minutes,
             brake_noise=self.brake_noise,
+            turn_hold_m=self.turn_hold_m,
         )
 
     def dfo_config(self, method: str) -> DFOConfig | None:
@@ -334,6 +339,7 @@ CONFIG_FIELDS = {
     "collect.min_minutes": "min_minutes",
     "collect.max_minutes": "max_minutes",
     "collect.brake_noise": "brake_noise",
+    "collect.turn_hold_m": "turn_hold_m",
     "bev.size": "bev_size",
     "bev.light_encoding": "light_encoding",
     "train.lr": "lr",
