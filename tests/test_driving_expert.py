@@ -214,3 +214,30 @@ def test_speed_control_is_smooth_and_the_old_one_was_not():
     assert new["switch_jump"].max() < 0.8 < 1.0 < old["switch_jump"].min()  # P step 0.5 x 1.5 only
     assert len(new["sign_changes"]) >= 3 and new["sign_changes"].max() <= 1
     assert np.median(old["sign_changes"]) >= 2
+
+
+def test_turn_hold_makes_left_and_right_turns_begin_at_the_same_place(tmp_path):
+    """Without the hold, the expert's right turns (7 m arc) begin before its left turns (11 m arc) at a stem;
+    with ``turn_hold_m`` both begin at the same place, and the expert still completes every route."""
+    from ibc_tutorial.driving.collect import CollectConfig, collect
+    from ibc_tutorial.experiments.agents.stem_analysis import demonstrations
+
+    onsets = {}
+    for hold in (0.0, 0.5):
+        log = collect(
+            CollectConfig(routes=10, seed=0, brake_noise=1.0, turn_hold_m=hold), show_progress=False
+        )
+        assert [e["end"] for e in log.meta["episodes"]] == ["completed"] * 10
+        log.save(tmp_path / f"hold{hold}.npz")
+        d = demonstrations(tmp_path / f"hold{hold}.npz")
+        assert d["onset_m"]["left"]["n"] >= 5 and d["onset_m"]["right"]["n"] >= 5
+        onsets[hold] = (d["onset_m"]["left"]["median"], d["onset_m"]["right"]["median"])
+    left, right = onsets[0.0]
+    assert left - right > 1.0  # the left turn begins more than a metre later
+    left, right = onsets[0.5]
+    assert abs(left - right) < 0.5  # within a step of each other
+
+
+def test_turn_hold_is_checked():
+    with pytest.raises(ValueError, match="turn_hold_m"):
+        ExpertConfig(turn_hold_m=-1.0)

@@ -246,3 +246,24 @@ def test_the_shipped_stem_analysis_is_complete_and_from_clean_ancestor_commits()
         if (root / ".git").exists():
             ancestor = subprocess.run(["git", "-C", str(root), "merge-base", "--is-ancestor", commit, "HEAD"])
             assert ancestor.returncode == 0, f"commit {commit} is not an ancestor of HEAD"
+
+
+def test_the_replication_records_its_table_episodes_for_the_stem_analysis(replicated, tmp_path):
+    """Every run (and the expert) writes ``stem_drive.npz``: the same episodes as its ``final_eval.json``;
+    ``stems analyse`` reads them without a second drive."""
+    from ibc_tutorial.experiments.agents.layout import STEM_DRIVE, expert_dir
+    from ibc_tutorial.experiments.agents.stem_analysis import run_analysis
+    from ibc_tutorial.experiments.agents.stems import drive_file, load_drive
+
+    out = replicated
+    for d in [run_dir(out, m, 0) for m in METHODS] + [expert_dir(out)]:
+        rec = load_drive(d / STEM_DRIVE)
+        assert rec["rows"] == json.loads((d / "final_eval.json").read_text())["episodes"]
+        assert len(rec["episodes"]) == TINY.final_episodes
+        assert len(rec["episodes"][0]["lane"]) == rec["rows"][0]["steps"] + 1  # states, the last included
+        assert (rec["obs"] is None) == (d == expert_dir(out))
+    assert drive_file(out, tmp_path, "ibc-seed0") == run_dir(out, "ibc", 0) / STEM_DRIVE
+    assert drive_file(out, tmp_path, "ibc-seed7") is None
+    done = run_analysis(out, tmp_path, log=None)
+    assert done == [f"{m}-seed0" for m in METHODS] + ["expert"]
+    assert run_analysis(out, tmp_path, log=None) == []  # resumable: nothing left to do

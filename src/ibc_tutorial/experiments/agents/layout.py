@@ -4,7 +4,8 @@ A replication folder holds
 
 - ``data/town01.npz``: the demonstrations (``DATA``);
 - ``runs/<method>/seed<k>/``: one training run each (``run_dir``: ``run.json``, ``metrics.jsonl``,
-  the evaluations of ``EVALUATIONS`` and the agent, ``final.pt``);
+  the evaluations of ``EVALUATIONS``, the agent, ``final.pt``, and the record of its table's episodes
+  for the stem analysis, ``STEM_DRIVE``);
 - ``runs/expert/``: the PID expert's evaluations on the same starts (``expert_dir``);
 - ``results.json``: everything the chapters read (``RESULTS``);
 - ``free_driving.npz`` and ``landscapes.npz``: the arrays of the Fig. 5 and Fig. 6 analogues;
@@ -32,6 +33,9 @@ ENTRIES = ("data", "runs", RESULTS, PROVENANCE, PROVENANCE_MD, FREE_DRIVING, LAN
 EVALUATIONS = {"final": "final_eval.json", "heldout": "heldout_eval.json"}
 """The evaluations of a run, by name: the table's starts (``final``, ``evaluate.EVAL_SEED``) and the
 held-out starts (``heldout``, ``evaluate.HELDOUT_SEED``), with the file each is written to."""
+STEM_DRIVE = "stem_drive.npz"
+"""In a run folder (and ``runs/expert/``): the per-state record of the table's episodes and the
+observations of its stem crossings and red stops (``stems.recorded_drive``), which the stem analysis reads."""
 FINAL_EVAL = EVALUATIONS["final"]
 """A run is finished once this file exists (it is written last)."""
 

@@ -61,6 +61,7 @@ from ibc_tutorial.experiments.agents.layout import (
     FINAL_EVAL,
     PROVENANCE,
     RESULTS,
+    STEM_DRIVE,
     expert_dir,
     finished_runs,
     planned_runs,
@@ -71,6 +72,7 @@ from ibc_tutorial.experiments.agents.presets import PAPER, Preset, differences
 from ibc_tutorial.experiments.agents.results import collect_results, preset_results
 from ibc_tutorial.experiments.agents.route_eval import ROUTE_SEED, evaluate_on_routes, summarize_route_rows
 from ibc_tutorial.experiments.agents.run_folder import inspect_run
+from ibc_tutorial.experiments.agents.stems import recorded_drive
 from ibc_tutorial.experiments.agents.train import train_agent
 from ibc_tutorial.experiments.runs import (
     Provenance,
@@ -78,6 +80,7 @@ from ibc_tutorial.experiments.runs import (
     delete_entries,
     read_json_dict,
     write_json,
+    write_npz,
 )
 from ibc_tutorial.parallel import imap_unordered
 from ibc_tutorial.utils import check_device, check_int
@@ -176,7 +179,8 @@ def final_evaluations(
     show_progress: bool | None = False,
     extra: dict | None = None,
 ) -> dict:
-    """The table's evaluation (``final_eval.json``) and the held-out one (``heldout_eval.json``) of an agent
+    """The table's evaluation (``final_eval.json``, its episodes recorded for the stem analysis in
+    ``stem_drive.npz``: ``stems.recorded_drive``) and the held-out one (``heldout_eval.json``) of an agent
     (an ``Agent`` or "expert") into ``out_dir``; returns the first. With ``preset.commands``: the town02
     routes instead (``route_evaluation``)."""
     if preset.commands:
@@ -189,8 +193,11 @@ def final_evaluations(
         if not episodes:
             continue
         te = time.perf_counter()
-        rows = episode_rows(
-            evaluate_agent(
+        if name == FINAL_EVAL:  # the table's episodes, recorded for the stem analysis (same episodes)
+            results, arrays = recorded_drive(agent, episodes, preset.final_steps, seed, policy_seed)
+            write_npz(out_dir / STEM_DRIVE, arrays)
+        else:
+            results = evaluate_agent(
                 agent,
                 "town02",
                 episodes,
@@ -199,7 +206,7 @@ def final_evaluations(
                 policy_seed=policy_seed,
                 show_progress=show_progress,
             )
-        )
+        rows = episode_rows(results)
         evals[name] = dict(
             extra or {},
             town="town02",

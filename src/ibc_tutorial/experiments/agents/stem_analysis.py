@@ -41,7 +41,7 @@ from ibc_tutorial.driving.stems import (
     stem_exit_counts,
 )
 from ibc_tutorial.experiments.agents.checkpoints import load_agent
-from ibc_tutorial.experiments.agents.stems import METHODS, TOWN, drivers, load_drive, unpack_bev
+from ibc_tutorial.experiments.agents.stems import METHODS, TOWN, drive_file, drivers, load_drive, unpack_bev
 from ibc_tutorial.experiments.runs import git_commit, machine, now, write_json
 from ibc_tutorial.optimizers.dfo import dfo_trace
 
@@ -199,7 +199,8 @@ def analyse_agent(name: str, checkpoint: Path | None, drive_path: Path) -> dict:
 
 
 def run_analysis(folder, out, log=print, command: str = "") -> list[str]:
-    """``analyse_agent`` for every drive file in ``out/drives`` without its ``out/analysis`` file.
+    """``analyse_agent`` for every drive file (``stems.drive_file``: ``out/drives``, else the replication's
+    own records in ``folder/runs``) without its ``out/analysis`` file.
 
     Each invocation that analyses something is recorded in ``out/analysis/provenance.json``
     (commit, command, machine, CPU seconds per agent)."""
@@ -213,8 +214,8 @@ def run_analysis(folder, out, log=print, command: str = "") -> list[str]:
     }
     done = []
     for name, ck in drivers(folder):
-        src, dst = out / "drives" / f"{name}.npz", out / "analysis" / f"{name}.json"
-        if not src.exists() or dst.exists():
+        src, dst = drive_file(folder, out, name), out / "analysis" / f"{name}.json"
+        if src is None or dst.exists():
             continue
         t0 = time.process_time()
         write_json(dst, analyse_agent(name, ck, src))

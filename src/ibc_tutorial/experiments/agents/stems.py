@@ -17,7 +17,12 @@ last axis: ``np.unpackbits(obs_bev, axis=-1)`` restores it) and ``obs_state``.
     ibc-tutorial stems drive --folder book/results/laptop \
         --out book/results/laptop/stems --episodes 5
 
-``analyse`` (``experiments.agents.stem_energy``) then reads these files.
+``replicate`` records the same for every agent from its table's episodes (``recorded_drive``: the
+``final_evaluations`` of ``EVAL_SEED``'s starts, with the agent's training seed as its policy seed), into
+``runs/<method>/seed<k>/stem_drive.npz`` (``runs/expert/stem_drive.npz``), so that a replication
+needs no second drive; ``drive_file`` finds either.
+
+``analyse`` (``experiments.agents.stem_analysis``) then reads these files.
 """
 
 from __future__ import annotations
@@ -31,6 +36,7 @@ import numpy as np
 from ibc_tutorial.driving.stems import kept_states
 from ibc_tutorial.experiments.agents.checkpoints import load_agent
 from ibc_tutorial.experiments.agents.evaluate import EVAL_SEED, episode_rows, evaluate_agent
+from ibc_tutorial.experiments.agents.layout import STEM_DRIVE, expert_dir, run_dir
 from ibc_tutorial.experiments.runs import git_commit, machine, now, write_json, write_npz
 from ibc_tutorial.utils import check_int
 
@@ -62,16 +68,18 @@ def drivers(folder) -> list[tuple[str, Path | None]]:
     return out + [("expert", None)]
 
 
-def drive(checkpoint: Path | None, episodes: int, steps: int, seed: int = EVAL_SEED) -> dict:
-    """Drive one agent (``checkpoint``; None: the expert) for ``episodes`` free-driving episodes.
-
-    Returns the arrays of its drive file (see the module's docstring)."""
-    agent = "expert" if checkpoint is None else load_agent(checkpoint)[0]
+def recorded_drive(agent, episodes: int, steps: int, seed: int = EVAL_SEED, policy_seed: int = POLICY_SEED):
+    """Drive ``agent`` (an ``Agent``, or "expert") for ``episodes`` batched routeless town02 episodes of
+    ``steps`` steps, recording what the stem analysis reads; returns ``(results, arrays)``: the
+    ``EpisodeResult`` of each episode (as ``evaluate_agent`` returns them: the recording changes no
+    episode) and the arrays of its drive file (see the module's docstring). ``replicate`` records its
+    table's episodes so, for every agent."""
+    is_agent = not isinstance(agent, str)
     packed: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
 
     def keep(t: int, running: list[int], batch: dict) -> None:
         bev = batch["bev"]  # (B, 5, S, S) float32, 0 or 1 with the "flag" encoding
-        if not np.isin(bev, (0.0, 1.0)).all():
+        if not ((bev == 0.0) | (bev == 1.0)).all():
             raise ValueError("the BEV holds values other than 0 and 1: it cannot be bit-packed")
         bits = np.packbits(bev.astype(np.uint8), axis=-1)  # (B, 5, S, S / 8)
         for k, i in enumerate(running):
@@ -83,10 +91,10 @@ def drive(checkpoint: Path | None, episodes: int, steps: int, seed: int = EVAL_S
         episodes,
         steps,
         seed=seed,
-        policy_seed=POLICY_SEED,
+        policy_seed=policy_seed,
         record_steps=True,
         show_progress=False,
-        on_step=None if checkpoint is None else keep,
+        on_step=keep if is_agent else None,
     )
     arrays: dict[str, np.ndarray] = {}
     obs_ep, obs_t, obs_bev, obs_state = [], [], [], []
@@ -94,20 +102,28 @@ def drive(checkpoint: Path | None, episodes: int, steps: int, seed: int = EVAL_S
         tr = r.trace
         for k in TRACE:
             arrays[f"e{i}_{k}"] = np.asarray(tr[k])
-        if checkpoint is not None:
+        if is_agent:
             for t in kept_states(TOWN, tr["lane"], tr["speed"], tr["red_ahead"], tr["entry_dist"]):
                 if (i, t) in packed:  # the last state of an episode was never shown to the policy
                     obs_ep.append(i)
                     obs_t.append(t)
                     obs_bev.append(packed[(i, t)][0])
                     obs_state.append(packed[(i, t)][1])
-    if checkpoint is not None:
+    if is_agent:
         arrays["obs_episode"] = np.array(obs_ep, dtype=np.int16)
         arrays["obs_t"] = np.array(obs_t, dtype=np.int32)
         arrays["obs_bev"] = np.stack(obs_bev) if obs_bev else np.zeros((0,), np.uint8)
         arrays["obs_state"] = np.stack(obs_state) if obs_state else np.zeros((0, 3), np.float32)
     arrays["rows"] = np.array(json.dumps(episode_rows(results)))
-    return arrays
+    return results, arrays
+
+
+def drive(checkpoint: Path | None, episodes: int, steps: int, seed: int = EVAL_SEED) -> dict:
+    """Drive one agent (``checkpoint``; None: the expert) for ``episodes`` free-driving episodes.
+
+    Returns the arrays of its drive file (see the module's docstring)."""
+    agent = "expert" if checkpoint is None else load_agent(checkpoint)[0]
+    return recorded_drive(agent, episodes, steps, seed)[1]
 
 
 def run_drives(
@@ -147,6 +163,20 @@ def run_drives(
     inv["finished"] = now()
     write_json(prov_path, prov)
     return done
+
+
+def drive_file(folder, out, name: str) -> Path | None:
+    """The drive file of driver ``name`` (``<method>-seed<k>`` or "expert"): ``out/drives/<name>.npz`` if
+    there, else the one a replication recorded in its run folder (``layout.STEM_DRIVE``), else None."""
+    own = Path(out) / "drives" / f"{name}.npz"
+    if own.exists():
+        return own
+    if name == "expert":
+        rec = expert_dir(folder) / STEM_DRIVE
+    else:
+        method, seed = name.rsplit("-seed", 1)
+        rec = run_dir(folder, method, int(seed)) / STEM_DRIVE
+    return rec if rec.exists() else None
 
 
 def load_drive(path) -> dict:
