@@ -4,7 +4,6 @@ import json
 import shutil
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from ibc_tutorial import cli, stats
@@ -15,7 +14,10 @@ from ibc_tutorial.experiments.agents.claims import (
     compare_verdicts,
     first_eval_scores,
     judge_claims,
-    spread_interval,
+    minority,
+    range_differences,
+    stem_exit_tables,
+    stem_files,
 )
 from ibc_tutorial.experiments.agents.presets import TINY
 from ibc_tutorial.experiments.agents.results import episode_table
@@ -47,9 +49,10 @@ def test_every_claim_gets_a_verdict(judged, replicated):
         2,
         2,
     ]  # tiny has held-out starts: both sets judged
-    assert judged[4].parts == () and isinstance(judged.exit_test, stats.ExitTest)
-    assert judged[4].verdict == judged.exit_test.verdict
-    assert len(judged[5].parts) + len(judged[5].missing) == 2
+    # claims 4 and 5 need the stem analysis, which this folder does not have yet: cannot tell, and why
+    for k in (4, 5):
+        assert judged[k].verdict == stats.CANNOT_TELL and judged[k].parts == ()
+        assert "stems analyse" in judged[k].missing[0]
     for k in (1, 2, 3):  # a claim of two parts: combined by the rule
         assert judged[k].verdict == combine(*(j.verdict for j in judged[k].parts))
 
@@ -84,28 +87,62 @@ def test_bad_folders_are_refused(replicated, tmp_path):
     (unfinished / "results.json").write_text(json.dumps(dict(res, complete=False)))
     with pytest.raises(ValueError, match=f"{unfinished}.*not a finished replication"):
         judge_claims(unfinished)
-    (unfinished / "results.json").write_text(
-        json.dumps({k: v for k, v in res.items() if k != "free_driving"})
-    )
-    with pytest.raises(ValueError, match="no free driving"):
-        judge_claims(unfinished)
     with pytest.raises(ValueError, match="folder must be a path"):
         judge_claims(3)
     with pytest.raises(ValueError, match="b must be ClaimVerdicts"):
         compare_verdicts(judge_claims(replicated), {1: stats.HOLDS})
 
 
-def test_the_rule_and_the_spread():
+def test_the_rule():
     assert combine(stats.HOLDS, stats.HOLDS) == stats.HOLDS
     assert combine(stats.HOLDS, stats.CANNOT_TELL) == stats.CANNOT_TELL
     assert combine(stats.CANNOT_TELL, stats.DOES_NOT_HOLD) == stats.DOES_NOT_HOLD
     with pytest.raises(ValueError, match="verdicts must be"):
         combine("maybe")
-    x = np.array([-0.5, 0.5] * 5)  # std 0.5, every resample between 0 and 0.5
-    s = spread_interval(x)
-    assert s.estimate == pytest.approx(0.5) and 0.0 <= s.low <= s.high <= 0.5
-    with pytest.raises(ValueError, match="1-D array"):
-        spread_interval([1.0])
+
+
+def _analysis(lefts, crossings, stem_range, red_range):
+    """A hand-made stem-analysis file: one episode per entry of ``lefts``/``crossings``; two decision
+    states at a stem with range ``stem_range`` and one red stop with ``red_range``."""
+    states = [
+        {"kind": "stem", "window": True, "range_extent": stem_range},
+        {"kind": "stem", "window": False, "range_extent": 9.0},  # outside the window: not read
+        {"kind": "stem", "window": True, "range_extent": stem_range},
+        {"kind": "red", "range_extent": red_range},
+    ]
+    eps = [{"left": a, "stem_crossings": c} for a, c in zip(lefts, crossings, strict=True)]
+    return {"episodes": eps, "states": states}
+
+
+def test_claims_4_and_5_read_the_stem_analysis(replicated, tmp_path):
+    folder = tmp_path / "rep"
+    shutil.copytree(replicated, folder)
+    ana = folder / "stems" / "analysis"
+    ana.mkdir(parents=True)
+    for s in range(4):  # DA-IBC agents take each exit about half the time; BC's always turn right
+        (ana / f"da-ibc-seed{s}.json").write_text(
+            json.dumps(_analysis([2, 1, 2], [4, 3, 4], 0.4, 0.1 + s / 100))
+        )
+        (ana / f"bc-seed{s}.json").write_text(json.dumps(_analysis([0, 0, 0], [4, 3, 4], 0.0, 0.0)))
+    (ana / "provenance.json").write_text("{}")  # not an agent's file
+    files = stem_files(folder)
+    assert sorted(files) == [f"{m}-seed{s}" for m in ("bc", "da-ibc") for s in range(4)]
+    left, cross = stem_exit_tables(files, "da-ibc")
+    assert left.shape == cross.shape == (4, 3) and left.sum() == 20 and cross.sum() == 44
+    assert range_differences(files) == pytest.approx([0.3, 0.29, 0.28, 0.27])
+    j = judge_claims(folder)
+    assert j[4].verdict == stats.HOLDS and j[4].parts[0].interval.estimate == pytest.approx(minority(20 / 44))
+    assert j[5].verdict == stats.HOLDS and j[5].parts[0].interval.estimate == pytest.approx(0.285)
+    # the other way round: DA-IBC as one-sided as BC, its range narrower at the stems than at red stops
+    for s in range(4):
+        (ana / f"da-ibc-seed{s}.json").write_text(json.dumps(_analysis([0, 0, 0], [4, 3, 4], 0.1, 0.3)))
+    j = judge_claims(folder)
+    assert j[4].verdict == stats.CANNOT_TELL and j[4].parts[0].interval.estimate == 0.0
+    assert j[5].verdict == stats.DOES_NOT_HOLD
+    # no completed stem crossing: cannot tell, and why
+    for s in range(4):
+        (ana / f"bc-seed{s}.json").write_text(json.dumps(_analysis([0, 0, 0], [0, 0, 0], 0.0, 0.0)))
+    assert "no completed crossing from a stem by the bc agents" in judge_claims(folder)[4].missing
 
 
 def test_the_shipped_replication_is_judged():
@@ -113,4 +150,4 @@ def test_the_shipped_replication_is_judged():
         pytest.skip("no shipped results")
     judged = judge_claims(SHIPPED)
     assert judged.preset == "laptop" and set(judged.verdicts) == set(CLAIMS)
-    assert set(judged.verdicts.values()) <= VERDICTS and not judged[5].missing
+    assert set(judged.verdicts.values()) <= VERDICTS and not judged[4].missing and not judged[5].missing

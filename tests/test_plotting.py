@@ -394,3 +394,30 @@ def test_bev_channels_colour_bar_names_the_light_levels():
     plt.close(fig)
     with pytest.raises(ValueError, match="level_names"):
         town.plot_bev_channels(bev, light_levels=(0.3, 0.6, 1.0))
+
+
+def test_stem_figures():
+    fig = agents.plot_stem_exit_shares(
+        {"bc (v1)": (0.02, 0.0, 0.1), "da-ibc": (0.4, 0.3, 0.5), "expert": (0.5, 0.3, 0.7)}
+    )
+    assert_labelled(fig)
+    assert len(fig.axes[0].patches) == 3
+    plt.close(fig)
+    pos = np.arange(-5, 6)
+    fig = agents.plot_left_mass_by_position(
+        {"turned left": (pos, np.linspace(0.5, 1, 11)), "turned right": (pos, np.linspace(0.5, 0, 11))}
+    )
+    assert_labelled(fig)
+    assert len(fig.axes[0].lines) >= 2
+    plt.close(fig)
+    steer = np.linspace(-1, 1, 41)
+    fig = agents.plot_steering_profiles({"stem": (steer - 0.3) ** 2 * 20, "red light": steer**2 * 40}, steer)
+    assert_labelled(fig)
+    assert len(fig.axes) == 2
+    plt.close(fig)
+    with pytest.raises(ValueError, match="one length"):
+        agents.plot_left_mass_by_position({"x": (pos, pos[:3])})
+    with pytest.raises(ValueError, match="one energy per steering value"):
+        agents.plot_steering_profiles({"x": steer[:5]}, steer)
+    with pytest.raises(ValueError, match="shares"):
+        agents.plot_stem_exit_shares({})

@@ -291,3 +291,24 @@ def test_ratio_of_sums_interval_pools_events_and_resamples_agents():
         stats.ratio_of_sums_interval(num, den[:, :2])
     with pytest.raises(ValueError, match="positive sum"):
         stats.ratio_of_sums_interval(num, np.zeros((2, 3)))
+
+
+def test_ratio_of_sums_difference_decides_known_cases_and_refuses_bad_input():
+    minority = lambda p: np.minimum(p, 1 - p)  # noqa: E731
+    den = np.full((4, 5), 3.0)  # 4 agents x 5 episodes, 3 stem crossings each
+    half = np.tile([1.0, 2.0], (4, 3))[:, :5]  # left in about half the crossings
+    never = np.zeros((4, 5))  # always right
+    d = stats.ratio_of_sums_difference(half, den, never, den, transform=minority, n_resamples=500)
+    assert d.estimate == pytest.approx(minority(half.sum() / den.sum())) and d.low > 0.3
+    assert stats.verdict(d) == stats.HOLDS
+    same = stats.ratio_of_sums_difference(never, den, never, den, n_resamples=100)
+    assert same.estimate == same.low == same.high == 0.0
+    # agents that differ from each other widen the interval: one of four agents turns left always
+    split = np.zeros((4, 5))
+    split[0] = 3.0
+    wide = stats.ratio_of_sums_difference(split, den, never, den, n_resamples=2000, seed=2)
+    assert wide.estimate == pytest.approx(0.25) and wide.low <= 0.0 and wide.high > 0.5
+    with pytest.raises(ValueError, match="denominators_b"):
+        stats.ratio_of_sums_difference(half, den, never, -den)
+    with pytest.raises(ValueError, match="one shape"):
+        stats.ratio_of_sums_difference(half, den, never[:2], den)

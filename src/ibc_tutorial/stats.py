@@ -202,6 +202,26 @@ def ratio_interval(
     return _interval(x.mean() / ex.mean(), np.concatenate(reps), level)
 
 
+def _ratio_replicates(num: np.ndarray, den: np.ndarray, n_resamples: int, rng) -> np.ndarray:
+    """(R,) resampled ratios sum(num) / sum(den) of the two-level bootstrap; NaN where the drawn
+    denominators sum to 0."""
+    reps = []
+    for agents, episodes in _draws(*num.shape, n_resamples, rng):
+        idx = (agents[..., None], episodes)
+        top, bottom = num[idx].sum(axis=(1, 2)), den[idx].sum(axis=(1, 2))  # (r,)
+        reps.append(np.where(bottom > 0, top / np.where(bottom > 0, bottom, 1.0), np.nan))
+    return np.concatenate(reps)
+
+
+def _check_ratio_tables(num_name: str, numerators, den_name: str, denominators):
+    num, den = check_scores(num_name, numerators), check_scores(den_name, denominators)
+    if num.shape != den.shape:
+        raise ValueError(f"{num_name} and {den_name} must have one shape, got {num.shape} and {den.shape}")
+    if (den < 0).any() or den.sum() <= 0:
+        raise ValueError(f"{den_name} must be >= 0 with a positive sum")
+    return num, den
+
+
 def ratio_of_sums_interval(
     numerators,
     denominators,
@@ -221,26 +241,45 @@ def ratio_of_sums_interval(
     is applied to the estimate and to every resample. Resamples whose drawn denominators sum to 0
     are left out (``n_resamples`` of the result counts those kept); at least one must remain.
     """
-    num = check_scores("numerators", numerators)
-    den = check_scores("denominators", denominators)
-    if num.shape != den.shape:
-        raise ValueError(f"numerators and denominators must have one shape, got {num.shape} and {den.shape}")
-    if (den < 0).any() or den.sum() <= 0:
-        raise ValueError("denominators must be >= 0 with a positive sum")
+    num, den = _check_ratio_tables("numerators", numerators, "denominators", denominators)
     level = _check_level(level)
     n_resamples = check_int("n_resamples", n_resamples, minimum=1)
-    rng = _rng(seed)
-    a, e = num.shape
-    reps = []
-    for agents, episodes in _draws(a, e, n_resamples, rng):
-        idx = (agents[..., None], episodes)
-        top, bottom = num[idx].sum(axis=(1, 2)), den[idx].sum(axis=(1, 2))  # (r,)
-        reps.append(top[bottom > 0] / bottom[bottom > 0])
-    reps = np.concatenate(reps)
+    reps = _ratio_replicates(num, den, n_resamples, _rng(seed))
+    reps = reps[np.isfinite(reps)]
     if not len(reps):
         raise ValueError("every resample drew denominators summing to 0")
     f = (lambda p: p) if transform is None else transform
     return _interval(float(f(num.sum() / den.sum())), np.asarray(f(reps), dtype=float), level)
+
+
+def ratio_of_sums_difference(
+    numerators_a,
+    denominators_a,
+    numerators_b,
+    denominators_b,
+    *,
+    transform=None,
+    n_resamples: int = DEFAULT_RESAMPLES,
+    seed=0,
+    level: float = LEVEL,
+) -> Interval:
+    """f(share A) - f(share B) of two methods' pooled shares (``ratio_of_sums_interval``), with its interval.
+
+    Each resample draws the two-level bootstrap of each method independently (from one generator),
+    as ``difference_interval`` does for means, and subtracts the transformed shares; resamples in
+    which either method drew denominators summing to 0 are left out."""
+    na, da = _check_ratio_tables("numerators_a", numerators_a, "denominators_a", denominators_a)
+    nb, db = _check_ratio_tables("numerators_b", numerators_b, "denominators_b", denominators_b)
+    level = _check_level(level)
+    n_resamples = check_int("n_resamples", n_resamples, minimum=1)
+    rng = _rng(seed)
+    ra, rb = _ratio_replicates(na, da, n_resamples, rng), _ratio_replicates(nb, db, n_resamples, rng)
+    keep = np.isfinite(ra) & np.isfinite(rb)
+    if not keep.any():
+        raise ValueError("every resample drew denominators summing to 0")
+    f = (lambda p: p) if transform is None else transform
+    estimate = float(f(na.sum() / da.sum()) - f(nb.sum() / db.sum()))
+    return _interval(estimate, np.asarray(f(ra[keep]) - f(rb[keep]), dtype=float), level)
 
 
 # --------------------------------------------------------------------------- few seeds: Welch's t

@@ -327,3 +327,86 @@ def plot_crossing_energies(
     fig.colorbar(image, cax=cax, label=f"energy above the state's minimum (nats, ≤ {clip:g})")
     fig.suptitle(title)
     return fig
+
+
+def plot_stem_exit_shares(
+    shares: dict,
+    *,
+    reference: float | None = 0.5,
+    ylabel: str = "share of left turns",
+    title: str = "Left turns of the completed crossings from the stem of a T (95 % intervals)",
+):
+    """One bar per group with its interval: the share of left turns at the stems of the Ts.
+
+    ``shares``: ``{label: (estimate, low, high)}`` (a ``stats.Interval``'s numbers), e.g. one entry per
+    method and replication; a label starting with a method's name takes that method's colour.
+    ``reference``: a dashed line (None: none), the expert's even choice at 0.5."""
+    n = check_panels("shares", shares)
+    fig, ax = plt.subplots(figsize=(max(5.5, 1.1 * n + 2.0), 3.6))
+    for k, (label, (est, low, high)) in enumerate(shares.items()):
+        method = next((m for m in sorted(METHOD_COLORS, key=len, reverse=True) if label.startswith(m)), None)
+        color = METHOD_COLORS.get(method, "0.5")
+        ax.bar(k, est, color=color, alpha=0.75, width=0.65)
+        ax.errorbar(k, est, yerr=[[est - low], [high - est]], color="k", capsize=4, lw=1.2)
+        ax.text(k, high + 0.02, f"{est:.2f}", ha="center", va="bottom", fontsize=8)
+    if reference is not None:
+        ax.axhline(reference, color="0.3", ls="--", lw=1, label=f"{reference:g}: both exits alike")
+    ax.set_xticks(range(n), list(shares), rotation=20, ha="right", fontsize=8)
+    ax.set_ylim(0, 1.05)
+    label_axes(ax, "agents", ylabel, "", legend=reference is not None, loc="upper right", fontsize=8)
+    ax.grid(alpha=0.3, axis="y")
+    return finish(fig, True, title=title)
+
+
+def plot_left_mass_by_position(
+    curves: dict,
+    *,
+    dt_label: str = "states from the junction entry (0.1 s each; negative: before it)",
+    title: str = "Probability of steering left, along the crossings from a stem",
+):
+    """Lines of the mean probability mass left of straight against the state's position in the crossing.
+
+    ``curves``: ``{label: (positions (K,), means (K,))}``, e.g. one line per exit taken and replication;
+    a label containing "left" is drawn solid, "right" dashed."""
+    check_panels("curves", curves)
+    fig, ax = plt.subplots(figsize=(7.0, 3.8))
+    for k, (label, (pos, mean)) in enumerate(curves.items()):
+        pos, mean = as_array(pos, float).ravel(), as_array(mean, float).ravel()
+        if pos.shape != mean.shape:
+            raise ValueError(f"curves[{label!r}] must hold positions and means of one length")
+        ls = "--" if "right" in label else "-"
+        ax.plot(pos, mean, ls, marker="o", ms=3, color=f"C{k // 2}", label=label)
+    ax.axvline(0, color="0.4", lw=1)
+    ax.axhline(0.5, color="0.6", lw=0.8, ls=":")
+    ax.set_ylim(-0.03, 1.03)
+    label_axes(ax, dt_label, "mass left of straight", "", legend=True, loc="center left", fontsize=7)
+    ax.grid(alpha=0.3)
+    return finish(fig, True, title=title)
+
+
+def plot_steering_profiles(
+    profiles: dict,
+    steer,
+    *,
+    clip: float = 15.0,
+    title: str = "Energy over steering at the stem's decision and at a red light (Fig. 6 analogue)",
+):
+    """One panel per state: its energy over steering (the lowest over acceleration, minus its minimum), the
+    3-nat band shaded, a line at zero steering (the paper's Fig. 6 layout).
+
+    ``profiles``: ``{title: (G,) energies}`` over the steering values ``steer`` (G,)."""
+    n = check_panels("profiles", profiles)
+    check_positive("clip", clip)
+    steer = as_array(steer, float).ravel()
+    fig, axes = plt.subplots(1, n, figsize=(4.2 * n, 3.4), squeeze=False, sharey=True)
+    for ax, (name, e) in zip(axes[0], profiles.items(), strict=True):
+        e = as_array(e, float).ravel()
+        if e.shape != steer.shape:
+            raise ValueError(f"profiles[{name!r}] must hold one energy per steering value ({len(steer)})")
+        ax.plot(steer, np.minimum(e, clip), color="C3", lw=1.5)
+        ax.fill_between(steer, 0, 3, where=e <= 3, color="C1", alpha=0.3, label="within 3 nats")
+        ax.axvline(0, color="0.3", lw=1, ls="--", label="zero steering")
+        ax.set_ylim(0, clip)
+        label_axes(ax, STEER_LABEL, f"energy above the minimum (nats, ≤ {clip:g})", name, legend=True,
+                   loc="upper center", fontsize=7)  # fmt: skip
+    return finish(fig, True, title=title)

@@ -11,10 +11,17 @@ every part does (``combine``).
 - claims 1-3 compare two methods by the two-level (agents, episodes) bootstrap interval of the
   difference of their means (``stats.compare``): claim 1 at the first evaluation during training
   (``metrics.jsonl``), claims 2 and 3 on the table's starts and on the held-out starts;
-- claim 4 is the free-driving exit test (``stats.exit_spread_test``, the Fig. 5 analogue);
-- claim 5 reads the ten DFO draws at the two moments of DA-IBC's energy landscapes (the Fig. 6
-  analogue): spread in steering at a junction, braking at a red light. Those intervals are over
-  the draws at one moment of one agent: they test that landscape, not the method.
+- claims 4 and 5 read the stem analysis of the folder (``stems/analysis/``: ``ibc-tutorial stems analyse
+  --folder FOLDER --out FOLDER/stems``, on the table's episodes of every agent, which ``replicate`` records):
+  claim 4 (the Fig. 5 analogue) compares the share of the minority exit, min(p, 1 - p) of the left share p
+  of completed crossings from the stem of a T, DA-IBC minus BC (``stats.ratio_of_sums_difference``, the
+  agents x episodes bootstrap); claim 5 (the Fig. 6 analogue, about *steering*) compares, per DA-IBC agent,
+  the steering range within 3 nats of the energy's minimum at the stem's decision states (from the entry
+  until the steering passes ±0.3, ``driving.stems.decision_window``) with the same range at its stops at red
+  lights, the mean over agents of the difference with its bootstrap interval over agents. A folder without
+  the stem analysis judges both "cannot tell", saying what is missing. (The book's first replication
+  judged claim 4 by a permutation test over junction visits, which treated visits of one episode as
+  independent, and claim 5 by ten DFO draws at one moment of one agent: chapter 09 says why not.)
 
 ``compare_verdicts(a, b)`` says which claims get the same verdict in two folders (chapter 09: are
 the verdicts the same when the whole replication runs again on another CPU?).
@@ -33,7 +40,7 @@ from ibc_tutorial.experiments.agents.layout import EVALUATIONS, run_dir
 from ibc_tutorial.experiments.agents.presets import Preset
 from ibc_tutorial.experiments.agents.results import episode_table, load_results
 from ibc_tutorial.experiments.agents.run_folder import read_metrics
-from ibc_tutorial.utils import check_int
+from ibc_tutorial.experiments.runs import read_json_dict
 
 CLAIMS = {
     1: "BC reaches higher scores sooner",
@@ -50,11 +57,13 @@ STARTS = {"final": "the table's starts", "heldout": "held-out starts"}
 """The final evaluations claims 2 and 3 are judged on, and how the parts name them."""
 CLAIM_METHODS = ("bc", "ibc", "da-ibc")
 """The methods a folder must hold for the claims to be judged."""
-FREE_METHODS = ("bc", "da-ibc")
-"""The agents that drove freely (claim 4)."""
-STEER_SPREAD = 0.1
-"""Claim 5, junction: "spread along the steering axis" read as a standard deviation of the DFO draws' steering
-above this."""
+STEM_ANALYSIS = "stems/analysis"
+"""Where in a replication folder the stem analysis's per-agent files are (``stem_analysis.run_analysis``)."""
+STEM_COMMAND = "ibc-tutorial stems analyse --folder {folder} --out {folder}/stems"
+"""The command that makes them."""
+RANGE_KEY = "range_extent"
+"""Claim 5's reading of a state's energy: the extent of the steering within 3 nats of its minimum
+(``driving.energy_profiles.low_range``)."""
 
 
 # --------------------------------------------------------------------------- the pieces
@@ -72,19 +81,44 @@ def combine(*verdicts: str) -> str:
     return stats.DOES_NOT_HOLD if stats.DOES_NOT_HOLD in verdicts else stats.CANNOT_TELL
 
 
-def spread_interval(x, seed: int = 0, n_resamples: int = stats.DEFAULT_RESAMPLES) -> stats.Interval:
-    """The (population) standard deviation of the 1-D ``x`` with a 95 % percentile bootstrap interval over its
-    entries."""
-    x = np.asarray(x, dtype=float)
-    if x.ndim != 1 or len(x) < 2 or not np.isfinite(x).all():
-        raise ValueError(f"x must be a finite 1-D array of at least 2 values, got shape {x.shape}")
-    n_resamples = check_int("n_resamples", n_resamples, minimum=1)
-    draws = np.random.default_rng(check_int("seed", seed, minimum=0)).integers(
-        len(x), size=(n_resamples, len(x))
-    )
-    reps = x[draws].std(1)  # (R,)
-    lo, hi = np.percentile(reps, [2.5, 97.5])
-    return stats.Interval(float(x.std()), float(lo), float(hi), stats.LEVEL, n_resamples)
+def minority(p):
+    """min(p, 1 - p): the share of the less taken of two exits, given the share ``p`` of one of them."""
+    return np.minimum(p, 1 - p)
+
+
+def stem_files(folder) -> dict[str, dict]:
+    """{driver: its stem-analysis file} of ``folder/stems/analysis`` ({} if there is none)."""
+    d = Path(folder) / STEM_ANALYSIS
+    return {p.stem: read_json_dict(p, "re-run " + STEM_COMMAND.format(folder=folder))
+            for p in sorted(d.glob("*.json")) if p.name != "provenance.json"}  # fmt: skip
+
+
+def _agents_of(files: dict[str, dict], method: str) -> list[dict]:
+    return [f for n, f in sorted(files.items(), key=lambda kv: kv[0]) if n.startswith(method + "-seed")]
+
+
+def stem_exit_tables(files: dict[str, dict], method: str) -> tuple[np.ndarray, np.ndarray]:
+    """(left turns, completed stem crossings) per (agent, episode) of ``method``: (A, E) each."""
+    agents = _agents_of(files, method)
+    if not agents or len({len(f["episodes"]) for f in agents}) != 1:
+        raise ValueError(
+            f"the stem analysis holds no {method} agents, or agents with different episode counts"
+        )
+    left = np.array([[e["left"] for e in f["episodes"]] for f in agents], dtype=float)
+    cross = np.array([[e["stem_crossings"] for e in f["episodes"]] for f in agents], dtype=float)
+    return left, cross
+
+
+def range_differences(files: dict[str, dict], method: str = "da-ibc", key: str = RANGE_KEY) -> np.ndarray:
+    """(A,) per agent of ``method``: the mean ``key`` over its stem decision states minus the mean over its
+    red-light stops (agents with no state of either kind are left out)."""
+    out = []
+    for f in _agents_of(files, method):
+        stem = [s[key] for s in f["states"] if s["kind"] == "stem" and s["window"]]
+        red = [s[key] for s in f["states"] if s["kind"] == "red"]
+        if stem and red:
+            out.append(float(np.mean(stem)) - float(np.mean(red)))
+    return np.array(out)
 
 
 def first_eval_scores(folder, method: str, preset: Preset) -> np.ndarray:
@@ -118,12 +152,9 @@ class ClaimVerdict:
     verdict: str
     """``stats.HOLDS``, ``stats.DOES_NOT_HOLD`` or ``stats.CANNOT_TELL``."""
     parts: tuple[stats.Judgement, ...]
-    """The parts it combines, each with its interval (claim 4: none, its test is ``exit_test``)."""
-    exit_test: stats.ExitTest | None = None
-    """Claim 4's free-driving exit test, DA-IBC against BC (None for the other claims)."""
+    """The parts it combines, each with its interval."""
     missing: tuple[str, ...] = ()
-    """Parts the folder holds no data for (each counts as "cannot tell"), e.g. a landscape moment not
-    found."""
+    """Parts the folder holds no data for (each counts as "cannot tell"), e.g. no stem analysis."""
 
 
 @dataclass(frozen=True)
@@ -142,18 +173,12 @@ class ClaimVerdicts:
         """Claim number -> verdict."""
         return {k: c.verdict for k, c in self.claims.items()}
 
-    @property
-    def exit_test(self) -> stats.ExitTest:
-        """Claim 4's exit test."""
-        return self.claims[4].exit_test
-
     def __getitem__(self, number: int) -> ClaimVerdict:
         return self.claims[number]
 
 
-def _check_folder(folder) -> tuple[Path, dict, dict, Preset]:
-    """The folder's ``load_results``, checked to be a finished replication of the three methods with its
-    figures."""
+def _check_folder(folder) -> tuple[Path, dict, Preset]:
+    """The folder's ``load_results``, checked to be a finished replication of the three methods."""
     if not isinstance(folder, (str, Path)):
         raise ValueError(f"folder must be a path to a replication folder, got {type(folder).__name__}")
     folder = Path(folder)
@@ -180,29 +205,19 @@ def _check_folder(folder) -> tuple[Path, dict, dict, Preset]:
             f"folder {folder} trained {', '.join(preset.methods)} only: the claims need "
             f"{', '.join(CLAIM_METHODS)} (an ablation folder is not judged)"
         )
-    fd = res.get("free_driving")
-    if (
-        not isinstance(fd, dict)
-        or not all(m in fd for m in FREE_METHODS)
-        or not isinstance(res.get("landscapes"), dict)
-    ):
-        raise ValueError(
-            f"folder {folder} has no free driving or energy landscapes in its results.json "
-            f"(claims 4 and 5 need them): {again}"
-        )
-    return folder, res, loaded["landscapes"], preset
+    return folder, res, preset
 
 
 def judge_claims(folder) -> ClaimVerdicts:
     """Judge the DA-IBC paper's sec. 4.3 claims (``CLAIMS``) on a finished replication folder.
 
-    Reads only ``folder``: its ``results.json`` (the preset, the free driving, the landscapes'
-    moments), ``landscapes.npz`` and every run's ``metrics.jsonl``, ``final_eval.json`` and
-    ``heldout_eval.json``. Every interval is the default 95 % one of ``stats`` with its default
-    resamples and seed 0, so the same folder always gives the same verdicts. ValueError naming the
-    folder if it is not a finished replication of the three methods with its Fig. 5/6 analogues.
+    Reads only ``folder``: its ``results.json`` (the preset), every run's ``metrics.jsonl``,
+    ``final_eval.json`` and ``heldout_eval.json``, and the stem analysis (``STEM_ANALYSIS``). Every
+    interval is the default 95 % one of ``stats`` with its default resamples and seed 0, so the same
+    folder always gives the same verdicts. ValueError naming the folder if it is not a finished
+    replication of the three methods.
     """
-    folder, res, ls, preset = _check_folder(folder)
+    folder, res, preset = _check_folder(folder)
     evaluations = [ev for ev in EVALUATIONS if ev == "final" or preset.heldout_episodes > 0]
 
     def on_each_start_set(above: str, below: str, key: str, claim: str, unit: str) -> tuple:
@@ -233,37 +248,34 @@ def judge_claims(folder) -> ClaimVerdicts:
     for k, parts in ((1, parts1), (2, parts2), (3, parts3)):
         claims[k] = ClaimVerdict(k, CLAIMS[k], combine(*(j.verdict for j in parts)), parts)
 
-    # claim 4 (Fig. 5): DA-IBC leaves the same approach by different exits more than BC, beyond chance
-    visits = {m: [v for e in res["free_driving"][m]["episodes"] for v in e["visits"]] for m in FREE_METHODS}
-    test = stats.exit_spread_test(visits["da-ibc"], visits["bc"])
-    claims[4] = ClaimVerdict(4, CLAIMS[4], test.verdict, (), exit_test=test)
-
-    # claim 5 (Fig. 6): at the junction moment the DFO draws spread in steering; at the red light they brake
-    parts5, missing = [], []
-    if res["landscapes"].get("junction") and "junction_points" in ls:
-        junc = np.asarray(ls["junction_points"], dtype=float)  # (n_inferences, 2): (steer, acceleration)
-        parts5.append(
-            stats.judge(
-                f"junction: steering std of DFO's draws above {STEER_SPREAD:g}",
-                spread_interval(junc[:, 0]),
-                STEER_SPREAD,
-            )
+    # claims 4 and 5: the stem analysis of every agent's table episodes
+    files = stem_files(folder)
+    have = {m: bool(_agents_of(files, m)) for m in ("bc", "da-ibc")}
+    make = STEM_COMMAND.format(folder=folder)
+    no_stems = f"no stem analysis of the {{}} agents in {folder / STEM_ANALYSIS} ({make})"
+    # claim 4 (Fig. 5): DA-IBC takes the minority exit of a stem more often than BC
+    tables = {m: stem_exit_tables(files, m) for m, h in have.items() if h}  # (left, crossings), (A, E) each
+    empty = [m for m, (_, c) in tables.items() if c.sum() == 0]
+    if len(tables) == 2 and not empty:
+        (la, ca), (lb, cb) = tables["da-ibc"], tables["bc"]
+        d4 = stats.ratio_of_sums_difference(la, ca, lb, cb, transform=minority)
+        parts4 = (stats.judge("minority exit at a stem: DA-IBC's share - BC's", d4),)
+        claims[4] = ClaimVerdict(4, CLAIMS[4], parts4[0].verdict, parts4)
+    else:
+        gone = [no_stems.format(m) for m, h in have.items() if not h]
+        gone += [f"no completed crossing from a stem by the {m} agents" for m in empty]
+        claims[4] = ClaimVerdict(4, CLAIMS[4], stats.CANNOT_TELL, (), missing=tuple(gone))
+    # claim 5 (Fig. 6): DA-IBC's low-energy steering is wider at a stem's decision than at a red stop
+    diffs = range_differences(files) if have["da-ibc"] else np.zeros(0)
+    if len(diffs) >= 2:
+        d5 = stats.mean_interval(diffs[:, None])  # (A, 1): the bootstrap over agents
+        parts5 = (stats.judge("3-nat steering range: stem decision states - red stops (DA-IBC)", d5),)
+        claims[5] = ClaimVerdict(5, CLAIMS[5], parts5[0].verdict, parts5)
+    else:
+        why = (
+            no_stems.format("da-ibc") if not have["da-ibc"] else "fewer than 2 DA-IBC agents with both states"
         )
-    else:
-        missing.append("no junction moment in the free driving")
-    if res["landscapes"].get("red_light") and "red_light_points" in ls:
-        red = np.asarray(ls["red_light_points"], dtype=float)  # (n_inferences, 2)
-        parts5.append(
-            stats.judge(
-                "red light: DFO's draws brake (minus mean acceleration above 0)",
-                stats.mean_interval(-red[None, :, 1]),
-                0.0,
-            )
-        )  # (1, n_inferences): one "agent"
-    else:
-        missing.append("no red-light moment in the free driving")
-    v5 = combine(*(j.verdict for j in parts5), *(stats.CANNOT_TELL for _ in missing))
-    claims[5] = ClaimVerdict(5, CLAIMS[5], v5, tuple(parts5), missing=tuple(missing))
+        claims[5] = ClaimVerdict(5, CLAIMS[5], stats.CANNOT_TELL, (), missing=(why,))
     return ClaimVerdicts(folder, preset.name, dict(sorted(claims.items())))
 
 

@@ -10,6 +10,8 @@
   ``driving.energy_profiles``: valleys within 3 nats separated by >= 1 nat, the Boltzmann mass left of
   straight (of that profile, and of the marginal over acceleration, -log Σ_a exp(-E)), the steering
   within 3 nats (extent and measure); for BC, its Beta over steering (``energy_profiles.beta_shape``);
+- the same left mass (BC: the Beta's mass left of straight) with the previous steering in the state set to
+  0 (``left_mass_no_prev``): the counterfactual that asks whether the previous action locks a choice in;
 - at the entry state of every stem crossing of an energy agent: ``DRAWS`` DFO decisions with the
   agent's own settings (its share of left steering against the Boltzmann mass) and one ``dfo_trace``
   (the population's probability mass left of straight at each iteration: the sharpening).
@@ -180,17 +182,30 @@ def analyse_agent(name: str, checkpoint: Path | None, drive_path: Path) -> dict:
     if agent is not None and states:
         idx = np.array([s["obs"] for s in states])
         bev, state = unpack_bev(obs["bev"][idx]), obs["state"][idx].astype(np.float32)
+        no_prev = state.copy()
+        no_prev[:, 1] = 0.0  # (N, 3): the previous steering set to straight (the counterfactual of item 3)
         if agent.method == "bc":
             with torch.no_grad():
                 alpha, beta = agent.network({"bev": torch.from_numpy(bev), "state": torch.from_numpy(state)})
-            for s, a, b in zip(states, alpha[:, 0].tolist(), beta[:, 0].tolist(), strict=True):
+                a0, b0 = agent.network({"bev": torch.from_numpy(bev), "state": torch.from_numpy(no_prev)})
+            for s, a, b, a_, b_ in zip(
+                states,
+                alpha[:, 0].tolist(),
+                beta[:, 0].tolist(),
+                a0[:, 0].tolist(),
+                b0[:, 0].tolist(),
+                strict=True,
+            ):
                 shape = beta_shape(a, b)
                 s.update(alpha=round(a, 4), beta=round(b, 4), shape=shape["shape"])
                 s.update(mean=round(shape["mean"], 4), left_mass=round(shape["mass_left"], 4))
+                s.update(left_mass_no_prev=round(beta_shape(a_, b_)["mass_left"], 4))
         else:
             steer_grid, low, marg = energy_profiles(agent, bev, state)
+            _, _, marg0 = energy_profiles(agent, bev, no_prev)
             for k, s in enumerate(states):
                 s.update(read_profile(steer_grid, low[k], marg[k]))
+                s.update(left_mass_no_prev=round(boltzmann_sides(steer_grid, marg0[k])["left"], 4))
                 if s["kind"] == "stem" and s["rel"] == 0:
                     s.update(dfo_at(agent, bev[k], state[k]))
     for s in states:
@@ -321,6 +336,9 @@ def pooled_readings(states: list[dict]) -> dict:
         m = np.array([s["mean"] for s in states])
         out["mean"] = {"mean": round(float(m.mean()), 4), "abs_below_0.1": int((np.abs(m) < 0.1).sum())}
         out["left_mass_mean"] = round(float(np.mean([s["left_mass"] for s in states])), 4)
+    if all("left_mass_no_prev" in s for s in states):  # files made before the counterfactual lack it
+        out["left_mass_no_prev_mean"] = round(float(np.mean([s["left_mass_no_prev"] for s in states])), 4)
+        out["left_mass_mean_all"] = round(float(np.mean([s["left_mass"] for s in states])), 4)
     return out
 
 
