@@ -37,6 +37,7 @@ import argparse
 import math
 import os
 import platform
+import sys
 import tempfile
 import time
 
@@ -50,6 +51,7 @@ from ibc_tutorial.experiments.agents.evaluate import evaluate_agent
 from ibc_tutorial.experiments.agents.presets import METHODS, get_preset
 from ibc_tutorial.experiments.agents.replicate import FIGURE_METHODS
 from ibc_tutorial.experiments.agents.train import DemoBatches, objective_for, steps_per_epoch
+from ibc_tutorial.experiments.runs import git_commit, machine, now, write_json
 from ibc_tutorial.kde import inverse_density_weights
 from ibc_tutorial.training import TrainConfig, Trainer
 
@@ -77,6 +79,10 @@ def main() -> None:
     )
     ap.add_argument("--stacked-k", default="1,2,5,10", help="agents stacked in prototype (a)")
     ap.add_argument("--reps", type=int, default=5, help="timing rounds (minimum or median over them)")
+    ap.add_argument(
+        "--out",
+        help="with --limits: also write the rows, the machine and the load averages to this JSON file",
+    )
     args = ap.parse_args()
     torch.set_num_threads(1)
     os.environ.setdefault("TQDM_DISABLE", "1")
@@ -198,7 +204,21 @@ def limits_and_prototypes(p, args) -> None:
     probs = inverse_density_weights(ds.actions, p.kde_bandwidth)
     print(f"{len(ds)} demonstrations rendered at {p.bev_size} px (of {len(log)})")
     if args.limits:
-        rl.print_limits(rl.limits(p, ds, probs, episodes=p.final_episodes, reps=args.reps))
+        load_before = os.getloadavg()[0]
+        rows = rl.limits(p, ds, probs, episodes=p.final_episodes, reps=args.reps)
+        rl.print_limits(rows)
+        if args.out:
+            report = {
+                "command": "python benchmarks/bench_replicate.py " + " ".join(sys.argv[1:]),
+                "preset": p.name,
+                "machine": machine(),
+                "load_average": [round(load_before, 2), round(os.getloadavg()[0], 2)],
+                "made": now(),
+                "commit": git_commit(),
+                "rows": rows,
+            }
+            write_json(args.out, report)
+            print(f"written to {args.out}")
     if args.prototypes:
         print("\nprototypes: ratio = current path's time / candidate's time (> 1: the candidate is faster)")
         ks = tuple(int(k) for k in args.stacked_k.split(","))

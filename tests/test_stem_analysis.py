@@ -95,3 +95,16 @@ def test_read_profile():
     s = np.linspace(-1, 1, 41)
     r = read_profile(s, 10 * (s - 0.5) ** 2, 10 * (s - 0.5) ** 2)
     assert r["valleys"] == 1 and r["argmin_steer"] == pytest.approx(0.5) and r["left_mass"] < 0.02
+
+
+def test_by_position_averages_per_state_and_turn():
+    from ibc_tutorial.experiments.agents.stem_analysis import by_position
+
+    files = [
+        {"states": [state(-1, "left", 0.6, 0.2), state(0, "left", 0.9, 0.2), state(0, "right", 0.1, 0.2)]},
+        {"states": [state(0, "left", 0.7, 0.2), state(0, "x", 0.5, 0.2, kind="red")]},
+    ]
+    pos, mean, n = by_position(files, "left")
+    assert pos.tolist() == [-1, 0] and mean == pytest.approx([0.6, 0.8]) and n.tolist() == [1, 2]
+    pos, mean, n = by_position(files, "right", positions=[0, 5])
+    assert pos.tolist() == [0] and mean == pytest.approx([0.1])

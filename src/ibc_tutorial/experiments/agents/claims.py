@@ -94,7 +94,7 @@ def stem_files(folder) -> dict[str, dict]:
 
 
 def _agents_of(files: dict[str, dict], method: str) -> list[dict]:
-    return [f for n, f in sorted(files.items(), key=lambda kv: kv[0]) if n.startswith(method + "-seed")]
+    return [f for n, f in sorted(files.items()) if n == method or n.startswith(method + "-seed")]
 
 
 def stem_exit_tables(files: dict[str, dict], method: str) -> tuple[np.ndarray, np.ndarray]:

@@ -342,6 +342,24 @@ def pooled_readings(states: list[dict]) -> dict:
     return out
 
 
+def by_position(
+    files: list[dict], turn: str, key: str = "left_mass", positions=range(-10, 11)
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The mean of ``key`` over the stem states of ``files`` (agents' analysis files) whose crossing took
+    ``turn`` ("left", "right" or "ended"), per position relative to the entry (``rel``, in states).
+
+    Returns ``(positions (K,), means (K,), counts (K,))``; positions without a state are left out."""
+    pos, means, counts = [], [], []
+    for r in positions:
+        v = [s[key] for f in files for s in f["states"]
+             if s["kind"] == "stem" and s["turn"] == turn and s["rel"] == r and key in s]  # fmt: skip
+        if v:
+            pos.append(r)
+            means.append(float(np.mean(v)))
+            counts.append(len(v))
+    return np.array(pos), np.array(means), np.array(counts)
+
+
 def fig6_states(files: dict[str, dict], method: str = "da-ibc") -> dict:
     """The Fig. 6 analogue's two states, by rule.
 
