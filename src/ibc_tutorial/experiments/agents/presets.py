@@ -292,7 +292,7 @@ LAPTOP = Preset(
     final_episodes=10,  # as the paper
     final_steps=3000,  # as the paper: 300 s
     heldout_episodes=5,  # a check on other starts, half the table's episodes
-    seeds=tuple(range(10)),  # ten agents per method (the paper: three): the spread between agents dominates
+    seeds=(0, 1, 2, 3, 4),  # five agents per method (the paper: three)
     routeless_episodes=10,  # enough junction passes to count exits per junction
     routeless_steps=3000,
 )
