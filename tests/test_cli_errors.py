@@ -486,3 +486,17 @@ def test_stems_refuses_a_folder_without_runs_before_any_work(tmp_path, capsys):
     assert "--folder must be a replication folder with runs/" in err
     assert not out.exists()
     assert cli.main(["stems", "sideways"]) == 2  # not a step
+
+
+@pytest.mark.parametrize(
+    "extra, name",
+    [(["--dfo-samples", "0"], "--dfo-samples"), (["--dfo-iters", "-1"], "--dfo-iters"),
+     (["--episodes", "0"], "--episodes"), (["--steps", "0"], "--steps")],
+)  # fmt: skip
+def test_stems_refuses_bad_counts_before_any_work(tmp_path, capsys, extra, name):
+    (tmp_path / "rep" / "runs").mkdir(parents=True)
+    out = tmp_path / "stems"
+    code = cli.main(["stems", "drive", "--folder", str(tmp_path / "rep"), "--out", str(out), *extra])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1 and f"{name} must be a positive integer" in err
+    assert not out.exists()

@@ -267,3 +267,25 @@ def test_the_replication_records_its_table_episodes_for_the_stem_analysis(replic
     done = run_analysis(out, tmp_path, log=None)
     assert done == [f"{m}-seed0" for m in METHODS] + ["expert"]
     assert run_analysis(out, tmp_path, log=None) == []  # resumable: nothing left to do
+
+
+def test_stem_drives_with_a_changed_dfo(replicated, tmp_path):
+    """``stems drive --dfo-select sample``: the IBC agent draws its action instead of taking the lowest
+    energy; the change is part of the folder's protocol, and BC and the expert are not changed."""
+    from ibc_tutorial.experiments.agents.stems import run_drives, with_dfo
+
+    out = tmp_path / "sampled"
+    done = run_drives(replicated, out, episodes=1, steps=5, only=["ibc-seed0", "bc-seed0"], log=None,
+                      dfo={"select": "sample", "samples": 16})  # fmt: skip
+    assert done == ["bc-seed0", "ibc-seed0"]
+    prov = json.loads((out / "provenance.json").read_text())
+    assert prov["protocol"]["dfo"] == {"samples": 16, "select": "sample"}
+    with pytest.raises(ValueError, match="another protocol"):
+        run_drives(replicated, out, episodes=1, steps=5, only=["ibc-seed0"], log=None)
+    agent = load_agent(run_dir(replicated, "ibc", 0) / "final.pt")[0]
+    assert agent.dfo_config.select == "argmax"
+    assert with_dfo(agent, {"select": "sample"}).dfo_config.select == "sample"
+    bc = load_agent(run_dir(replicated, "bc", 0) / "final.pt")[0]
+    assert with_dfo(bc, {"select": "sample"}) is bc and bc.dfo_config is None
+    with pytest.raises(ValueError, match="dfo must hold"):
+        with_dfo(agent, {"temperature": 2})

@@ -141,6 +141,11 @@ def check_paths(command: str, args: argparse.Namespace) -> None:
     elif command in ("replicate", "replicate-steering", "sweep-steering"):
         check_output_dir("--out", args.out)
     elif command == "stems":
+        for name in ("dfo_samples", "dfo_iters", "episodes", "steps"):
+            if getattr(args, name) is not None and getattr(args, name) < 1:
+                raise UserError(
+                    f"--{name.replace('_', '-')} must be a positive integer, got {getattr(args, name)}"
+                )
         if not Path(args.folder, "runs").is_dir():
             raise UserError(f"--folder must be a replication folder with runs/, got {args.folder}")
         check_output_dir("--out", args.out)
@@ -337,6 +342,13 @@ def _stems_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--episodes", type=int, default=5, help="free-driving episodes per driver (drive)")
     p.add_argument("--steps", type=int, default=3000, help="steps per episode, 10 per second (drive)")
     p.add_argument("--only", nargs="*", default=None, help="drive only these (e.g. da-ibc-seed0 expert)")
+    p.add_argument(
+        "--dfo-select",
+        choices=("argmax", "sample"),
+        help="drive: the energy agents' final DFO draw changed (argmax: the lowest energy; sample: ~ p)",
+    )
+    p.add_argument("--dfo-samples", type=int, help="drive: the energy agents' DFO samples changed")
+    p.add_argument("--dfo-iters", type=int, help="drive: the energy agents' DFO iterations changed")
     p.add_argument(
         "--summary-only", action="store_true", help="analyse: only pool the analysis files into summary.json"
     )

@@ -224,7 +224,11 @@ def stems(args: argparse.Namespace) -> int:
     command = getattr(args, "command_line", "")
     torch.set_num_threads(1)
     if args.step == "drive":
-        stem_drives.run_drives(args.folder, args.out, args.episodes, args.steps, args.only, command=command)
+        dfo = {k: getattr(args, f"dfo_{k}") for k in ("select", "samples", "iters")}
+        dfo = {k: v for k, v in dfo.items() if v is not None}
+        stem_drives.run_drives(
+            args.folder, args.out, args.episodes, args.steps, args.only, command=command, dfo=dfo or None
+        )
         return 0
     if not args.summary_only:
         stem_analysis.run_analysis(args.folder, args.out, command=command)

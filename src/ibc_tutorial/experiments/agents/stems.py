@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import json
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -118,26 +119,56 @@ def recorded_drive(agent, episodes: int, steps: int, seed: int = EVAL_SEED, poli
     return results, arrays
 
 
-def drive(checkpoint: Path | None, episodes: int, steps: int, seed: int = EVAL_SEED) -> dict:
-    """Drive one agent (``checkpoint``; None: the expert) for ``episodes`` free-driving episodes.
+DFO_OVERRIDES = {"select": "select", "samples": "n_samples", "iters": "n_iters"}
+"""``run_drives``' ``dfo`` keys and the ``DFOConfig`` fields they set (``--dfo-select`` etc.)."""
+
+
+def with_dfo(agent, dfo: dict | None):
+    """``agent`` acting with its ``DFOConfig`` changed by ``dfo`` ({"select": "sample", "samples": 2048,
+    "iters": 5}, any of them; the counterfactuals of chapter 08); BC and the expert are returned as they are.
+    """
+    if not dfo or isinstance(agent, str) or agent.dfo_config is None:
+        return agent
+    unknown = sorted(set(dfo) - set(DFO_OVERRIDES))
+    if unknown:
+        raise ValueError(f"dfo must hold some of {sorted(DFO_OVERRIDES)}, got {unknown}")
+    agent.dfo_config = replace(agent.dfo_config, **{DFO_OVERRIDES[k]: v for k, v in dfo.items()})
+    return agent
+
+
+def drive(
+    checkpoint: Path | None, episodes: int, steps: int, seed: int = EVAL_SEED, dfo: dict | None = None
+) -> dict:
+    """Drive one agent (``checkpoint``; None: the expert) for ``episodes`` free-driving episodes, an energy
+    agent's DFO changed by ``dfo`` (``with_dfo``).
 
     Returns the arrays of its drive file (see the module's docstring)."""
-    agent = "expert" if checkpoint is None else load_agent(checkpoint)[0]
+    agent = "expert" if checkpoint is None else with_dfo(load_agent(checkpoint)[0], dfo)
     return recorded_drive(agent, episodes, steps, seed)[1]
 
 
 def run_drives(
-    folder, out, episodes: int = EPISODES, steps: int = STEPS, only=None, log=print, command: str = ""
+    folder,
+    out,
+    episodes: int = EPISODES,
+    steps: int = STEPS,
+    only=None,
+    log=print,
+    command: str = "",
+    dfo: dict | None = None,
 ) -> list[str]:
     """Drive each agent of ``folder``, and the expert, without a file in ``out/drives``; the names driven.
 
-    ``command``: the command line, recorded in ``out/provenance.json`` (``ibc-tutorial stems drive``)."""
+    ``command``: the command line, recorded in ``out/provenance.json`` (``ibc-tutorial stems drive``);
+    ``dfo``: the energy agents' DFO changed (``with_dfo``), part of the folder's protocol."""
     episodes = check_int("episodes", episodes, minimum=1)
     steps = check_int("steps", steps, minimum=1)
     out = Path(out)
     prov_path = out / "provenance.json"
     prov = json.loads(prov_path.read_text()) if prov_path.exists() else {"invocations": []}
     same = {"episodes": episodes, "steps": steps, "town": TOWN, "seed": EVAL_SEED, "policy_seed": POLICY_SEED}
+    if dfo:
+        same["dfo"] = dict(sorted(dfo.items()))
     if prov.get("protocol", same) != same:
         raise ValueError(f"{out} holds drives of another protocol {prov['protocol']}: use another --out")
     prov["protocol"] = same
@@ -152,7 +183,7 @@ def run_drives(
         if path.exists():
             continue
         t0 = time.process_time()
-        arrays = drive(ck, episodes, steps)
+        arrays = drive(ck, episodes, steps, dfo=dfo)
         write_npz(path, arrays)
         cpu = time.process_time() - t0
         inv.setdefault("cpu_seconds", {})[name] = round(cpu, 1)
