@@ -321,6 +321,9 @@ def test_agents_figures():
         "ibc": {},
     }
     assert_labelled(agents.plot_training_curves(curves))
+    fig = agents.plot_training_curves(curves, reference=(250.0, "expert"))
+    assert any(line.get_label() == "expert" and line.get_ydata()[0] == 250.0 for line in fig.axes[0].lines)
+    plt.close(fig)
     fig = agents.plot_loss_curves({"bc": ([1, 2], [1.0, 0.5]), "da-ibc": ([1, 2], [2.0, 1.0])})
     assert [ax.get_title() for ax in fig.axes] == ["BC (Beta)", "DA-IBC"]
     assert_labelled(fig)

@@ -4,6 +4,7 @@ import matplotlib
 
 matplotlib.use("Agg")
 
+import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
@@ -65,3 +66,18 @@ def test_fig5_analogue_panels_images_and_lines():
         plot_fig5_analogue(t, grid, steer, scores, np.zeros(5), clip_nats=0)
     with pytest.raises(ValueError, match="shape"):
         plot_fig5_analogue(t, grid, steer, {"ebm": np.zeros((4, 7))}, np.zeros(5))
+
+
+def test_dose_response():
+    from ibc_tutorial.plotting.steering import plot_dose_response
+
+    v = np.array([[0.0, 0.1, 0.0], [0.2, 0.3, 0.1], [0.5, 0.4, 0.6]])  # (3 shares, 3 seeds)
+    fig = plot_dose_response([0.15, 0.31, 0.63], {"ebm": "EBM"}, {"side mass": {"ebm": v, "mdn": v / 2}})
+    ax = fig.axes[0]
+    assert ax.get_xlabel() and ax.get_ylabel() == "side mass" and fig._suptitle.get_text()
+    assert len(ax.lines) == 2 and list(ax.lines[0].get_ydata()) == pytest.approx([1 / 30, 0.2, 0.5])
+    plt.close(fig)
+    with pytest.raises(ValueError, match="shares, seeds"):
+        plot_dose_response([0.1, 0.2], {}, {"x": {"ebm": v}})
+    with pytest.raises(ValueError, match="measures"):
+        plot_dose_response([0.1], {}, {})

@@ -126,3 +126,12 @@ def test_a_preset_stored_before_light_encoding_existed_keeps_its_intensities():
     stored = {k: v for k, v in P.LAPTOP.to_dict().items() if k != "light_encoding"}
     assert P.Preset.from_dict(stored).light_encoding == "intensity"
     assert P.Preset.from_dict(P.LAPTOP.to_dict()) == P.LAPTOP
+
+
+def test_differences_from_the_paper_mark_what_it_does_not_state():
+    d = P.differences(P.PAPER, P.LAPTOP)
+    assert d["lr_schedule"] == ("constant (not stated)", "cosine")
+    assert d["brake_noise"] == ("0.0 (not stated)", 1.0)
+    assert d["bev_size"] == (192, 64)  # stated: given as it is
+    assert P.differences(P.LAPTOP, P.TINY)["bev_size"] == (64, 32)  # between presets: values only
+    assert P.PAPER_UNSTATED <= {f.name for f in dataclasses.fields(P.Preset)}

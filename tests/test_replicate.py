@@ -289,3 +289,43 @@ def test_stem_drives_with_a_changed_dfo(replicated, tmp_path):
     assert with_dfo(bc, {"select": "sample"}) is bc and bc.dfo_config is None
     with pytest.raises(ValueError, match="dfo must hold"):
         with_dfo(agent, {"temperature": 2})
+
+
+def test_observation_and_landscape_at_a_kept_state(replicated, tmp_path):
+    from ibc_tutorial.experiments.agents.stem_analysis import landscape_at, observation_at
+    from ibc_tutorial.experiments.agents.stems import TRACE
+    from ibc_tutorial.experiments.runs import write_npz
+
+    agent = load_agent(run_dir(replicated, "da-ibc", 0) / "final.pt")[0]
+    s = agent.preset.bev_size
+    bev = (np.arange(5 * s * s).reshape(5, s, s) % 3 == 0).astype(np.float32)  # (5, S, S) of 0 and 1
+    arrays = {f"e0_{k}": np.zeros(3) for k in TRACE}
+    arrays["rows"] = np.array(json.dumps([{"termination": ""}]))
+    arrays["obs_episode"], arrays["obs_t"] = np.array([0, 0], np.int16), np.array([4, 7], np.int32)
+    arrays["obs_state"] = np.array([[1, 0, 0], [2, 0.1, 0.2]], np.float32)
+    arrays["obs_bev"] = np.packbits(np.stack([bev * 0, bev]).astype(np.uint8), axis=-1)  # (2, 5, S, S / 8)
+    path = write_npz(tmp_path / "drive.npz", arrays)
+    got_bev, got_state = observation_at(path, 0, 7)
+    assert np.array_equal(got_bev, bev) and got_state.tolist() == pytest.approx([2, 0.1, 0.2])
+    with pytest.raises(ValueError, match="episode 0, state 5"):
+        observation_at(path, 0, 5)
+    land = landscape_at(agent, got_bev, got_state, n_grid=9, draws=4)
+    assert land["energy"].shape == (9, 9) and land["energy"].min() == 0.0 and land["points"].shape == (4, 2)
+    assert (np.abs(land["points"]) <= 1).all() and land["steer"][0] == -1.0
+
+
+def test_the_shipped_turn_hold_ablation_is_the_laptop_preset_with_its_overrides():
+    folder = SHIPPED.parent / "ablations" / "turn-hold"
+    prov = json.loads((folder / "provenance.json").read_text())
+    from ibc_tutorial.experiments.agents.presets import with_overrides
+
+    assert prov["overrides"] == [
+        "turn_hold_m=0.5",
+        "seeds=0,1,2",
+        "heldout_episodes=0",
+        "routeless_episodes=0",
+    ]
+    assert differences(Preset.from_dict(prov["preset"]), with_overrides(LAPTOP, prov["overrides"])) == {}
+    assert prov["complete"] and "uncommitted" not in prov["commit"]
+    analysed = sorted(p.stem for p in (folder / "stems" / "analysis").glob("*-seed*.json"))
+    assert analysed == sorted(f"{m}-seed{s}" for m in METHODS for s in (0, 1, 2))

@@ -28,9 +28,12 @@ def episode(left: int, right: int, *, twice=0, both=0, circling=0, ended=False) 
     }
 
 
-def state(rel: int, turn: str, left_mass: float, extent: float, valleys: int = 1, kind="stem") -> dict:
+def state(
+    rel: int, turn: str, left_mass: float, extent: float, valleys: int = 1, kind="stem", crossing: int = 0
+) -> dict:
     return {
         "kind": kind,
+        "crossing": crossing,
         "episode": 0,
         "t": 100 + rel,
         "rel": rel,
@@ -76,17 +79,26 @@ def test_pooled_readings_energy_and_beta():
     assert pooled_readings([]) == {"n": 0}
 
 
-def test_fig6_rule_takes_the_median_entry_and_red_stop():
+def test_fig6_rule_takes_each_crossings_most_undecided_state_then_the_median_extent():
     files = {
         "da-ibc-seed0": {
-            "states": [state(0, "right", 0.0, 0.1), state(0, "left", 0.7, 0.3), state(3, "left", 0.5, 0.9)]
+            "states": [  # crossing 0: most undecided at -3 (0.45); crossing 1: at -1 (0.6)
+                state(-5, "right", 0.9, 0.1), state(-3, "right", 0.45, 0.3), state(0, "right", 0.0, 0.1),
+                state(-1, "left", 0.6, 0.5, crossing=1), state(0, "left", 1.0, 0.9, crossing=1),
+                state(2, "left", 0.5, 0.9, crossing=1),  # after the entry: not a candidate
+            ]
         },
-        "da-ibc-seed1": {"states": [state(0, "right", 0.1, 0.2), state(0, "ended", 0.4, 0.2)]},
-        "ibc-seed0": {"states": [state(0, "right", 0.3, 0.1)]},
+        "da-ibc-seed1": {"states": [state(-2, "right", 0.5, 0.2), state(-1, "ended", 0.5, 0.2, crossing=1)]},
+        "ibc-seed0": {"states": [state(0, "right", 0.5, 0.1)]},  # another method
         "da-ibc-seed2": {"states": [state(5, "", 0.5, e, kind="red") for e in (0.4, 0.1, 0.2)]},
-    }
+    }  # fmt: skip
     f = fig6_states(files)
-    assert (f["junction"]["agent"], f["junction"]["left_mass"]) == ("da-ibc-seed1", 0.1)  # of 0.0, 0.1, 0.7
+    # candidates: extents 0.3 (seed0, -3), 0.5 (seed0, -1), 0.2 (seed1, -2): the median is 0.3
+    assert (f["junction"]["agent"], f["junction"]["rel"], f["junction"]["range_extent"]) == (
+        "da-ibc-seed0",
+        -3,
+        0.3,
+    )
     assert f["red_light"]["range_extent"] == 0.2
     assert fig6_states({"bc-seed0": {"states": []}}) == {"junction": None, "red_light": None}
 

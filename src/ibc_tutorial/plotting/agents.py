@@ -18,10 +18,16 @@ METHOD_LABELS = {"bc": "BC (Beta)", "ibc": "IBC", "da-ibc": "DA-IBC", "expert": 
 
 
 def plot_agent_architecture(
-    bev_size: int = 64, channels=(16, 32, 32, 64), embed_dim: int = 256, head_hidden: int = 128
+    bev_size: int = 64,
+    channels=(16, 32, 32, 64),
+    embed_dim: int = 256,
+    head_hidden: int = 128,
+    light_encoding: str = "flag",
 ):
     """The DA-IBC paper's Fig. 2 as boxes and arrows: BEV CNN and state MLP, concatenated, then the
-    Beta head (BC) or the energy head with its factorised first layer (IBC, DA-IBC)."""
+    Beta head (BC) or the energy head with its factorised first layer (IBC, DA-IBC). ``light_encoding``
+    ("flag": one "must stop" bit, or "intensity") names how the BEV's light channels are drawn."""
+    lights = {"flag": "red/yellow = 1", "intensity": "by intensity"}.get(light_encoding, light_encoding)
     fig, ax = plt.subplots(figsize=(11, 4.6))
     ax.set_xlim(0, 11)
     ax.set_ylim(0, 5)
@@ -43,7 +49,7 @@ def plot_agent_architecture(
         3.2,
         1.6,
         1.2,
-        f"BEV\n5 x {bev_size} x {bev_size}\n(road, lanes,\nlights t-16, -9, -1\nby intensity)",
+        f"BEV\n5 x {bev_size} x {bev_size}\n(road, lanes,\nlights t-16, -9, -1\n{lights})",
         "#dde8f5",
     )
     box(
@@ -91,9 +97,10 @@ def plot_training_curves(
     ylabel: str = "town02 score (m x 0.7^infractions)",
     title: str = "Score in town02 during training (mean ± std over seeds)",
     ax=None,
+    reference: tuple[float, str] | None = None,
 ):
     """Score (or another key of ``curves[method][seed]``) against epoch: mean and ±1 std over seeds per
-    method."""
+    method; ``reference`` = (value, label) draws a dashed line, e.g. the expert on the same episodes."""
     if ax is None:
         _, ax = plt.subplots(figsize=(7.5, 4.2))
     for method, per_seed in curves.items():
@@ -109,6 +116,8 @@ def plot_training_curves(
             epochs, m, "o-", color=color, label=f"{METHOD_LABELS.get(method, method)} ({len(vals)} seeds)"
         )
         ax.fill_between(epochs, m - s, m + s, color=color, alpha=0.2)
+    if reference is not None:
+        ax.axhline(reference[0], color=METHOD_COLORS["expert"], ls="--", lw=1.2, label=reference[1])
     label_axes(ax, "epoch", ylabel, title)
     ax.legend()
     ax.grid(alpha=0.3)
@@ -170,6 +179,7 @@ def plot_energy_landscapes(panels: list, steer, accel, *, suptitle: str = "Energ
         e = as_array(e)  # (A, S)
         cs = ax_e.contourf(steer, accel, e - e.min(), levels=20, cmap="viridis")
         fig.colorbar(cs, ax=ax_e, label="E(x, y) - min E")
+        ax_e.axvline(0.0, color="w", ls="--", lw=1, label="zero steering")
         p = as_array(points)  # (K, 2)
         ax_e.scatter(
             p[:, 0],

@@ -158,3 +158,33 @@ def plot_fig5_analogue(
             label="score above its minimum at that time (nats)",
         )
     return fig
+
+
+def plot_dose_response(shares, labels: dict, measures: dict, *, title: str = "The side-road share, swept"):
+    """One panel per measure: its mean over seeds against the side-road share of the data, a line per model,
+    a dot per seed.
+
+    Args:
+        shares: the (K,) side-road shares measured in the data, in the order of the values.
+        labels: {model: legend label}.
+        measures: {axis label (with units): {model: (K, S) per share, per seed}}.
+    """
+    n = check_panels("measures", measures)
+    x = as_array(shares, float).ravel()  # (K,)
+    fig, axes = plt.subplots(1, n, figsize=(4.4 * n, 3.8), squeeze=False)
+    for ax, (ylabel, per_model) in zip(axes[0], measures.items(), strict=True):
+        for i, (model, values) in enumerate(per_model.items()):
+            v = as_array(values, float)  # (K, S)
+            if v.ndim != 2 or len(v) != len(x):
+                raise ValueError(f"measures[{ylabel!r}][{model!r}] must be (shares, seeds), got {v.shape}")
+            ax.plot(x, v.mean(axis=1), "o-", color=f"C{i}", label=labels.get(model, model))
+            for k in range(v.shape[1]):
+                ax.scatter(x, v[:, k], color=f"C{i}", s=10, alpha=0.5)
+        ax.set_xlabel("side-road share of the passes in the data")
+        ax.set_ylabel(ylabel)
+        ax.set_title(ylabel.split(" (")[0])
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
+    fig.suptitle(title)
+    fig.tight_layout()
+    return fig

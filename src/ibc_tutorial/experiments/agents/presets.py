@@ -266,6 +266,14 @@ class Preset:
         return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
 
 
+PAPER_UNSTATED = frozenset(
+    {"lr_schedule", "brake_noise", "turn_hold_m", "neg_sigma", "heldout_episodes", "routeless_episodes"}
+)
+"""Fields of ``PAPER`` whose value the DA-IBC paper does not state, the book's assumption: no schedule
+is given (constant assumed), no braking perturbations or turn timing of its expert, no σ for the
+counter-examples' noise, no held-out evaluation (the book's own check), and its Fig. 5 is one 3,000 s
+drive per agent rather than episodes (``routeless_episodes=3`` is the book's reading)."""
+
 PAPER = Preset(name="paper")
 """The DA-IBC paper's settings (sec. 4.2), its binary light channels included. Days of compute on a CPU;
 given for reference."""
@@ -367,6 +375,11 @@ def with_overrides(preset: Preset, overrides) -> Preset:
 
 
 def differences(a: Preset, b: Preset) -> dict[str, tuple]:
-    """Fields whose values differ: ``{field: (a's value, b's value)}`` (the name excluded)."""
+    """Fields whose values differ: ``{field: (a's value, b's value)}`` (the name excluded). Compared with
+    ``PAPER``, a value the paper does not state (``PAPER_UNSTATED``) is given as "<value> (not stated)"."""
     da, db = a.to_dict(), b.to_dict()
-    return {k: (da[k], db[k]) for k in da if k != "name" and da[k] != db[k]}
+
+    def shown(p: Preset, d: dict, k: str):
+        return f"{d[k]} (not stated)" if p == PAPER and k in PAPER_UNSTATED else d[k]
+
+    return {k: (shown(a, da, k), shown(b, db, k)) for k in da if k != "name" and da[k] != db[k]}

@@ -35,6 +35,7 @@ from ibc_tutorial import stats
 from ibc_tutorial.driving.analysis import junction_crossings
 from ibc_tutorial.driving.energy_profiles import beta_shape, boltzmann_sides, low_range, valleys
 from ibc_tutorial.driving.stems import (
+    LEAD,
     decision_window,
     episode_measures,
     red_stops,
@@ -360,40 +361,73 @@ def by_position(
     return np.array(pos), np.array(means), np.array(counts)
 
 
+def _median_state(cands: list[tuple], key: str) -> dict | None:
+    """Of ``cands`` = [(agent, state)], the state whose ``key`` is the median (the lower middle of an even
+    count; ties by agent, episode, step), as {agent, episode, t, valleys, range_extent, left_mass, rel}."""
+    if not cands:
+        return None
+    cands = sorted(cands, key=lambda c: (c[1][key], c[0], c[1]["episode"], c[1]["t"]))
+    n, st = cands[(len(cands) - 1) // 2]
+    keep = ("valleys", "range_extent", "left_mass", "rel")
+    return {"agent": n, "episode": st["episode"], "t": st["t"], **{k: st[k] for k in keep if k in st}}
+
+
 def fig6_states(files: dict[str, dict], method: str = "da-ibc") -> dict:
     """The Fig. 6 analogue's two states, by rule.
 
-    Junction: of ``method``'s agents' entry states of finished stem crossings (where the decision
-    window opens), the one whose Boltzmann mass left of straight is the median (the lower middle of
-    an even count; ties by agent, episode, step). Red light: of their red-light stops, the one whose
-    3-nat steering extent is the median, the same way.
+    Junction, where the choice is made: for each finished stem crossing of ``method``'s agents, its most
+    undecided state from ``LEAD`` states before the entry to the entry (the Boltzmann mass left of straight
+    closest to 1/2; the earlier state on a tie); of those, the one whose 3-nat steering extent is the
+    median. Red light: of their red-light stops, the one whose 3-nat steering extent is the median. The
+    median (the lower middle of an even count; ties by agent, episode, step) keeps the picture typical.
     """
-    out = {}
-    for label, sel, key in (
-        (
-            "junction",
-            lambda s: s["kind"] == "stem" and s["rel"] == 0 and s["turn"] in ("left", "right"),
-            "left_mass",
-        ),
-        ("red_light", lambda s: s["kind"] == "red", "range_extent"),
-    ):
-        mine = [(n, f) for n, f in sorted(files.items()) if n.startswith(method + "-")]
-        cands = [
-            (s[key], n, s["episode"], s["t"], s) for n, f in mine for s in f["states"] if sel(s) and key in s
-        ]
-        if not cands:
-            out[label] = None
-            continue
-        cands.sort(key=lambda c: c[:4])
-        v, n, ep, t, s = cands[(len(cands) - 1) // 2]
-        out[label] = {
-            "agent": n,
-            "episode": ep,
-            "t": t,
-            key: v,
-            **{k: s[k] for k in ("valleys", "range_extent", "left_mass")},
-        }
-    return out
+    mine = [(n, f) for n, f in sorted(files.items()) if n.startswith(method + "-")]
+    crossings: dict[tuple, list] = {}
+    for n, f in mine:
+        for st in f["states"]:
+            if (
+                st["kind"] == "stem"
+                and st["turn"] in ("left", "right")
+                and -LEAD <= st["rel"] <= 0
+                and "left_mass" in st
+            ):
+                crossings.setdefault((n, st["episode"], st["crossing"]), []).append(st)
+    undecided = [
+        (key[0], min(sts, key=lambda s: (abs(s["left_mass"] - 0.5), s["rel"])))
+        for key, sts in sorted(crossings.items())
+    ]
+    red = [(n, st) for n, f in mine for st in f["states"] if st["kind"] == "red" and "range_extent" in st]
+    return {
+        "junction": _median_state(undecided, "range_extent"),
+        "red_light": _median_state(red, "range_extent"),
+    }
+
+
+@torch.no_grad()
+def landscape_at(agent, bev: np.ndarray, state: np.ndarray, n_grid: int = GRID, draws: int = 10,
+                 seed: int = DFO_SEED) -> dict:  # fmt: skip
+    """The agent's energy over the (steering, acceleration) grid at one observation, minus its minimum, and
+    ``draws`` DFO decisions there: {"steer" (G,), "accel" (G,), "energy" (G accel, G steer), "points"
+    (draws, 2)} (the Fig. 6 analogue's panel)."""
+    steer, grid = _grid(n_grid)
+    z = agent.network.embed({"bev": torch.from_numpy(bev[None]), "state": torch.from_numpy(state[None])})
+    e = agent.network.energy_from_embedding(z, grid).reshape(n_grid, n_grid).numpy()  # (accel, steer)
+    obs = {"bev": np.repeat(bev[None], draws, 0), "state": np.repeat(state[None], draws, 0)}
+    points = agent.act(obs, torch.Generator().manual_seed(seed)).numpy()  # (draws, 2)
+    return {"steer": steer, "accel": steer.copy(), "energy": e - e.min(), "points": points}
+
+
+def observation_at(drive_path, episode: int, t: int) -> tuple[np.ndarray, np.ndarray]:
+    """The (bev (5, S, S), state (3,)) that a drive file kept for state ``t`` of ``episode``."""
+    d = load_drive(drive_path)
+    obs = d["obs"]
+    if obs is None:
+        raise ValueError(f"{drive_path} keeps no observations (the expert's drive)")
+    hit = np.flatnonzero((obs["episode"] == episode) & (obs["t"] == t))
+    if not len(hit):
+        raise ValueError(f"{drive_path} keeps no observation of episode {episode}, state {t}")
+    k = int(hit[0])
+    return unpack_bev(obs["bev"][k : k + 1])[0], obs["state"][k].astype(np.float32)
 
 
 def demonstrations(path) -> dict:
