@@ -8,7 +8,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-from ibc_tutorial.plotting.steering import plot_fig5_analogue, plot_study_metrics  # noqa: E402
+from ibc_tutorial.plotting.steering import Fig5Options, plot_fig5_analogue, plot_study_metrics  # noqa: E402
 
 
 def test_study_metrics_draws_one_panel_per_metric_with_labels():
@@ -41,9 +41,8 @@ def test_fig5_analogue_panels_images_and_lines():
     scores = {"ebm": rng.normal(size=(5, 7)), "mdn": 50 * rng.normal(size=(5, 7))}
     steer = {"ebm": np.zeros(5), "mdn": np.zeros(5), "regression": np.full(5, 0.2)}
     bev = np.zeros((5, 32, 32), np.float32)
-    fig = plot_fig5_analogue(
-        t, grid, steer, scores, np.zeros(5), bev=bev, titles={"ebm": "EBM"}, junction_s=0.2, clip_nats=10
-    )
+    options = Fig5Options(bev=bev, titles={"ebm": "EBM"}, junction_s=0.2, clip_nats=10)
+    fig = plot_fig5_analogue(t, grid, steer, scores, np.zeros(5), options)
     panels = [ax for ax in fig.axes if ax.get_title()]
     assert [ax.get_title() for ax in panels] == [
         "the observation at the junction entry",
@@ -63,7 +62,7 @@ def test_fig5_analogue_panels_images_and_lines():
     with pytest.raises(ValueError, match="steer"):
         plot_fig5_analogue(t, grid, {}, {}, np.zeros(5))
     with pytest.raises(ValueError, match="clip_nats"):
-        plot_fig5_analogue(t, grid, steer, scores, np.zeros(5), clip_nats=0)
+        plot_fig5_analogue(t, grid, steer, scores, np.zeros(5), Fig5Options(clip_nats=0))
     with pytest.raises(ValueError, match="shape"):
         plot_fig5_analogue(t, grid, steer, {"ebm": np.zeros((4, 7))}, np.zeros(5))
 

@@ -2,12 +2,15 @@
 
 The five channels follow the DA-IBC paper (sec. 2.1 and Fig. 1): 0 drivable area and
 1 lane boundaries (road edges and centre lines), both 0/1; 2-4 the traffic lights' stop lines at
-history indices -16, -9 and -1 of a queue whose last entry is the current step (Roach's
-convention, which the paper's BEV comes from), i.e. 15, 8 and 0 steps ago, clamped at the
-episode's start. As in the paper's Fig. 1(d) and in Roach, a stop line is drawn in every state,
-by intensity: **red 1.0, yellow 0.6, green 0.3** (``LIGHT_LEVELS``), 0 where there is no line.
+history indices -16, -9 and -1 of a queue whose last entry is the current step (the paper's three
+light channels at "time steps -16, -9 and -1"; the queue convention is Roach's, which the book
+follows; the paper does not say where its BEV code comes from), i.e. 15, 8 and 0 steps ago, clamped
+at the episode's start. The paper's channels are binary, "values restricted to 0 or 1", white where
+a light is red: ``light_encoding="flag"`` draws a stop line at 1 for red and yellow ("must stop") and
+not at all for green, as every preset does. The book's variant, ``"intensity"``, draws the line in
+every state: **red 1.0, yellow 0.6, green 0.3** (``LIGHT_LEVELS``), 0 where there is no line.
 
-Why intensities rather than one "must stop" flag, measured (``driving.analysis.light_label_conflicts``,
+Why the book also offers intensities, measured (``driving.analysis.light_label_conflicts``,
 chapter 07): within 9.5 m of its stop line the expert stops for red, drives on at green, and at
 yellow stops only if 4 m/s^2 of braking suffice. A 0/1 flag that draws yellow as red contradicts
 the expert's label whenever it drives through a late yellow (4 of about 6,700 such samples of the
@@ -53,9 +56,9 @@ CHANNELS = ("drivable area", "lane boundaries", "lights t-16", "lights t-9", "li
 LIGHT_LEVELS = (0.3, 0.6, 1.0)
 """Value of a stop line in channels 2-4 by light state: green 0.3, yellow 0.6, red 1.0 (0 = no line)."""
 LIGHT_ENCODINGS = ("intensity", "flag")
-"""How the light channels draw a stop line: "intensity" (by state: red 1.0, yellow 0.6, green 0.3; the
-book's), or "flag" (one "must stop" bit: red and yellow 1.0, green not drawn; kept for chapter 08's
-ablation)."""
+"""How the light channels draw a stop line: "flag" (one "must stop" bit: red and yellow 1.0, green not drawn;
+the paper's binary channels, every preset's), or "intensity" (by state: red 1.0, yellow 0.6, green 0.3; the
+book's variant, chapter 07, and chapter 08's ablation)."""
 LIGHT_SHIFTS = (2, 4, 6)
 """Bit offsets of the 2-bit light codes of channels 2, 3, 4 in a packed view byte."""
 

@@ -1,8 +1,9 @@
 """The expert: PID control along dense waypoints, obeying the traffic lights.
 
-After the CARLA "roaming" autopilot that Learning by Cheating and Roach use, and that
-generated the DA-IBC paper's dataset (its sec. 4.1, "a deterministic agent, guided by a dense
-point trajectory and a PID controller"):
+The DA-IBC paper's expert is "a deterministic agent, guided by a dense point trajectory and a PID
+controller" (its sec. 4.1, citing Learning by Cheating) on predefined leaderboard routes, and it says
+no more. The book's reconstruction starts from the PID autopilot with which Learning by Cheating
+collected its data:
 
 * the path: lanes with waypoints every metre, following a route's turns, or (routeless) a
   random legal exit at each junction;

@@ -10,10 +10,13 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import matplotlib.pyplot as plt
 import numpy as np
 
 from ibc_tutorial.plotting.common import STEER_LABEL, TIME_LABEL, as_array, check_panels
+from ibc_tutorial.plotting.town import draw_bev
 
 
 def plot_study_metrics(
@@ -64,19 +67,23 @@ def plot_study_metrics(
     return fig
 
 
-def plot_fig5_analogue(
-    time_s,
-    grid,
-    steer: dict,
-    scores: dict,
-    expert,
-    *,
-    bev=None,
-    titles: dict | None = None,
-    junction_s: float | None = None,
-    clip_nats: float = 30.0,
-    title: str = "Steering along 5 s of an expert pass of a side road",
-):
+@dataclass(frozen=True)
+class Fig5Options:
+    """What ``plot_fig5_analogue`` draws besides the models' panels."""
+
+    bev: object = None
+    """Optional (5, S, S) observation shown in a first panel (the paper's camera image)."""
+    titles: dict | None = None
+    """Optional {model: panel title}."""
+    junction_s: float | None = None
+    """Optional time (s) at which the expert enters the junction: a dotted line across every panel."""
+    clip_nats: float = 30.0
+    """The top of the shared colour scale (nats above the minimum); larger gaps saturate."""
+    title: str = "Steering along 5 s of an expert pass of a side road"
+    """The figure's title."""
+
+
+def plot_fig5_analogue(time_s, grid, steer: dict, scores: dict, expert, options: Fig5Options = Fig5Options()):
     """The paper's Fig. 5 layout: one panel per model, steering across, time running down.
 
     Each scored model's panel is an image of its score over the steering grid (energy, or −log
@@ -91,11 +98,15 @@ def plot_fig5_analogue(
         steer: {model: (T,) its steering output}; one panel per entry.
         scores: {model: (T, G) energy or −log density}; models without an entry get the lines only.
         expert: (T,) the expert's steering along the window.
-        bev: optional (5, S, S) observation shown in a first panel (the paper's camera image).
-        titles: optional {model: panel title}.
-        junction_s: optional time (s) at which the expert enters the junction.
-        clip_nats: the top of the shared colour scale (nats above the minimum); larger gaps saturate.
+        options: the observation panel, titles, junction line, colour scale and title (``Fig5Options``).
     """
+    bev, titles, junction_s, clip_nats, title = (
+        options.bev,
+        options.titles,
+        options.junction_s,
+        options.clip_nats,
+        options.title,
+    )
     n = check_panels("steer", steer)
     t = as_array(time_s, float)
     g = as_array(grid, float)
@@ -112,8 +123,6 @@ def plot_fig5_analogue(
     fig, axes = plt.subplots(rows, cols, figsize=(3.6 * cols, 3.6 * rows), squeeze=False)
     flat = [ax for row in axes for ax in row]
     if bev is not None:
-        from ibc_tutorial.plotting.town import draw_bev
-
         draw_bev(flat[0], bev)
         flat[0].set_title("the observation at the junction entry", fontsize=9)
     dt = float(t[1] - t[0]) if len(t) > 1 else 0.1

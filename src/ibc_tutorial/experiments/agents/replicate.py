@@ -194,7 +194,8 @@ def final_evaluations(
             continue
         te = time.perf_counter()
         if name == FINAL_EVAL:  # the table's episodes, recorded for the stem analysis (same episodes)
-            results, arrays = recorded_drive(agent, episodes, preset.final_steps, seed, policy_seed)
+            binary = preset.light_encoding == "flag"  # the observations are bit-packed: 0/1 views only
+            results, arrays = recorded_drive(agent, episodes, preset.final_steps, seed, policy_seed, binary)
             write_npz(out_dir / STEM_DRIVE, arrays)
         else:
             results = evaluate_agent(

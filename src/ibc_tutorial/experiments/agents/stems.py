@@ -69,13 +69,21 @@ def drivers(folder) -> list[tuple[str, Path | None]]:
     return out + [("expert", None)]
 
 
-def recorded_drive(agent, episodes: int, steps: int, seed: int = EVAL_SEED, policy_seed: int = POLICY_SEED):
+def recorded_drive(
+    agent,
+    episodes: int,
+    steps: int,
+    seed: int = EVAL_SEED,
+    policy_seed: int = POLICY_SEED,
+    keep_obs: bool = True,
+):
     """Drive ``agent`` (an ``Agent``, or "expert") for ``episodes`` batched routeless town02 episodes of
     ``steps`` steps, recording what the stem analysis reads; returns ``(results, arrays)``: the
     ``EpisodeResult`` of each episode (as ``evaluate_agent`` returns them: the recording changes no
     episode) and the arrays of its drive file (see the module's docstring). ``replicate`` records its
-    table's episodes so, for every agent."""
-    is_agent = not isinstance(agent, str)
+    table's episodes so, for every agent. ``keep_obs=False`` keeps the per-state record only (no
+    observations: a BEV drawn with the "intensity" lights is not 0/1 and cannot be bit-packed)."""
+    is_agent = not isinstance(agent, str) and keep_obs
     packed: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
 
     def keep(t: int, running: list[int], batch: dict) -> None:
