@@ -162,3 +162,22 @@ def test_drive_route_measures_the_mass_of_a_scorer_at_the_junction():
     assert r0["side_mass"][0] == pytest.approx(0.0, abs=1e-6)
     assert r0["section_w_cmd"] == 0.0 and r0["section_changes"] >= 10  # a constant command does not jitter
     assert "side_mass" not in ev.drive_route(lambda obs: 0.0, ref, TINY)  # no scorer, no mass
+
+
+def test_the_shipped_sweep_is_complete_and_a_clean_run_of_an_ancestor_commit():
+    import json
+    import re
+    import subprocess
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    folder = root / "book" / "results" / "steering-sweep"
+    prov = json.loads((folder / "provenance.json").read_text())
+    res = json.loads((folder / "results.json").read_text())
+    assert prov["complete"] and res["complete"] and len(prov["runs_done"]) == len(prov["runs_planned"]) == 36
+    assert len(prov["invocations"]) == 1 and re.fullmatch(r"[0-9a-f]{40}", prov["commit"])
+    if (root / ".git").exists():
+        ancestor = subprocess.run(
+            ["git", "-C", str(root), "merge-base", "--is-ancestor", prov["commit"], "HEAD"]
+        )
+        assert ancestor.returncode == 0
