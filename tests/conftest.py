@@ -1,6 +1,12 @@
 """Fixtures shared by the tests."""
 
 import pytest
+from hypothesis import settings
+
+# Hypothesis draws the same examples on every run, so that CI's verdict does not depend on chance; a
+# case that once failed is pinned in its test with @example.
+settings.register_profile("book", derandomize=True)
+settings.load_profile("book")
 
 
 def _stub(*args, **kwargs):

@@ -202,10 +202,10 @@ def check_beta_nll(fn) -> Feedback:
                     "which exponent goes with α and which with β: α belongs to y', β to (1 - y').",
                 )
             )
+            if _clamped_too_wide(fn):  # first: a wide clamp's loss can land near another mistake's by chance
+                return hint(TOO_WIDE)
             if (mistake := mistake_hint(out, mistakes, rtol=1e-3, atol=1e-3)) is not None:
                 return mistake
-            if _clamped_too_wide(fn):
-                return hint(TOO_WIDE)
             return hint(
                 f"your loss is {float(out):.4g} on a random test batch where eq. 1 gives {float(ref):.4g}; "
                 "compare your formula with the Beta density term by term."
