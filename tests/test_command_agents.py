@@ -94,3 +94,31 @@ def test_replicate_with_commands_end_to_end(tmp_path, capsys):
     # the same folder without --commands: another preset, refused before any work
     assert main(["replicate", "--preset", "tiny", "--out", str(out), "--set", "route_max_steps=8"]) == 2
     assert "differs in commands" in capsys.readouterr().err
+
+
+def test_route_drives_of_a_folder_resume_and_keep_each_agents_input(tmp_path, capsys):
+    from ibc_tutorial.cli import main
+    from ibc_tutorial.experiments.agents.route_drives import load_route_drives, run_route_drives
+
+    folder = tmp_path / "rep"
+    for method, preset in (("bc", TINY), ("da-ibc", CMD)):  # a routeless agent and a command agent
+        d = folder / "runs" / method / "seed0"
+        d.mkdir(parents=True)
+        save_checkpoint(d / "final.pt", _agent(method, preset), data_sha256="0" * 64, epoch=1, seed=0)
+    out = tmp_path / "drives"
+    done = run_route_drives(folder, out, only=["bc-seed0", "da-ibc-seed0"], log=None, max_steps=4)
+    assert done == ["bc-seed0", "da-ibc-seed0"]
+    drives = load_route_drives(out)
+    assert set(drives) == {"bc-seed0", "da-ibc-seed0"}
+    assert drives["bc-seed0"]["commands"] is False and drives["da-ibc-seed0"]["commands"] is True
+    assert [r["route"] for r in drives["bc-seed0"]["episodes"]] == ["r1", "r2", "r3", "r4", "r5", "r6"]
+    assert all(r["steps"] <= 4 for d in drives.values() for r in d["episodes"])
+    assert run_route_drives(folder, out, log=None, max_steps=4, only=["bc-seed0"]) == []  # resumed
+    prov = json.loads((out / "provenance.json").read_text())
+    assert len(prov["invocations"]) == 2 and prov["protocol"]["max_steps"] == 4
+    with pytest.raises(ValueError, match="another protocol"):
+        run_route_drives(folder, out, drives=2, log=None, max_steps=4)
+    with pytest.raises(ValueError, match="only must name drivers"):
+        run_route_drives(folder, out, only=["ibc-seed9"], log=None)
+    assert main(["routes", "--folder", str(tmp_path / "none"), "--out", str(out)]) == 2
+    assert "--folder must be a replication folder" in capsys.readouterr().err

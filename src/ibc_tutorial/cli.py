@@ -14,14 +14,13 @@ here raise ``UserError``, and ``main`` prints either. Ctrl-C prints one line too
 130). ``IBC_TUTORIAL_DEBUG=1`` shows the traceback instead, for maintainers.
 
     ibc-tutorial collect   --town town01 --routes 10 --seed 0 --out data/town01.npz
-    ibc-tutorial train     --method da-ibc --data data/town01.npz --preset laptop --seed 0 --out
-    runs/da-ibc/seed0
-    ibc-tutorial evaluate  --checkpoint runs/da-ibc/seed0/final.pt      # the table's protocol: town02,
-    routeless
+    ibc-tutorial train     --method da-ibc --data data/town01.npz --seed 0 --out runs/da-ibc/seed0
+    ibc-tutorial evaluate  --checkpoint runs/da-ibc/seed0/final.pt   # the table's: town02, routeless
     ibc-tutorial replicate --preset laptop --out book/results/laptop
     ibc-tutorial replicate --preset tiny --set dfo.n_samples=64 --out /tmp/tiny
     ibc-tutorial sweep-steering --preset laptop --out book/results/steering-sweep --workers 2 --threads 1
     ibc-tutorial replicate --preset laptop --commands --out book/results/commands
+    ibc-tutorial routes --folder book/results/laptop --out book/results/commands/routeless
 """
 
 from __future__ import annotations
@@ -146,6 +145,12 @@ def check_paths(command: str, args: argparse.Namespace) -> None:
                 raise UserError(
                     f"--{name.replace('_', '-')} must be a positive integer, got {getattr(args, name)}"
                 )
+        if not Path(args.folder, "runs").is_dir():
+            raise UserError(f"--folder must be a replication folder with runs/, got {args.folder}")
+        check_output_dir("--out", args.out)
+    elif command == "routes":
+        if args.drives < 1:
+            raise UserError(f"--drives must be a positive integer, got {args.drives}")
         if not Path(args.folder, "runs").is_dir():
             raise UserError(f"--folder must be a replication folder with runs/, got {args.folder}")
         check_output_dir("--out", args.out)
@@ -354,6 +359,15 @@ def _stems_arguments(p: argparse.ArgumentParser) -> None:
     )
 
 
+def _routes_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--folder", default="book/results/laptop", help="replication folder with runs/")
+    p.add_argument(
+        "--out", default="book/results/commands/routeless", help="where each driver's <name>.json goes"
+    )
+    p.add_argument("--drives", type=int, default=1, help="drives of every route per driver")
+    p.add_argument("--only", nargs="*", default=None, help="drive only these (e.g. da-ibc-seed0 expert)")
+
+
 def _sweep_steering_arguments(p: argparse.ArgumentParser) -> None:
     from ibc_tutorial.experiments.steering.sweep import SWEEP  # deferred: loads torch
 
@@ -417,6 +431,11 @@ SUBCOMMANDS: dict[str, tuple[str, object, str]] = {
         "stems",
         _stems_arguments,
         "the stems of the T-junctions: every shipped agent driven freely, the energy where it chooses",
+    ),
+    "routes": (
+        "routes",
+        _routes_arguments,
+        "every agent of a replication folder, and the expert, driven on the town02 routes (resumable)",
     ),
     "sweep-steering": (
         "sweep_steering",

@@ -236,6 +236,16 @@ def stems(args: argparse.Namespace) -> int:
     return 0
 
 
+def routes(args: argparse.Namespace) -> int:
+    """``ibc-tutorial routes``: every agent of ``--folder`` and the expert on the town02 routes (resumable)."""
+    from ibc_tutorial.experiments.agents.route_drives import run_route_drives
+
+    drives = check_int("--drives", args.drives, minimum=1)
+    torch.set_num_threads(1)
+    run_route_drives(args.folder, args.out, drives, args.only, command=getattr(args, "command_line", ""))
+    return 0
+
+
 def sweep_steering(args: argparse.Namespace) -> int:
     """``ibc-tutorial sweep-steering``: shares, models, seeds, sessions and the preset checked, the folder
     checked, then the sweep."""
