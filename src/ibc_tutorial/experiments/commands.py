@@ -237,7 +237,7 @@ def stems(args: argparse.Namespace) -> int:
 
 
 def routes(args: argparse.Namespace) -> int:
-    """``ibc-tutorial routes``: every agent of ``--folder`` and the expert on the town02 routes (resumable)."""
+    """``ibc-tutorial routes``: every agent of ``--folder`` and the expert on the routes (resumable)."""
     from ibc_tutorial.experiments.agents.route_drives import run_route_drives
 
     drives = check_int("--drives", args.drives, minimum=1)
