@@ -161,3 +161,19 @@ def test_tracker_notices_a_wrong_turn():
     assert tracker.crossings[0]["command"] == first[1] and tracker.crossings[0]["taken"] == other
     s = junction_success([{"crossings": tracker.crossings}])
     assert s[first[1]] == {"crossings": 1, "taken": 0, "rate": 0.0}
+
+
+def test_observation_before_crossing_is_the_first_state_within_the_distance():
+    from ibc_tutorial.driving.commands import COMMANDS
+    from ibc_tutorial.driving.route_following import observation_before_crossing, route_crossings
+
+    obs, where = observation_before_crossing("r2", 0, 2.0, bev_size=32, light_encoding="flag")
+    approach, turn = route_crossings(build_route("r2"))[0]
+    assert where["approach"] == approach and where["turn"] == turn
+    assert 0.0 < where["distance_m"] <= 2.0  # the first state within 2 m: not yet past the entry
+    assert COMMANDS[int(obs["command"])] == turn  # within 20 m of the entry: the route's turn
+    assert obs["bev"].shape == (5, 32, 32) and obs["state"].shape == (3,)
+    far, where_far = observation_before_crossing("r2", 0, 40.0, bev_size=32)
+    assert where_far["step"] < where["step"] and COMMANDS[int(far["command"])] == "follow"
+    with pytest.raises(ValueError, match="crossing must be below 14"):
+        observation_before_crossing("r2", 14, 2.0)

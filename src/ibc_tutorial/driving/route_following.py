@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ibc_tutorial.driving.commands import COMMANDS, FOLLOW, command_at
+from ibc_tutorial.driving.commands import COMMANDS, FOLLOW, command_at, distance_to_entry
 from ibc_tutorial.driving.env import EnvConfig, make_env
 from ibc_tutorial.driving.expert import Expert
 from ibc_tutorial.driving.routes import Route
@@ -331,6 +331,52 @@ def drive_routes(
             )
         )
     return out
+
+
+def observation_before_crossing(
+    name: str,
+    crossing: int,
+    before_m: float,
+    *,
+    bev_size: int = 64,
+    light_encoding: str = "intensity",
+    seed: int = 0,
+) -> tuple[dict[str, np.ndarray], dict]:
+    """The observation of the expert's car on route ``name`` at the first step it is ``before_m`` metres or
+    less before the entry of the route's ``crossing``-th junction crossing (0-based; ``route_crossings``).
+
+    Returns ``({"bev": (5, S, S), "state": (3,), "command": ()}, {"approach", "turn", "distance_m", "step"})``:
+    the command is the route's (``RouteTracker``), the distance measured along the approach lane
+    (``commands.distance_to_entry``). A stated rule for choosing a state, so that a figure drawn there is
+    not chosen by hand (chapter 11). Light phases as ``drive_routes``'s first route with ``seed``."""
+    route = build_route(name)
+    town = get_town(ROUTE_TOWN)
+    crossings = route_crossings(route, town)
+    crossing = check_int("crossing", crossing, minimum=0)
+    if crossing >= len(crossings):
+        raise ValueError(f"crossing must be below {len(crossings)} (route {name}'s crossings), got {crossing}")
+    before_m = check_positive("before_m", before_m, allow_zero=True)
+    tracker = RouteTracker(route, town)
+    pos = sorted(tracker.turns)[crossing]  # position in the route's lanes of that junction's approach lane
+    budget = math.ceil(tracker.length / MIN_MEAN_SPEED * 10)
+    env = make_env(config=EnvConfig(ROUTE_TOWN, bev_size, True, budget, light_encoding=light_encoding))
+    offsets = env.sim.schedule.random_offsets(np.random.default_rng([seed, 0]))
+    obs, info = env.reset(seed=seed, options={"route": route, "light_offsets": offsets})
+    expert = Expert(env)
+    for step in range(budget):
+        command = tracker.update(info["x"], info["y"], info["yaw"])
+        if tracker.p > pos:
+            break
+        if tracker.p == pos:
+            d = distance_to_entry(town, tracker.lanes[pos], (info["x"], info["y"]))
+            if d <= before_m:
+                ap = town.approach_of_lane[tracker.lanes[pos]]
+                where = {"approach": int(ap), "turn": tracker.turns[pos], "distance_m": round(d, 3), "step": step}
+                return {**obs, "command": np.int64(command)}, where
+        obs, _, terminated, _, info = env.step(expert.act())
+        if terminated:
+            break
+    raise ValueError(f"the expert never came within {before_m} m of crossing {crossing} of route {name}")
 
 
 def junction_success(rows) -> dict[str, dict]:
