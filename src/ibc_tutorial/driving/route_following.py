@@ -191,6 +191,8 @@ class RouteResult:
     """Per junction crossing: ``{"approach", "command", "taken"}``."""
     xy: np.ndarray | None = field(default=None, repr=False)
     """(steps + 1, 2) positions, if recorded."""
+    commands: np.ndarray | None = field(default=None, repr=False)
+    """(steps + 1,) the command (index into ``COMMANDS``) at each recorded position, if recorded."""
 
     @property
     def driving_score(self) -> float:
@@ -246,7 +248,7 @@ def drive_routes(
         commands: give the policy the route's command (``batch["command"]``, (B,) int64 indices into
             ``driving.commands.COMMANDS``); False: a routeless policy, which sees no command.
         max_steps: cap on every route's steps (None: its length at ``MIN_MEAN_SPEED``).
-        record_xy: keep the car's positions.
+        record_xy: keep the car's positions and the command at each (``RouteResult.xy``, ``.commands``).
     """
     seed = check_int("seed", seed, minimum=0)
     if isinstance(policy, str):
@@ -272,7 +274,7 @@ def drive_routes(
         o, info = env.reset(seed=seed + k, options={"route": route, "light_offsets": offsets})
         obs.append(o)
         cmds.append(trackers[k].update(info["x"], info["y"], info["yaw"]))
-        tracks.append([(info["x"], info["y"])])
+        tracks.append([(info["x"], info["y"], cmds[-1])])
     experts = [Expert(env) for env in envs] if policy == "expert" else None
     ends = [""] * len(named)
     infos: list[dict] = [env.sim.info() for env in envs]
@@ -299,7 +301,7 @@ def drive_routes(
             tr = trackers[i]
             cmds[i] = tr.update(infos[i]["x"], infos[i]["y"], infos[i]["yaw"])
             if record_xy:
-                tracks[i].append((infos[i]["x"], infos[i]["y"]))
+                tracks[i].append((infos[i]["x"], infos[i]["y"], cmds[i]))
             if terminated:
                 ends[i] = infos[i]["termination"]
             elif tr.wrong_turn:
@@ -327,7 +329,8 @@ def drive_routes(
                 int(info["red_light_infractions"]),
                 ends[i],
                 list(tr.crossings),
-                np.array(tracks[i]) if record_xy else None,
+                np.array(tracks[i])[:, :2] if record_xy else None,
+                np.array(tracks[i])[:, 2].astype(np.int64) if record_xy else None,
             )
         )
     return out
@@ -345,7 +348,8 @@ def observation_before_crossing(
     """The observation of the expert's car on route ``name`` at the first step it is ``before_m`` metres or
     less before the entry of the route's ``crossing``-th junction crossing (0-based; ``route_crossings``).
 
-    Returns ``({"bev": (5, S, S), "state": (3,), "command": ()}, {"approach", "turn", "distance_m", "step"})``:
+    Returns ``({"bev": (5, S, S), "state": (3,), "command": ()}, {"approach", "turn", "distance_m",
+    "step"})``:
     the command is the route's (``RouteTracker``), the distance measured along the approach lane
     (``commands.distance_to_entry``). A stated rule for choosing a state, so that a figure drawn there is
     not chosen by hand (chapter 11). Light phases as ``drive_routes``'s first route with ``seed``."""
@@ -354,7 +358,9 @@ def observation_before_crossing(
     crossings = route_crossings(route, town)
     crossing = check_int("crossing", crossing, minimum=0)
     if crossing >= len(crossings):
-        raise ValueError(f"crossing must be below {len(crossings)} (route {name}'s crossings), got {crossing}")
+        raise ValueError(
+            f"crossing must be below {len(crossings)} (route {name}'s crossings), got {crossing}"
+        )
     before_m = check_positive("before_m", before_m, allow_zero=True)
     tracker = RouteTracker(route, town)
     pos = sorted(tracker.turns)[crossing]  # position in the route's lanes of that junction's approach lane
@@ -371,7 +377,12 @@ def observation_before_crossing(
             d = distance_to_entry(town, tracker.lanes[pos], (info["x"], info["y"]))
             if d <= before_m:
                 ap = town.approach_of_lane[tracker.lanes[pos]]
-                where = {"approach": int(ap), "turn": tracker.turns[pos], "distance_m": round(d, 3), "step": step}
+                where = {
+                    "approach": int(ap),
+                    "turn": tracker.turns[pos],
+                    "distance_m": round(d, 3),
+                    "step": step,
+                }
                 return {**obs, "command": np.int64(command)}, where
         obs, _, terminated, _, info = env.step(expert.act())
         if terminated:
