@@ -177,3 +177,24 @@ def test_observation_before_crossing_is_the_first_state_within_the_distance():
     assert where_far["step"] < where["step"] and COMMANDS[int(far["command"])] == "follow"
     with pytest.raises(ValueError, match="crossing must be below 14"):
         observation_before_crossing("r2", 14, 2.0)
+
+
+@pytest.mark.parametrize("name", ["r4", "r5", "r6"])
+def test_a_wrong_exit_is_a_failed_crossing_whichever_connector_the_car_is_seen_on(name):
+    town = get_town("town02")
+    route = build_route(name)
+    first = route_crossings(route)[0]
+    for other in (t for t in town.approaches[first[0]].exits if t != first[1]):
+        detour = Route(route.start_lane, route.start_s, (other,))
+        lanes = detour.lanes(town)
+        # the car seen on the approach lane, then straight on the wrong exit's road lane (its connector's
+        # points skipped): the crossing must still be recorded, as missed
+        poses = [p for p in _poses_along(detour, town, len(lanes))]
+        conn = next(k for k in lanes if town.lanes[k].kind == "connector" and town.lanes[k].node is not None)
+        skip = {(float(x), float(y)) for x, y in town.lanes[conn].points}
+        tracker = RouteTracker(route)
+        for x, y, h in poses:
+            if (x, y) not in skip:
+                tracker.update(x, y, h)
+        assert tracker.wrong_turn, (name, other)
+        assert [(c["command"], c["taken"]) for c in tracker.crossings] == [(first[1], other)], (name, other)

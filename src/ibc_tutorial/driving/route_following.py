@@ -93,6 +93,22 @@ def route_crossings(route: Route, town=ROUTE_TOWN) -> list[tuple[int, str]]:
     return out
 
 
+def route_exits(route: Route, town=ROUTE_TOWN) -> list[int]:
+    """The number of exits of every junction the route crosses, in order (2 at a stem, 3 elsewhere)."""
+    tw = get_town(town) if isinstance(town, str) else town
+    return [len(tw.approaches[ap].exits) for ap, _ in route_crossings(route, tw)]
+
+
+def chance_crossings(exits) -> float:
+    """Expected junction crossings passed by the route's exit, before the first wrong one, by a car that
+    takes each junction's exits with equal chance: sum over k of prod_{j <= k} 1 / exits_j (what luck gives
+    a routeless car; chapter 11). ``exits``: the number of exits of each crossing, in order, each >= 1."""
+    e = np.asarray(exits, dtype=float).reshape(-1)
+    if (e < 1).any() or not np.all(e == np.round(e)):
+        raise ValueError(f"exits must be whole numbers >= 1, got {exits!r}")
+    return float(np.cumprod(1.0 / e).sum())
+
+
 class RouteTracker:
     """Follows a car along a route's lanes: progress (metres along the route), the command, wrong turns.
 
@@ -144,6 +160,10 @@ class RouteTracker:
                 self.p += 1 + window.index(lane)
             elif kind == "road" and not self.wrong_turn:
                 self.wrong_turn = True
+                if self.p in self.turns:  # left the route's junction by another exit, from its approach
+                    ap = tw.approach_of_lane[self.lanes[self.p]]
+                    turn = self.turns[self.p]
+                    self.crossings.append({"pos": self.p, "approach": int(ap), "command": turn, "taken": ""})
         on_route = lane == self.lanes[self.p]
         if on_route:
             ln = tw.lanes[lane]

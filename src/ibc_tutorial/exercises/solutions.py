@@ -300,3 +300,32 @@ def ch10_command_whiteness(segments, dt):
 def ch10_crashes_per_km(runs):
     """Crashes over kilometres driven, summed over the runs."""
     return sum(r["crashes"] for r in runs) / (sum(r["distance_m"] for r in runs) / 1000.0)
+
+
+# =========================================================================== chapter 11: route commands
+def ch11_command(kind, distance_m, next_turn, connector_turn):
+    """The command at a place: the route's turn within 20 m of a junction's entry, the connector's turn
+    inside a junction, "follow" everywhere else (corners included)."""
+    if kind == "junction connector":
+        return connector_turn
+    if kind == "approach" and distance_m <= 20.0:
+        return next_turn
+    return "follow"
+
+
+def ch11_junction_success(rows):
+    """Per command, crossings taken as commanded over crossings with it, pooled; None where there are none."""
+    out = {}
+    for command in ("left", "straight", "right", "all"):
+        cs = [c for r in rows for c in r["crossings"] if command in ("all", c["command"])]
+        out[command] = sum(c["taken"] == c["command"] for c in cs) / len(cs) if cs else None
+    return out
+
+
+def ch11_chance_crossings(exits):
+    """Σ_k P(the first k exits are all right) = Σ_k Π_{j<=k} 1 / exits_j."""
+    total, p = 0.0, 1.0
+    for e in exits:
+        p /= e
+        total += p
+    return total
