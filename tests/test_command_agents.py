@@ -122,3 +122,28 @@ def test_route_drives_of_a_folder_resume_and_keep_each_agents_input(tmp_path, ca
         run_route_drives(folder, out, only=["ibc-seed9"], log=None)
     assert main(["routes", "--folder", str(tmp_path / "none"), "--out", str(out)]) == 2
     assert "--folder must be a replication folder" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("method", ["bc", "da-ibc"])
+def test_reading_under_each_command_and_the_refusals(method):
+    from ibc_tutorial.experiments.agents.command_readings import reading
+
+    agent = _agent(method, CMD)
+    obs = {"bev": np.zeros((5, 32, 32), np.float32), "state": np.array([3.0, 0.0, 0.0], np.float32)}
+    left, right = reading(agent, obs, "left", n_grid=21), reading(agent, obs, "right", n_grid=21)
+    assert 0.0 <= left["left_mass"] <= 1.0
+    if method == "bc":
+        assert left["shape"] in ("single-peaked", "U-shaped", "J-shaped", "flat") and -1 <= left["mean"] <= 1
+        assert (left["alpha"], left["beta"]) != (
+            right["alpha"],
+            right["beta"],
+        )  # the command reaches the head
+    else:
+        assert left["profile"].shape == (21,) and left["profile"].min() == 0.0 and left["valleys"] >= 1
+        assert not np.allclose(left["profile"], right["profile"])
+    with pytest.raises(ValueError, match="takes a route command"):
+        reading(agent, obs, None)
+    with pytest.raises(ValueError, match="is routeless"):
+        reading(_agent(method, TINY), obs, "left")
+    with pytest.raises(ValueError, match="one bev"):
+        reading(agent, {"bev": obs["bev"][None], "state": obs["state"]}, "left")

@@ -1,0 +1,67 @@
+"""What an agent's output says at one state under each command (chapter 11's stem figure).
+
+``reading(agent, obs, command)`` gives, at one observation, under one command (or none, for a routeless
+agent):
+
+* for an energy agent (IBC, DA-IBC), its energy over steering, the lowest over acceleration minus its
+  minimum (the profile chapter 08 reads at the stems), the number of valleys within 3 nats separated by a
+  1-nat barrier (``driving.energy_profiles.valleys``), the Boltzmann mass left of straight of the marginal
+  over acceleration, and the argmin's steering;
+* for BC, its Beta over steering (``energy_profiles.beta_shape``: shape, mean, mass left of straight).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from ibc_tutorial.driving.commands import command_index
+from ibc_tutorial.driving.energy_profiles import beta_shape, boltzmann_sides, valleys
+from ibc_tutorial.policies.encoders import to_tensor_obs
+
+GRID = 81
+"""Steering (and acceleration) values of the energy grid in [-1, 1]."""
+
+
+def _batch(agent, obs: dict, command: str | None) -> dict:
+    bev, state = np.asarray(obs["bev"]), np.asarray(obs["state"], dtype=np.float32)
+    if bev.ndim != 3 or state.shape != (3,):
+        raise ValueError(
+            f"obs must hold one bev (5, S, S) and one state (3,), got {bev.shape} and {state.shape}"
+        )
+    batch = {"bev": bev[None], "state": state[None]}
+    if command is not None:
+        batch["command"] = np.array([command_index(command)], dtype=np.int64)
+    agent.check_command(batch)  # a command agent needs one, a routeless agent must not get one
+    return batch
+
+
+@torch.no_grad()
+def reading(agent, obs: dict, command: str | None, n_grid: int = GRID) -> dict:
+    """The agent's output at ``obs`` (``{"bev": (5, S, S), "state": (3,)}``) under ``command`` (a name of
+    ``driving.commands.COMMANDS``, or None for a routeless agent). See the module's docstring."""
+    batch = _batch(agent, obs, command)
+    if agent.method == "bc":
+        alpha, beta = agent.network(to_tensor_obs(batch, agent.device))  # (1, 2) each: steer, acceleration
+        a, b = float(alpha[0, 0]), float(beta[0, 0])
+        shape = beta_shape(a, b)
+        return {
+            "alpha": a,
+            "beta": b,
+            "shape": shape["shape"],
+            "mean": shape["mean"],
+            "left_mass": shape["mass_left"],
+        }
+    steer, _, e = agent.energy_grid(batch, n_per_dim=n_grid)  # (G,), (G,), (G accel, G steer)
+    low = e.min(axis=0)  # (G,) the lowest over acceleration
+    low = low - low.min()
+    marg = -np.logaddexp.reduce(-e, axis=0)  # (G,) -log sum over acceleration of exp(-E)
+    vs = valleys(steer, low)
+    return {
+        "steer": steer,
+        "profile": low,
+        "valleys": len(vs),
+        "valley_steer": [round(v["steer"], 3) for v in vs],
+        "argmin_steer": float(steer[np.argmin(low)]),
+        "left_mass": boltzmann_sides(steer, marg - marg.min())["left"],
+    }
