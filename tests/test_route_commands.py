@@ -198,3 +198,20 @@ def test_a_wrong_exit_is_a_failed_crossing_whichever_connector_the_car_is_seen_o
                 tracker.update(x, y, h)
         assert tracker.wrong_turn, (name, other)
         assert [(c["command"], c["taken"]) for c in tracker.crossings] == [(first[1], other)], (name, other)
+
+
+@pytest.mark.parametrize("name", ["r1", "r4"])
+def test_route_path_gives_every_turn_once_in_order(name):
+    from ibc_tutorial.driving.route_following import route_length, route_path
+
+    xy, cmds = route_path(name)
+    route = build_route(name)
+    assert xy.shape == (len(cmds), 2)
+    steps = np.linalg.norm(np.diff(xy, axis=0), axis=1)
+    assert abs(steps.sum() - route_length(route)) < 0.05 * route_length(route)  # the route's length
+    runs = [COMMANDS[c] for k, c in enumerate(cmds) if c != FOLLOW and (k == 0 or cmds[k - 1] != c)]
+
+    def merged(seq):  # two equal turns with no "follow" between them are one run of that command
+        return [t for k, t in enumerate(seq) if k == 0 or seq[k - 1] != t]
+
+    assert merged(runs) == merged(list(route.turns))

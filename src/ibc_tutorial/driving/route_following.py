@@ -93,6 +93,23 @@ def route_crossings(route: Route, town=ROUTE_TOWN) -> list[tuple[int, str]]:
     return out
 
 
+def route_path(name: str, town=ROUTE_TOWN) -> tuple[np.ndarray, np.ndarray]:
+    """(xy (N, 2), commands (N,)): the centre line of route ``name`` (its lanes' waypoints, from its start to
+    its end) and the command a car there is given (``RouteTracker``); for maps, without driving."""
+    tw = get_town(town) if isinstance(town, str) else town
+    route = build_route(name)
+    tracker = RouteTracker(route, tw)
+    xy, commands = [], []
+    for k, lane in enumerate(tracker.lanes):
+        ln = tw.lanes[lane]
+        s = np.arange(len(ln.points)) * ln.length / len(ln.points)  # (P,) metres along the lane
+        keep = (tracker.lane_start[k] + s >= 0) & (tracker.lane_start[k] + s <= tracker.length)
+        for p, h in zip(ln.points[keep], ln.headings[keep], strict=True):
+            commands.append(tracker.update(float(p[0]), float(p[1]), float(h)))
+            xy.append(p)
+    return np.array(xy, dtype=float), np.array(commands, dtype=np.int64)
+
+
 def route_exits(route: Route, town=ROUTE_TOWN) -> list[int]:
     """The number of exits of every junction the route crosses, in order (2 at a stem, 3 elsewhere)."""
     tw = get_town(town) if isinstance(town, str) else town

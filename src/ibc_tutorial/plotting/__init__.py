@@ -18,6 +18,8 @@ units, and returns the ``Figure``; import it from the module of its part of the 
   landscapes.
 - ``plotting.steering`` (10): the road-following study's metrics per model beside the paper's, the
   Fig. 5 analogue.
+- ``plotting.routes`` (11): routes coloured by their commands, intervals per group of drivers, success
+  per command, an agent's output under each command.
 
 Steering is drawn in the book's convention: −1 turns left, +1 turns right
 (``common.STEER_LABEL``); positions in a right-handed world frame (y > 0 to the left).

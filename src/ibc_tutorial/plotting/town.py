@@ -15,7 +15,6 @@ from ibc_tutorial.plotting.common import (
     TIME_LABEL,
     as_array,
     check_panels,
-    figure_and_axes,
     finish,
     label_axes,
 )
@@ -295,40 +294,6 @@ def plot_routes(town, routes_xy, *, title: str = "The demonstration routes", arr
         title_fontsize=9,
     )
     return finish(fig, True)
-
-
-COMMAND_COLORS = {"follow": "#111111", "left": "#1f77b4", "straight": "#2ca02c", "right": "#d62728"}
-"""Colour of each route command (``driving.commands.COMMANDS``) on a map."""
-
-
-def plot_route_commands(town, xy, commands, *, marks=None, ax=None, title: str = "A route and its commands"):
-    """A drive's path on the map coloured by the command given at each point, with ``marks``
-    (``{label: (x, y)}``, e.g. the stems crossed) annotated.
-
-    ``xy``: (T, 2) positions (m); ``commands``: (T,) indices into ``driving.commands.COMMANDS``."""
-    xy = as_array(xy, float)
-    commands = as_array(commands).astype(int).ravel()
-    if xy.ndim != 2 or xy.shape[1] != 2 or len(commands) != len(xy):
-        raise ValueError(f"xy must be (T, 2) and commands (T,), got {xy.shape} and {commands.shape}")
-    if len(commands) and (commands.min() < 0 or commands.max() >= len(COMMAND_COLORS)):
-        raise ValueError(f"commands must be indices into {tuple(COMMAND_COLORS)}")
-    fig, ax, own = figure_and_axes(ax, (6.4, 5.4))
-    plot_town(town, ax=ax, title=title)
-    names = tuple(COMMAND_COLORS)
-    change = np.flatnonzero(np.diff(commands)) + 1  # first index of each run of one command
-    for a, b in zip(np.r_[0, change], np.r_[change, len(commands)], strict=True):
-        name = names[commands[a]]
-        ax.plot(xy[a : min(b + 1, len(xy)), 0], xy[a : min(b + 1, len(xy)), 1], color=COMMAND_COLORS[name],
-                lw=2.6 if name != "follow" else 1.6, solid_capstyle="butt")  # fmt: skip
-    ax.plot(*xy[0], "o", color="k", ms=6, label="start")
-    ax.plot(*xy[-1], "s", color="k", ms=6, label="end")
-    for name, colour in COMMAND_COLORS.items():
-        ax.plot([], [], color=colour, lw=2.6, label=name)
-    for label, (x, y) in (marks or {}).items():
-        ax.annotate(label, (x, y), xytext=(6, 6), textcoords="offset points", fontsize=8,
-                    bbox=dict(boxstyle="round,pad=0.2", fc="w", alpha=0.8))  # fmt: skip
-    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.0, 1.0), title="command", title_fontsize=8)
-    return finish(fig, own)
 
 
 def plot_action_histograms(actions, *, title: str = "The expert's actions in the dataset"):
