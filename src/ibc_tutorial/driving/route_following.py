@@ -386,10 +386,26 @@ def observation_before_crossing(
     less before the entry of the route's ``crossing``-th junction crossing (0-based; ``route_crossings``).
 
     Returns ``({"bev": (5, S, S), "state": (3,), "command": ()}, {"approach", "turn", "distance_m",
-    "step"})``:
-    the command is the route's (``RouteTracker``), the distance measured along the approach lane
+    "step"})``: the command is the route's (``RouteTracker``), the distance measured along the approach lane
     (``commands.distance_to_entry``). A stated rule for choosing a state, so that a figure drawn there is
     not chosen by hand (chapter 11). Light phases as ``drive_routes``'s first route with ``seed``."""
+    ((obs, where),) = observations_before_crossing(
+        name, crossing, [before_m], bev_size=bev_size, light_encoding=light_encoding, seed=seed
+    )
+    return obs, where
+
+
+def observations_before_crossing(
+    name: str,
+    crossing: int,
+    distances_m,
+    *,
+    bev_size: int = 64,
+    light_encoding: str = "intensity",
+    seed: int = 0,
+) -> list[tuple[dict[str, np.ndarray], dict]]:
+    """``observation_before_crossing`` at each distance of ``distances_m`` (metres before the entry, each
+    >= 0), from one drive of the expert; in the order given."""
     route = build_route(name)
     town = get_town(ROUTE_TOWN)
     crossings = route_crossings(route, town)
@@ -398,7 +414,9 @@ def observation_before_crossing(
         raise ValueError(
             f"crossing must be below {len(crossings)} (route {name}'s crossings), got {crossing}"
         )
-    before_m = check_positive("before_m", before_m, allow_zero=True)
+    wanted = [check_positive("distances_m", float(d), allow_zero=True) for d in np.atleast_1d(distances_m)]
+    if not wanted:
+        raise ValueError("distances_m must hold at least one distance")
     tracker = RouteTracker(route, town)
     pos = sorted(tracker.turns)[crossing]  # position in the route's lanes of that junction's approach lane
     budget = math.ceil(tracker.length / MIN_MEAN_SPEED * 10)
@@ -406,25 +424,30 @@ def observation_before_crossing(
     offsets = env.sim.schedule.random_offsets(np.random.default_rng([seed, 0]))
     obs, info = env.reset(seed=seed, options={"route": route, "light_offsets": offsets})
     expert = Expert(env)
+    found: dict[int, tuple[dict, dict]] = {}
     for step in range(budget):
         command = tracker.update(info["x"], info["y"], info["yaw"])
         if tracker.p > pos:
             break
         if tracker.p == pos:
             d = distance_to_entry(town, tracker.lanes[pos], (info["x"], info["y"]))
-            if d <= before_m:
-                ap = town.approach_of_lane[tracker.lanes[pos]]
-                where = {
-                    "approach": int(ap),
-                    "turn": tracker.turns[pos],
-                    "distance_m": round(d, 3),
-                    "step": step,
-                }
-                return {**obs, "command": np.int64(command)}, where
+            ap = town.approach_of_lane[tracker.lanes[pos]]
+            for k, want in enumerate(wanted):
+                if k not in found and d <= want:
+                    where = {
+                        "approach": int(ap),
+                        "turn": tracker.turns[pos],
+                        "distance_m": round(d, 3),
+                        "step": step,
+                    }
+                    found[k] = ({**obs, "command": np.int64(command)}, where)
+            if len(found) == len(wanted):
+                return [found[k] for k in range(len(wanted))]
         obs, _, terminated, _, info = env.step(expert.act())
         if terminated:
             break
-    raise ValueError(f"the expert never came within {before_m} m of crossing {crossing} of route {name}")
+    missing = [wanted[k] for k in range(len(wanted)) if k not in found]
+    raise ValueError(f"the expert never came within {missing} m of crossing {crossing} of route {name}")
 
 
 def junction_success(rows) -> dict[str, dict]:
