@@ -424,3 +424,56 @@ def test_stem_figures():
         agents.plot_steering_profiles({"x": steer[:5]}, steer)
     with pytest.raises(ValueError, match="shares"):
         agents.plot_stem_exit_shares({})
+
+
+def test_figure_explorer_redraws_on_each_control():
+    import ipywidgets as w
+    import matplotlib.pyplot as plt
+
+    from ibc_tutorial.widgets import figure_explorer
+
+    calls = []
+
+    def draw(route, distance):
+        calls.append((route, distance))
+        fig, ax = plt.subplots()
+        ax.set_title(f"{route} {distance}")
+        return fig
+
+    route = w.Dropdown(options=["r1", "r2"], value="r1")
+    distance = w.SelectionSlider(options=[10, 5, 0], value=10)
+    box = figure_explorer(draw, {"route": route, "distance": distance})
+    image = box.children[-1]
+    first = image.value
+    route.value = "r2"
+    distance.value = 0
+    assert calls == [("r1", 10), ("r2", 10), ("r2", 0)] and image.value != first
+    with pytest.raises(ValueError, match="controls must hold"):
+        figure_explorer(draw, {})
+
+
+def test_route_figures_draw_and_check_their_input():
+    from ibc_tutorial.driving.route_following import route_path
+    from ibc_tutorial.driving.towns import get_town
+    from ibc_tutorial.plotting import routes
+    from ibc_tutorial.stats import Interval
+
+    xy, cmds = route_path("r4")
+    fig = routes.plot_route_commands(get_town("town02"), xy, cmds, marks={"stem": xy[10]})
+    assert fig.axes[0].get_title() == "A route and its commands"
+    with pytest.raises(ValueError, match="xy must be"):
+        routes.plot_route_commands(get_town("town02"), xy, cmds[:-1])
+    with pytest.raises(ValueError, match="commands must be indices"):
+        routes.plot_route_commands(get_town("town02"), xy, cmds + 4)
+    rows = {"a": Interval(0.5, 0.4, 0.6), "b": Interval(0.9, 0.8, 1.0)}
+    fig = routes.plot_intervals(rows, xlabel="x", title="t", reference=1.0)
+    assert list(fig.axes[0].get_yticks()) == [1, 0]  # "a" drawn on top
+    fig = routes.plot_success_by_command({"BC": {"left": Interval(0.5, 0.4, 0.6), "straight": None}})
+    assert fig.axes[0].get_ylim() == (0, 1.05)
+    steer = np.linspace(-1, 1, 5)
+    fig = routes.plot_command_curves(
+        {"2 m": {"left": steer**2, "no command": steer}}, steer, ylabel="E", title="T"
+    )
+    assert len(fig.axes) == 1 and len(fig.axes[0].lines) == 3  # two curves and the zero line
+    with pytest.raises(ValueError, match="one value per steering value"):
+        routes.plot_command_curves({"2 m": {"left": steer[:3]}}, steer, ylabel="E", title="T")

@@ -30,6 +30,10 @@ DRIVERS = {
         _row("r1", 0.2, "building", [(STEM, "right", "")]),  # ended inside a junction entered from a stem
         _row("r2", 0.4, "building", [(NOT_STEM, "left", "")]),  # inside a junction, not from a stem
     ],
+    "bc-seed2": [
+        _row("r1", 0.3, "off_road", [(STEM, "left", "")]),  # off the road inside a stem's junction
+        _row("r2", 0.4, "timeout", [(STEM, "left", "")]),  # stopped there: not an end at the stem
+    ],
     "expert": [_row("r1", 1.0), _row("r2", 1.0)],
 }
 
@@ -45,18 +49,18 @@ def test_route_table_orders_each_agents_routes_alike():
     bm = rr.by_method(DRIVERS)
     assert list(bm) == ["bc", "expert"]
     t = rr.route_table(bm["bc"], "completion")
-    np.testing.assert_array_equal(t, [[1.0, 0.5], [0.2, 0.4]])  # r1 then r2 for both agents
+    np.testing.assert_array_equal(t, [[1.0, 0.5], [0.2, 0.4], [0.3, 0.4]])  # r1 then r2 for every agent
     with pytest.raises(ValueError, match="same routes"):
         rr.route_table({"a": [_row("r1", 1.0)], "b": [_row("r2", 1.0)]}, "completion")
 
 
 def test_success_counts_pool_crossings_and_count_unfinished_as_missed():
     taken, crossings = rr.success_counts(rr.by_method(DRIVERS)["bc"], "all")
-    np.testing.assert_array_equal(crossings, [[1, 2], [1, 1]])
-    np.testing.assert_array_equal(taken, [[1, 1], [0, 0]])
+    np.testing.assert_array_equal(crossings, [[1, 2], [1, 1], [1, 1]])
+    np.testing.assert_array_equal(taken, [[1, 1], [0, 0], [0, 0]])
     taken, crossings = rr.success_counts(rr.by_method(DRIVERS)["bc"], "left")
-    np.testing.assert_array_equal(crossings, [[0, 2], [0, 1]])
-    np.testing.assert_array_equal(taken, [[0, 1], [0, 0]])
+    np.testing.assert_array_equal(crossings, [[0, 2], [0, 1], [1, 1]])
+    np.testing.assert_array_equal(taken, [[0, 1], [0, 0], [0, 0]])
     with pytest.raises(ValueError, match="command"):
         rr.success_counts(DRIVERS, "follow")
 
@@ -66,6 +70,7 @@ def test_stem_ends_only_inside_a_junction_entered_from_a_stem():
     ends = rr.stem_ends(DRIVERS["bc-seed1"])
     assert [r["route"] for r in ends] == ["r1"]
     assert rr.stem_ends(DRIVERS["bc-seed0"]) == []
+    assert [r["route"] for r in rr.stem_ends(DRIVERS["bc-seed2"])] == ["r1"]
     assert rr.stem_crossings(DRIVERS["bc-seed0"]) == 1
 
 

@@ -154,3 +154,25 @@ def dfo_stepper(
     iteration.observe(draw, names="value")
     run()
     return w.VBox([w.HBox([iteration, init]), w.HBox([select, seed_box]), image])
+
+
+# ========================================================================== chapter 11: figures by choice
+def figure_explorer(draw, controls: dict):
+    """The figure ``draw(**values)`` returns, redrawn whenever a control changes.
+
+    ``controls``: ``{argument name of draw: ipywidgets control}`` (a ``Dropdown`` of routes, a
+    ``SelectionSlider`` of distances, ...); their values are passed to ``draw`` by name. Chapter 11 uses it
+    for its routes and for an agent's output under each command; each has a static figure beside it."""
+    if not controls:
+        raise ValueError("controls must hold at least one control")
+    if not callable(draw):
+        raise ValueError(f"draw must be a function returning a Figure, got {type(draw).__name__}")
+    image = w.Image(format="png")
+
+    def redraw(*_):
+        image.value = _png(draw(**{name: c.value for name, c in controls.items()}))
+
+    for control in controls.values():
+        control.observe(redraw, names="value")
+    redraw()
+    return w.VBox([w.HBox(list(controls.values())), image])

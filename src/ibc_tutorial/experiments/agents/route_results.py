@@ -11,7 +11,8 @@ functions here turn those into what the chapter's table and intervals need:
   ``stats.difference_interval`` (the agents x routes bootstrap);
 * ``success_counts``: per agent and route drive, the crossings with a command and those whose commanded
   exit was taken, for ``stats.ratio_of_sums_interval`` (success pooled over crossings);
-* ``stem_ends``: the route drives that ended in a building inside a junction entered from a stem.
+* ``stem_ends``: the route drives that ended in a building or off the road inside a junction entered
+  from a stem (chapter 08's "ends at a stem").
 """
 
 from __future__ import annotations
@@ -121,12 +122,12 @@ def success_counts(drivers: dict[str, list[dict]], command: str = "all") -> tupl
 
 
 def stem_ends(rows: list[dict]) -> list[dict]:
-    """The rows (route drives) that ended in a building inside a junction entered from a stem: the route's
-    last crossing is from a stem approach and has no exit (``taken`` "")."""
+    """The rows (route drives) that ended in a building or off the road inside a junction entered from a
+    stem: the route's last crossing is from a stem approach and has no exit (``taken`` "")."""
     return [
         r
         for r in rows
-        if r["end"] == "building"
+        if r["end"] in ("building", "off_road")
         and r["crossings"]
         and r["crossings"][-1]["taken"] == ""
         and r["crossings"][-1]["approach"] in ROUTE_TOWN_STEMS
