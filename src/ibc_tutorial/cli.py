@@ -20,7 +20,7 @@ here raise ``UserError``, and ``main`` prints either. Ctrl-C prints one line too
     ibc-tutorial replicate --preset tiny --set dfo.n_samples=64 --out /tmp/tiny
     ibc-tutorial sweep-steering --preset laptop --out book/results/steering-sweep --workers 2 --threads 1
     ibc-tutorial replicate --preset laptop --commands --out book/results/commands
-    ibc-tutorial routes --folder book/results/laptop --out book/results/commands/routeless
+    ibc-tutorial routes --folder book/results/laptop --out book/results/routeless-on-routes
 """
 
 from __future__ import annotations
@@ -362,7 +362,7 @@ def _stems_arguments(p: argparse.ArgumentParser) -> None:
 def _routes_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--folder", default="book/results/laptop", help="replication folder with runs/")
     p.add_argument(
-        "--out", default="book/results/commands/routeless", help="where each driver's <name>.json goes"
+        "--out", default="book/results/routeless-on-routes", help="where each driver's <name>.json goes"
     )
     p.add_argument("--drives", type=int, default=1, help="drives of every route per driver")
     p.add_argument("--only", nargs="*", default=None, help="drive only these (e.g. da-ibc-seed0 expert)")

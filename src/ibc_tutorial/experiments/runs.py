@@ -337,3 +337,23 @@ class Provenance:
         if notes:
             lines += ["", "Notes:", ""] + [f"- {n}" for n in notes]
         atomic_write_bytes(out / PROVENANCE_MD, ("\n".join(lines) + "\n").encode())
+
+
+def run_missing(named, path_of, work, *, only=None, on_done=None, log=print) -> list[str]:
+    """For each ``(name, item)`` of ``named`` (those in ``only``, if given) whose file ``path_of(name)`` does
+    not exist yet: ``work(name, item, path)``, which writes it, then ``on_done(name, cpu_seconds)``; so an
+    interrupted loop resumes where it stopped. Returns the names done; ``log`` prints one line per name."""
+    done = []
+    for name, item in named:
+        path = Path(path_of(name))
+        if (only and name not in only) or path.exists():
+            continue
+        t0 = time.process_time()
+        work(name, item, path)
+        cpu = time.process_time() - t0
+        if on_done is not None:
+            on_done(name, cpu)
+        done.append(name)
+        if log:
+            log(f"{now()} {name}: {cpu:.0f} s of CPU", flush=True)
+    return done

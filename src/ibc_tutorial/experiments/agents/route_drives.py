@@ -3,7 +3,7 @@
 A command replication (``replicate --commands``) drives its own agents on the routes in its final
 evaluation. Chapter 11 also needs the routeless agents of chapter 09 on the same routes, without a command:
 their completion shows what luck at the junctions gives. ``run_route_drives`` does that for any folder
-(``ibc-tutorial routes --folder book/results/laptop --out book/results/commands/routeless``): each driver
+(``ibc-tutorial routes --folder book/results/laptop --out book/results/routeless-on-routes``): each driver
 (``stems.drivers``: every ``runs/<method>/seed<k>/final.pt``, then the expert) drives every route
 ``drives`` times, given a command exactly when its checkpoint takes one, with the light phases of
 ``route_eval.ROUTE_SEED`` and the DFO draws of its training seed, as the command replication's evaluation.
@@ -14,13 +14,12 @@ exists is skipped, so an interrupted run resumes, and ``provenance.json`` record
 from __future__ import annotations
 
 import json
-import time
 from pathlib import Path
 
 from ibc_tutorial.experiments.agents.checkpoints import load_agent, training_seed
 from ibc_tutorial.experiments.agents.route_eval import ROUTE_SEED, evaluate_on_routes, summarize_route_rows
 from ibc_tutorial.experiments.agents.stems import drivers
-from ibc_tutorial.experiments.runs import git_commit, machine, now, write_json
+from ibc_tutorial.experiments.runs import git_commit, machine, now, run_missing, write_json
 from ibc_tutorial.utils import check_int
 
 PROVENANCE = "provenance.json"
@@ -56,12 +55,8 @@ def run_route_drives(
     inv = {"command": command, "commit": git_commit(), "machine": machine(), "started": now()}
     prov["invocations"].append(inv)
     write_json(prov_path, prov)
-    done = []
-    for name, ck in named:
-        path = out / f"{name}.json"
-        if (only and name not in only) or path.exists():
-            continue
-        t0 = time.process_time()
+
+    def drive(name, ck, path):
         if ck is None:
             agent, policy_seed, takes = "expert", 0, False
         else:
@@ -70,23 +65,16 @@ def run_route_drives(
         rows = evaluate_on_routes(
             agent, drives=drives, seed=ROUTE_SEED, policy_seed=policy_seed, max_steps=max_steps
         )
-        write_json(
-            path,
-            {
-                "driver": name,
-                "checkpoint": None if ck is None else str(Path(ck).relative_to(Path(folder))),
-                "commands": takes,
-                "policy_seed": policy_seed,
-                "summary": summarize_route_rows(rows),
-                "episodes": rows,
-            },
-        )
-        cpu = time.process_time() - t0
+        checkpoint = None if ck is None else str(Path(ck).relative_to(Path(folder)))
+        summary = summarize_route_rows(rows)
+        meta = {"driver": name, "checkpoint": checkpoint, "commands": takes, "policy_seed": policy_seed}
+        write_json(path, {**meta, "summary": summary, "episodes": rows})
+
+    def record(name, cpu):
         inv.setdefault("cpu_seconds", {})[name] = round(cpu, 1)
         write_json(prov_path, prov)
-        done.append(name)
-        if log:
-            log(f"{now()} {name}: {cpu:.0f} s of CPU", flush=True)
+
+    done = run_missing(named, lambda name: out / f"{name}.json", drive, only=only, on_done=record, log=log)
     inv["finished"] = now()
     write_json(prov_path, prov)
     return done

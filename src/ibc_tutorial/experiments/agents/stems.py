@@ -28,7 +28,6 @@ needs no second drive; ``drive_file`` finds either.
 from __future__ import annotations
 
 import json
-import time
 from dataclasses import replace
 from pathlib import Path
 
@@ -38,7 +37,7 @@ from ibc_tutorial.driving.stems import kept_states
 from ibc_tutorial.experiments.agents.checkpoints import load_agent
 from ibc_tutorial.experiments.agents.evaluate import EVAL_SEED, episode_rows, evaluate_agent
 from ibc_tutorial.experiments.agents.layout import STEM_DRIVE, expert_dir, run_dir
-from ibc_tutorial.experiments.runs import git_commit, machine, now, write_json, write_npz
+from ibc_tutorial.experiments.runs import git_commit, machine, now, run_missing, write_json, write_npz
 from ibc_tutorial.utils import check_int
 
 TOWN = "town02"
@@ -183,22 +182,16 @@ def run_drives(
     inv = {"command": command, "commit": git_commit(), "machine": machine(), "started": now()}
     prov["invocations"].append(inv)
     write_json(prov_path, prov)
-    done = []
-    for name, ck in drivers(folder):
-        if only and name not in only:
-            continue
-        path = out / "drives" / f"{name}.npz"
-        if path.exists():
-            continue
-        t0 = time.process_time()
-        arrays = drive(ck, episodes, steps, dfo=dfo)
-        write_npz(path, arrays)
-        cpu = time.process_time() - t0
+
+    def drive_one(name, ck, path):
+        write_npz(path, drive(ck, episodes, steps, dfo=dfo))
+
+    def record(name, cpu):
         inv.setdefault("cpu_seconds", {})[name] = round(cpu, 1)
         write_json(prov_path, prov)
-        done.append(name)
-        if log:
-            log(f"{now()} {name}: {cpu:.0f} s of CPU", flush=True)
+
+    path_of = lambda name: out / "drives" / f"{name}.npz"  # noqa: E731
+    done = run_missing(drivers(folder), path_of, drive_one, only=only, on_done=record, log=log)
     inv["finished"] = now()
     write_json(prov_path, prov)
     return done
