@@ -111,6 +111,7 @@ SHIPPED_RUNS = [
     "ablations/previous-preset",
     "ablations/intensity-lights",
     "steering-laptop",
+    "commands",
 ]
 """Every replication folder the book ships (each made by one clean run of a committed state)."""
 
@@ -129,6 +130,30 @@ def test_the_shipped_results_are_a_clean_run_of_an_ancestor_commit(name):
         pytest.skip("not a git checkout: the ancestry cannot be read")
     ancestor = subprocess.run(["git", "-C", str(root), "merge-base", "--is-ancestor", commit, "HEAD"])
     assert ancestor.returncode == 0, f"the shipped results' commit {commit} is not an ancestor of HEAD"
+
+
+def test_the_shipped_route_drives_cover_every_shipped_agent_from_a_clean_ancestor_commit():
+    """Chapter 11's ``routes`` folder: chapter 09's every agent and the expert on the town02 routes, without
+    commands, from clean ancestor commits, each driver's every route once."""
+    from ibc_tutorial.driving.route_following import ROUTES
+    from ibc_tutorial.experiments.agents.route_drives import load_route_drives
+
+    folder = SHIPPED.parent / "routeless-on-routes"
+    if not folder.exists():
+        pytest.skip("no shipped route drives")
+    drives = load_route_drives(folder)
+    assert set(drives) == {f"{m}-seed{s}" for m in METHODS for s in LAPTOP.seeds} | {"expert"}
+    for name, d in drives.items():
+        assert d["commands"] is False and sorted(r["route"] for r in d["episodes"]) == sorted(ROUTES), name
+    prov = json.loads((folder / "provenance.json").read_text())
+    assert prov["protocol"]["folder"] == "laptop" and prov["protocol"]["max_steps"] is None
+    root = SHIPPED.parents[2]
+    for inv in prov["invocations"]:
+        commit = inv["commit"]
+        assert "uncommitted" not in commit and re.fullmatch(r"[0-9a-f]{40}", commit), commit
+        if (root / ".git").exists():
+            ancestor = subprocess.run(["git", "-C", str(root), "merge-base", "--is-ancestor", commit, "HEAD"])
+            assert ancestor.returncode == 0, f"commit {commit} is not an ancestor of HEAD"
 
 
 def test_the_shipped_crossings_are_clean_runs_of_an_ancestor_commit():
