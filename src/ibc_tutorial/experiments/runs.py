@@ -138,6 +138,24 @@ def check_only_entries(out, entries: tuple, what: str) -> None:
         )
 
 
+def check_folder_entries(out, entries: tuple, what: str, allowed=None) -> bool:
+    """Whether ``out`` exists as a folder to check further: False if it does not exist; ValueError if it is
+    a file, or holds files (hidden ones aside) other than ``entries`` or names ``allowed(name)`` accepts,
+    naming up to three of them and the ``what`` it is not (e.g. "sweep"); True otherwise."""
+    out = Path(out)
+    if not out.exists():
+        return False
+    if not out.is_dir():
+        raise ValueError(f"{out} is a file, expected a folder")
+    names = {p.name for p in out.iterdir() if not p.name.startswith(".")}
+    foreign = sorted(n for n in names - set(entries) if not (allowed and allowed(n)))
+    if foreign:
+        raise ValueError(
+            f"{out} holds other files ({', '.join(foreign[:3])}), not a {what}: use another --out"
+        )
+    return True
+
+
 def delete_entries(out, entries: tuple) -> None:
     """Delete ``entries`` (files or folders) from ``out``, nothing else (``--force``, after
     ``check_only_entries``)."""

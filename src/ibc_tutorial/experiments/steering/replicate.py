@@ -33,6 +33,7 @@ from ibc_tutorial.experiments.runs import (
     PROVENANCE,
     PROVENANCE_MD,
     Provenance,
+    check_folder_entries,
     check_only_entries,
     delete_entries,
     read_folder,
@@ -94,16 +95,8 @@ and 2, as printed."""
 def check_folder(out, preset: SteeringPreset) -> None:
     """Refuse (ValueError: what differs and what to do) a folder holding anything but this preset's study."""
     out = Path(out)
-    if not out.exists():
+    if not check_folder_entries(out, ENTRIES, "road-following study"):
         return
-    if not out.is_dir():
-        raise ValueError(f"{out} is a file, expected a folder")
-    names = {p.name for p in out.iterdir() if not p.name.startswith(".")}
-    if names - set(ENTRIES):
-        raise ValueError(
-            f"{out} holds other files ({', '.join(sorted(names - set(ENTRIES))[:3])}), not a "
-            "road-following study: use another --out"
-        )
     for name in (PROVENANCE, RESULTS):
         if (out / name).exists():
             stored = read_json_dict(out / name, "delete it and re-run the same command").get("preset")

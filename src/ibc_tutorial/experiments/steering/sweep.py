@@ -37,6 +37,7 @@ import numpy as np
 from ibc_tutorial.driving.dataset import DemoDataset, DemoLog
 from ibc_tutorial.experiments.runs import (
     Provenance,
+    check_folder_entries,
     check_only_entries,
     delete_entries,
     read_folder,
@@ -82,16 +83,8 @@ def check_folder(out, settings: SweepSettings, base: SteeringPreset) -> None:
     """Refuse (ValueError: what and what to do) a folder holding anything but this sweep's files, or this
     sweep with other settings; a damaged run's ``eval.json`` is named."""
     out = Path(out)
-    if not out.exists():
+    if not check_folder_entries(out, ENTRIES, "sweep", allowed=lambda name: name.startswith("share")):
         return
-    if not out.is_dir():
-        raise ValueError(f"{out} is a file, expected a folder")
-    names = {p.name for p in out.iterdir() if not p.name.startswith(".")}
-    foreign = sorted(n for n in names - set(ENTRIES) if not n.startswith("share"))
-    if foreign:
-        raise ValueError(
-            f"{out} holds other files ({', '.join(foreign[:3])}), not a sweep: use another --out"
-        )
     if (out / SETTINGS).exists():
         stored = read_json_dict(out / SETTINGS, "delete it and re-run the same command")
         if stored != _stored(settings, base):
