@@ -128,6 +128,17 @@ def read_torch_file(path, what: str, fix: str) -> dict:
 
 
 # ---------------------------------------------------------------------- folders (--force)
+def read_run_file(path, valid, what: str) -> dict:
+    """A run's JSON file, checked by ``valid(d)`` (called on a dict only); ValueError naming the file, what it
+    should be (``what``, e.g. "a run's evaluation") and how to make it again otherwise."""
+    path = Path(path)
+    fix = f"delete {path.parent} and re-run the same command to make that run again"
+    d = read_json(path, fix)
+    if not isinstance(d, dict) or not valid(d):
+        raise ValueError(f"{path} is damaged (not {what}): {fix}")
+    return d
+
+
 def check_only_entries(out, entries: tuple, what: str) -> None:
     """Refuse (ValueError) ``out`` if it holds files other than ``entries`` (hidden ones aside): what
     ``--force`` may delete is a ``what``'s files (e.g. "replication"), never anything else."""

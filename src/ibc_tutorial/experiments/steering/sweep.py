@@ -41,9 +41,9 @@ from ibc_tutorial.experiments.runs import (
     check_only_entries,
     delete_entries,
     read_folder,
-    read_json,
     read_json_dict,
     read_npz,
+    read_run_file,
     write_json,
     write_npz,
 )
@@ -115,17 +115,16 @@ def clear_folder(out) -> None:
 
 def read_sweep_eval(path) -> dict:
     """A run's ``eval.json``, checked; ValueError naming the file otherwise."""
-    path = Path(path)
-    fix = f"delete {path.parent} and re-run the same command to make that run again"
-    r = read_json(path, fix)
-    if (
-        not isinstance(r, dict)
-        or not isinstance(r.get("sessions"), list)
-        or not isinstance(r.get("summary"), dict)
-        or not all(isinstance(s, dict) and isinstance(s.get("summary"), dict) for s in r["sessions"])
-    ):
-        raise ValueError(f"{path} is damaged (not a sweep run's evaluation): {fix}")
-    return r
+
+    def valid(r):
+        sessions = r.get("sessions")
+        return (
+            isinstance(sessions, list)
+            and isinstance(r.get("summary"), dict)
+            and all(isinstance(s, dict) and isinstance(s.get("summary"), dict) for s in sessions)
+        )
+
+    return read_run_file(path, valid, "a sweep run's evaluation")
 
 
 # ---------------------------------------------------------------------- the work of one process

@@ -20,7 +20,7 @@ import torch
 
 from ibc_tutorial import __version__
 from ibc_tutorial.driving.dataset import DemoDataset
-from ibc_tutorial.experiments.runs import read_json, read_torch_file, write_json, write_npz
+from ibc_tutorial.experiments.runs import read_run_file, read_torch_file, write_json, write_npz
 from ibc_tutorial.experiments.steering.evaluate import (
     Reference,
     drive_route,
@@ -243,17 +243,14 @@ def run_one(
 
 def read_eval(path) -> dict:
     """A run's ``eval.json``, checked; ValueError naming the file otherwise."""
-    path = Path(path)
-    fix = f"delete {path.parent} and re-run the same command to make that run again"
-    ev = read_json(path, fix)
-    if (
-        not isinstance(ev, dict)
-        or not isinstance(ev.get("routes"), list)
-        or not isinstance(ev.get("summary"), dict)
-        or not all(
-            isinstance(r, dict) and {"route", "crashes", "distance_m", "w_cmd", "swerve_score"} <= set(r)
-            for r in ev["routes"]
+    keys = {"route", "crashes", "distance_m", "w_cmd", "swerve_score"}
+
+    def valid(ev):
+        routes = ev.get("routes")
+        return (
+            isinstance(routes, list)
+            and isinstance(ev.get("summary"), dict)
+            and all(isinstance(r, dict) and keys <= set(r) for r in routes)
         )
-    ):
-        raise ValueError(f"{path} is damaged (not a run's evaluation): {fix}")
-    return ev
+
+    return read_run_file(path, valid, "a run's evaluation")
