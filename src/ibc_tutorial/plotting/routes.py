@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.patches import Patch
 
 from ibc_tutorial.plotting.common import (
     STEER_LABEL,
@@ -55,7 +56,7 @@ def plot_intervals(rows: dict, *, xlabel: str, title: str, reference: float | No
     method with and without commands. ``rows``: ``{label: Interval}`` (``stats.Interval``), drawn top
     to bottom; ``reference``: a vertical line (e.g. the expert's value)."""
     n = check_panels("rows", rows)
-    fig, ax, own = figure_and_axes(ax, (6.4, 0.45 * n + 1.4))
+    fig, ax, own = figure_and_axes(ax, (8.5, 0.45 * n + 1.6))
     y = np.arange(n)[::-1]
     for k, iv in zip(y, rows.values(), strict=True):
         ax.plot([iv.low, iv.high], [k, k], color="C0", lw=3, solid_capstyle="round")
@@ -77,7 +78,7 @@ def plot_success_by_command(success: dict, *, title: str = "Commanded exit taken
     ``success``: ``{method: {command: Interval or None}}`` (None: no crossing had that command)."""
     check_panels("success", success)
     commands = [c for c in ("left", "straight", "right", "all") if any(c in v for v in success.values())]
-    fig, ax, own = figure_and_axes(ax, (7.0, 3.6))
+    fig, ax, own = figure_and_axes(ax, (8.0, 3.6))
     width = 0.8 / len(commands)
     x = np.arange(len(success))
     for i, c in enumerate(commands):
@@ -90,13 +91,13 @@ def plot_success_by_command(success: dict, *, title: str = "Commanded exit taken
             ax.bar(xp, iv.estimate, width=width * 0.95, color=colour, alpha=0.85)
             ax.errorbar(xp, iv.estimate, yerr=[[iv.estimate - iv.low], [iv.high - iv.estimate]], color="k",
                         capsize=2, lw=1)  # fmt: skip
-        ax.bar([], [], color=COMMAND_COLORS.get(c, "0.6"), label=c)
-    ax.axhline(0.95, color="0.3", ls=":", lw=1, label="95 %")
+    handles = [Patch(color=COMMAND_COLORS.get(c, "0.6"), alpha=0.85, label=c) for c in commands]
+    handles.append(ax.axhline(0.95, color="0.3", ls=":", lw=1, label="95 %"))
     ax.set_xticks(x)
     ax.set_xticklabels(list(success))
     ax.set_ylim(0, 1.05)
-    label_axes(ax, "method", "share of crossings, commanded exit taken", title, legend=True, fontsize=7,
-               loc="lower right")  # fmt: skip
+    label_axes(ax, "method", "share of crossings, commanded exit taken", title)
+    ax.legend(handles=handles, fontsize=7, loc="upper left", bbox_to_anchor=(1.0, 1.0))
     return finish(fig, own)
 
 
