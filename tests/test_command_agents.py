@@ -147,3 +147,20 @@ def test_reading_under_each_command_and_the_refusals(method):
         reading(_agent(method, TINY), obs, "left")
     with pytest.raises(ValueError, match="one bev"):
         reading(agent, {"bev": obs["bev"][None], "state": obs["state"]}, "left")
+
+
+def test_reading_counts_straight_as_half_left_on_every_cpu(monkeypatch):
+    """torch.linspace(-1, 1, 81)[40] is -1.5e-8 with AVX2 kernels and 0 without: the reading's grid is
+    snapped, so the straight value's mass is split, not counted left on one CPU and halved on another."""
+    from ibc_tutorial.experiments.agents.command_readings import reading
+
+    agent = _agent("da-ibc", CMD)
+    grid = np.linspace(-1.0, 1.0, 5)
+    e = np.full((5, 5), 10.0)
+    e[:, 2] = 0.0  # all the mass at straight
+    shifted = grid.copy()
+    shifted[2] = -1.5e-8
+    monkeypatch.setattr(type(agent), "energy_grid", lambda self, obs, n_per_dim=5: (shifted, grid, e))
+    obs = {"bev": np.zeros((5, 32, 32), np.float32), "state": np.zeros(3, np.float32)}
+    r = reading(agent, obs, "left", n_grid=5)
+    assert r["steer"][2] == 0.0 and abs(r["left_mass"] - 0.5) < 1e-3

@@ -53,6 +53,9 @@ def reading(agent, obs: dict, command: str | None, n_grid: int = GRID) -> dict:
             "left_mass": shape["mass_left"],
         }
     steer, _, e = agent.energy_grid(batch, n_per_dim=n_grid)  # (G,), (G,), (G accel, G steer)
+    # torch.linspace's middle value is -1.5e-8 with AVX2 kernels and 0 without: snap the grid to its
+    # exact values, so that straight is straight (half its mass each side) on every CPU
+    steer = np.round(steer.astype(np.float64) * (n_grid - 1) / 2) / ((n_grid - 1) / 2) + 0.0
     low = e.min(axis=0)  # (G,) the lowest over acceleration
     low = low - low.min()
     marg = -np.logaddexp.reduce(-e, axis=0)  # (G,) -log sum over acceleration of exp(-E)
