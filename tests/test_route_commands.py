@@ -215,3 +215,19 @@ def test_route_path_gives_every_turn_once_in_order(name):
         return [t for k, t in enumerate(seq) if k == 0 or seq[k - 1] != t]
 
     assert merged(runs) == merged(list(route.turns))
+
+
+def test_command_runs_count_each_turn_once_per_approach():
+    from ibc_tutorial.driving.commands import command_runs
+
+    class Log:  # two episodes: a left, then a straight after "follow"; a right that the episode starts in
+        def __len__(self):
+            return 9
+
+        def episodes(self):
+            return [slice(0, 6), slice(6, 9)]
+
+    cmds = np.array([0, 1, 1, 0, 2, 2, 3, 3, 0])
+    assert command_runs(Log(), cmds) == {"left": 1, "straight": 1, "right": 1}
+    with pytest.raises(ValueError, match="one command per sample"):
+        command_runs(Log(), cmds[:-1])

@@ -84,3 +84,8 @@ def test_command_drivers_reads_a_replication_folder(tmp_path):
         rr.command_drivers(tmp_path)
     with pytest.raises(ValueError, match="found none"):
         rr.command_drivers(tmp_path / "empty")
+
+
+def test_missed_crossings_count_command_and_exit_taken():
+    misses = rr.missed_crossings(rr.by_method(DRIVERS)["bc"])
+    assert misses == {("left", "straight"): 1, ("right", "none"): 1, ("left", "none"): 3}

@@ -312,3 +312,18 @@ def test_ratio_of_sums_difference_decides_known_cases_and_refuses_bad_input():
         stats.ratio_of_sums_difference(half, den, never, -den)
     with pytest.raises(ValueError, match="one shape"):
         stats.ratio_of_sums_difference(half, den, never[:2], den)
+
+
+def test_beta_density_against_scipy_and_checks():
+    from scipy.stats import beta as scipy_beta
+
+    from ibc_tutorial.driving.energy_profiles import beta_density
+
+    s = np.linspace(-0.99, 0.99, 41)
+    for a, b in ((2.0, 5.0), (0.6, 0.7), (30.0, 28.0)):
+        np.testing.assert_allclose(beta_density(s, a, b), scipy_beta.pdf((s + 1) / 2, a, b) / 2, rtol=1e-9)
+    assert abs(np.trapezoid(beta_density(np.linspace(-1, 1, 20001), 3.0, 4.0), dx=2 / 20000) - 1) < 1e-6
+    with pytest.raises(ValueError, match="alpha"):
+        beta_density(s, 0.0, 1.0)
+    with pytest.raises(ValueError, match="steer must"):
+        beta_density([1.5], 2.0, 2.0)

@@ -153,3 +153,18 @@ def one_hot(commands, n: int = N_COMMANDS) -> np.ndarray:
     if len(c) and (c.min() < 0 or c.max() >= n):
         raise ValueError(f"commands must be indices in [0, {n}), got {int(c.min())}..{int(c.max())}")
     return np.eye(n, dtype=np.float32)[c]
+
+
+def command_runs(log, commands=None) -> dict[str, int]:
+    """How many times each turn ("left", "straight", "right") is commanded in a demonstration log: the runs
+    of that command within each episode (``commands``: ``log_commands(log)``, computed if None)."""
+    c_all = log_commands(log) if commands is None else np.asarray(commands).reshape(-1)
+    if len(c_all) != len(log):
+        raise ValueError(f"commands must hold one command per sample ({len(log)}), got {len(c_all)}")
+    runs = dict.fromkeys(COMMANDS[1:], 0)
+    for episode in log.episodes():
+        c = c_all[episode]
+        for k in np.flatnonzero(np.diff(np.r_[-1, c]) != 0):  # the first step of each run
+            if c[k] != FOLLOW:
+                runs[COMMANDS[c[k]]] += 1
+    return runs

@@ -17,6 +17,8 @@ grid s, increasing, left < 0 < right):
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ibc_tutorial.utils import check_positive
@@ -139,6 +141,20 @@ def beta_shape(alpha: float, beta: float) -> dict:
         "mode": 2 * (a - 1) / (a + b - 2) - 1 if shape == "single-peaked" else None,
         "mass_left": beta_cdf(0.5, a, b),
     }
+
+
+def beta_density(steer, alpha: float, beta: float) -> np.ndarray:
+    """The density of a Beta(α, β) rescaled to steering in [-1, 1], at ``steer`` (per unit of steering:
+    half the density on [0, 1] at (s + 1) / 2); 0 at the bounds where it is finite there."""
+    a, b = check_positive("alpha", alpha), check_positive("beta", beta)
+    s = np.asarray(steer, dtype=float)
+    if not np.isfinite(s).all() or (np.abs(s) > 1).any():
+        raise ValueError("steer must hold finite values in [-1, 1]")
+    x = (s + 1.0) / 2.0
+    log_b = math.lgamma(a) + math.lgamma(b) - math.lgamma(a + b)
+    with np.errstate(divide="ignore"):
+        log_p = (a - 1) * np.log(x) + (b - 1) * np.log1p(-x) - log_b
+    return np.exp(log_p) / 2.0
 
 
 def beta_cdf(x: float, a: float, b: float) -> float:

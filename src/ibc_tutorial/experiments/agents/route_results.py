@@ -18,6 +18,7 @@ functions here turn those into what the chapter's table and intervals need:
 from __future__ import annotations
 
 import json
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -137,3 +138,15 @@ def stem_ends(rows: list[dict]) -> list[dict]:
 def stem_crossings(rows: list[dict]) -> int:
     """The junction crossings of ``rows`` entered from a stem."""
     return sum(c["approach"] in ROUTE_TOWN_STEMS for r in rows for c in r["crossings"])
+
+
+def missed_crossings(drivers: dict[str, list[dict]]) -> Counter:
+    """``Counter`` of (commanded exit, exit taken) over the missed crossings of ``drivers``' rows; a route
+    that ended inside the junction took "none"."""
+    return Counter(
+        (x["command"], x["taken"] or "none")
+        for rows in drivers.values()
+        for r in rows
+        for x in r["crossings"]
+        if x["taken"] != x["command"]
+    )
