@@ -100,6 +100,7 @@ def test_energy_grid_matches_the_energy():
     obs = _obs(1, TINY.bev_size)
     steer, accel, e = agent.energy_grid(obs, 5)
     assert e.shape == (5, 5)
+    assert steer[2] == 0 and np.array_equal(steer, -steer[::-1])  # straight is straight on every CPU
     ref = agent.network.energy(
         obs, torch.tensor([[steer[1], accel[3]]])
     )  # row = acceleration, column = steer

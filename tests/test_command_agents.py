@@ -151,7 +151,8 @@ def test_reading_under_each_command_and_the_refusals(method):
 
 def test_reading_counts_straight_as_half_left_on_every_cpu(monkeypatch):
     """torch.linspace(-1, 1, 81)[40] is -1.5e-8 with AVX2 kernels and 0 without: the reading's grid is
-    snapped, so the straight value's mass is split, not counted left on one CPU and halved on another."""
+    exact (``symmetric_axis``), so the straight value's mass is split, not counted left on one CPU and
+    halved on another."""
     from ibc_tutorial.experiments.agents.command_readings import reading
 
     agent = _agent("da-ibc", CMD)

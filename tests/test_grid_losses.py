@@ -11,7 +11,7 @@ from scipy.special import softmax as scipy_softmax
 from ibc_tutorial.losses import grid_cross_entropy, info_nce, soft_targets, temporal_smoothing
 from ibc_tutorial.metrics import expert_rank, grid_nll, whiteness
 from ibc_tutorial.optimizers import ActionOptimizer
-from ibc_tutorial.optimizers.grid import GridOptimizer, action_grid
+from ibc_tutorial.optimizers.grid import GridOptimizer, action_grid, symmetric_axis
 
 
 # --------------------------------------------------------------------------- soft targets (eq. 5)
@@ -124,6 +124,25 @@ class _Quadratic:
         if actions.ndim == 2:
             actions = actions.expand(len(z), -1, -1)  # (B, G, D)
         return ((actions - z[:, None, :]) ** 2).sum(-1)  # (B, G)
+
+
+@pytest.mark.parametrize("n", [2, 3, 21, 41, 81, 201, 1000])
+def test_symmetric_axis_is_exact_on_every_cpu(n):
+    exact = [(2 * i - (n - 1)) / (n - 1) for i in range(n)]  # Python floats, no vector kernels
+    for dtype in (torch.float32, torch.float64):
+        v = symmetric_axis(n, dtype)
+        assert v.dtype == dtype and v.shape == (n,)
+        assert torch.equal(v, torch.tensor(exact, dtype=dtype))
+        assert torch.equal(v, -v.flip(0)) and v[0] == -1 and v[-1] == 1
+        if n % 2:
+            assert v[n // 2] == 0 and not torch.signbit(v[n // 2])
+
+
+def test_symmetric_axis_rejects_bad_input():
+    with pytest.raises(ValueError, match="n"):
+        symmetric_axis(1)
+    with pytest.raises(ValueError, match="dtype"):
+        symmetric_axis(5, torch.int64)
 
 
 def test_grid_optimizer_finds_the_argmin_in_three_dimensions():

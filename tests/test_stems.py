@@ -234,6 +234,14 @@ def test_boltzmann_sides():
         (p[S < 0].sum() + 0.5 * p[S == 0].sum()) / p.sum()
     )
 
+    # a float32 grid whose middle value is -1.5e-8 (torch.linspace's with AVX2 kernels) reads as straight
+    nudged = S.astype(np.float32).astype(np.float64)
+    nudged[len(S) // 2] = -1.49e-8
+    assert boltzmann_sides(nudged, S**2)["left"] == pytest.approx(0.5)
+    # ... but a value a hundredth of a step left of straight is left
+    nudged[len(S) // 2] = -0.01 * (S[1] - S[0])
+    assert boltzmann_sides(nudged, S**2)["left"] > 0.5 + 1e-3
+
 
 def test_low_range():
     r = low_range(S, 10 * S**2)  # within 3 nats: |s| <= sqrt(0.3) = 0.548 -> grid values -0.5 .. 0.5

@@ -88,14 +88,21 @@ def valleys(steer, energy, depth: float = DEPTH, barrier: float = BARRIER) -> li
 def boltzmann_sides(steer, energy, temperature: float = 1.0) -> dict[str, float]:
     """Mass of p(s) ∝ exp(-e(s) / temperature) over the grid: ``{"left", "right"}`` (sum 1).
 
-    Left is s < 0, right s > 0; a grid value at exactly 0 (straight) gives half its mass to each.
+    Left is s < 0, right s > 0; a grid value at straight gives half its mass to each. Straight is any
+    value within a millionth of the grid's spacing of 0, so that a float32 grid whose middle value is
+    -1.5e-8 (``torch.linspace(-1, 1, 41)`` with AVX2 kernels) reads as one with an exact 0
+    (``optimizers.grid.symmetric_axis``).
     """
     temperature = check_positive("temperature", temperature)
     s, e = _profile(steer, energy)
     p = np.exp(-(e - e.min()) / temperature)
     p = p / p.sum()
-    zero = 0.5 * p[s == 0].sum()
-    return {"left": float(p[s < 0].sum() + zero), "right": float(p[s > 0].sum() + zero)}
+    straight = np.abs(s) <= 1e-6 * (s[-1] - s[0]) / (len(s) - 1)
+    zero = 0.5 * p[straight].sum()
+    return {
+        "left": float(p[(s < 0) & ~straight].sum() + zero),
+        "right": float(p[(s > 0) & ~straight].sum() + zero),
+    }
 
 
 def low_range(steer, energy, depth: float = DEPTH) -> dict[str, float]:

@@ -1,6 +1,7 @@
 """Exhaustive inference over a fixed grid of actions: the steering-EBM paper's (chapter 03).
 
 - ``action_grid``: a regular grid of candidate actions in any number of dimensions.
+- ``symmetric_axis``: n values over [-1, 1], exactly symmetric on every CPU (the energy readings' axis).
 - ``grid_energies``: the energies of a shared grid for a batch of embeddings, in cache-sized blocks.
 - ``grid_argmin``: ŷ = argmin over the grid of E(x, y) (eq. 1 and Fig. 3 of the steering-EBM paper).
 - ``GridOptimizer``: ``grid_argmin`` as an ``ActionOptimizer``.
@@ -30,6 +31,22 @@ def action_grid(n_per_dim: int, action_dim: int = 1, low: float = -1.0, high: fl
     check_box(low, high, 1)  # numbers, finite, low < high
     axis = torch.linspace(low, high, n_per_dim)  # (n,)
     return torch.cartesian_prod(*[axis] * action_dim).reshape(-1, action_dim)  # (n^D, D)
+
+
+def symmetric_axis(n: int, dtype: torch.dtype = torch.float32) -> torch.Tensor:
+    """``n`` evenly spaced values over [-1, 1] (n,) of ``dtype``, exactly symmetric on every CPU.
+
+    Value i is (2i - (n - 1)) / (n - 1), computed in float64 and rounded once: value n-1-i is exactly
+    -value i, and the middle value of an odd ``n`` is exactly 0. ``torch.linspace(-1, 1, n)`` is not:
+    its vectorised kernels give a middle value of -1.5e-8 for n = 41 or 81 with AVX2 and 0 without, so
+    a reading that splits a profile at straight (``driving.energy_profiles.boltzmann_sides``) would
+    count the straight value as left on one CPU and as half left on another.
+    """
+    check_int("n", n, minimum=2)
+    i = torch.arange(n, dtype=torch.float64)
+    if dtype not in (torch.float32, torch.float64):
+        raise ValueError(f"dtype must be torch.float32 or torch.float64, got {dtype!r}")
+    return ((2 * i - (n - 1)) / (n - 1)).to(dtype)  # (n,)
 
 
 def grid_energies(

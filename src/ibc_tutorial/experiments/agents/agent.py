@@ -33,6 +33,7 @@ from ibc_tutorial.experiments.agents.presets import METHODS, Preset
 from ibc_tutorial.kde import inverse_density_weights
 from ibc_tutorial.optimizers import embedded_energy
 from ibc_tutorial.optimizers.dfo import DFOConfig, dfo
+from ibc_tutorial.optimizers.grid import symmetric_axis
 from ibc_tutorial.policies.encoders import BEVStateEncoder, to_tensor_obs
 from ibc_tutorial.policies.energy import EnergyModel
 from ibc_tutorial.policies.explicit import BetaPolicy
@@ -214,7 +215,7 @@ class Agent:
             raise ValueError("energy_grid needs an energy agent (ibc or da-ibc), got bc")
         self.check_command(obs)
         obs = to_tensor_obs(obs, self.device)
-        v = torch.linspace(-1.0, 1.0, n_per_dim)
+        v = symmetric_axis(n_per_dim)  # (G,) straight is exactly 0 on every CPU
         acc, steer = torch.meshgrid(v, v, indexing="ij")
         grid = torch.stack([steer.reshape(-1), acc.reshape(-1)], dim=1).to(self.device)  # (G², 2)
         e = self.network.energy_from_embedding(self.network.embed(obs), grid)[0].cpu()  # (G²,)

@@ -17,6 +17,7 @@ import torch
 
 from ibc_tutorial.driving.commands import command_index
 from ibc_tutorial.driving.energy_profiles import beta_shape, boltzmann_sides, valleys
+from ibc_tutorial.optimizers.grid import symmetric_axis
 from ibc_tutorial.policies.encoders import to_tensor_obs
 
 GRID = 81
@@ -53,9 +54,7 @@ def reading(agent, obs: dict, command: str | None, n_grid: int = GRID) -> dict:
             "left_mass": shape["mass_left"],
         }
     steer, _, e = agent.energy_grid(batch, n_per_dim=n_grid)  # (G,), (G,), (G accel, G steer)
-    # torch.linspace's middle value is -1.5e-8 with AVX2 kernels and 0 without: snap the grid to its
-    # exact values, so that straight is straight (half its mass each side) on every CPU
-    steer = np.round(steer.astype(np.float64) * (n_grid - 1) / 2) / ((n_grid - 1) / 2) + 0.0
+    steer = symmetric_axis(n_grid, torch.float64).numpy()  # (G,) the grid's values, exactly (straight is 0)
     low = e.min(axis=0)  # (G,) the lowest over acceleration
     low = low - low.min()
     marg = -np.logaddexp.reduce(-e, axis=0)  # (G,) -log sum over acceleration of exp(-E)

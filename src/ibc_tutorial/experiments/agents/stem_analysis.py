@@ -6,7 +6,7 @@
 - per episode, ``driving.stems.episode_measures`` and the steering onset of every finished stem crossing;
 - per state of every stem crossing (from ``stems.LEAD`` states before its entry to its exit) and per
   stop at a red light: for an energy agent, its energy over steering (the lowest over acceleration on a
-  ``GRID`` x ``GRID`` grid of [-1, 1]², as ``evaluate.ended_crossing_energies`` computes it) read by
+  ``GRID`` x ``GRID`` grid of [-1, 1]², as ``crossings.ended_crossing_energies`` computes it) read by
   ``driving.energy_profiles``: valleys within 3 nats separated by >= 1 nat, the Boltzmann mass left of
   straight (of that profile, and of the marginal over acceleration, -log Σ_a exp(-E)), the steering
   within 3 nats (extent and measure); for BC, its Beta over steering (``energy_profiles.beta_shape``);
@@ -47,9 +47,10 @@ from ibc_tutorial.experiments.agents.checkpoints import load_agent
 from ibc_tutorial.experiments.agents.stems import METHODS, TOWN, drive_file, drivers, load_drive, unpack_bev
 from ibc_tutorial.experiments.runs import git_commit, machine, now, write_json
 from ibc_tutorial.optimizers.dfo import dfo_trace
+from ibc_tutorial.optimizers.grid import symmetric_axis
 
 GRID = 41
-"""Values per action dimension of the energy grid (as ``evaluate.ENERGY_GRID``)."""
+"""Values per action dimension of the energy grid (as ``crossings.ENERGY_GRID``)."""
 DRAWS = 64
 """DFO decisions drawn at each entry state."""
 DFO_SEED = 0
@@ -59,7 +60,7 @@ CHUNK = 32
 
 
 def _grid(n: int) -> tuple[np.ndarray, torch.Tensor]:
-    v = torch.linspace(-1.0, 1.0, n)
+    v = symmetric_axis(n)  # (G,) straight is exactly 0 on every CPU
     acc, steer = torch.meshgrid(v, v, indexing="ij")
     return v.numpy(), torch.stack([steer.reshape(-1), acc.reshape(-1)], dim=1)  # (G,), (G², 2)
 
