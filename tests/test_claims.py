@@ -14,6 +14,7 @@ from ibc_tutorial.experiments.agents.claims import (
     compare_verdicts,
     first_eval_scores,
     judge_claims,
+    judge_stem_claims,
     minority,
     range_differences,
     stem_exit_tables,
@@ -133,6 +134,9 @@ def test_claims_4_and_5_read_the_stem_analysis(replicated, tmp_path):
     j = judge_claims(folder)
     assert j[4].verdict == stats.HOLDS and j[4].parts[0].interval.estimate == pytest.approx(minority(20 / 44))
     assert j[5].verdict == stats.HOLDS and j[5].parts[0].interval.estimate == pytest.approx(0.285)
+    # the same two claims on the analysis folder alone (e.g. the agents driven again on another CPU)
+    alone = judge_stem_claims(ana)
+    assert sorted(alone) == [4, 5] and all(alone[k] == j[k] for k in (4, 5))
     # the other way round: DA-IBC as one-sided as BC, its range narrower at the stems than at red stops
     for s in range(4):
         (ana / f"da-ibc-seed{s}.json").write_text(json.dumps(_analysis([0, 0, 0], [4, 3, 4], 0.1, 0.3)))
@@ -143,6 +147,13 @@ def test_claims_4_and_5_read_the_stem_analysis(replicated, tmp_path):
     for s in range(4):
         (ana / f"bc-seed{s}.json").write_text(json.dumps(_analysis([0, 0, 0], [0, 0, 0], 0.0, 0.0)))
     assert "no completed crossing from a stem by the bc agents" in judge_claims(folder)[4].missing
+    # no analysis of the DA-IBC agents: both claims cannot tell, naming the folder and the command
+    for s in range(4):
+        (ana / f"da-ibc-seed{s}.json").unlink()
+    alone = judge_stem_claims(ana)
+    assert alone[5].verdict == stats.CANNOT_TELL and "stems analyse" in alone[5].missing[0]
+    with pytest.raises(ValueError, match="analysis must be"):
+        judge_stem_claims(tmp_path / "nowhere")
 
 
 def test_the_shipped_replication_is_judged():

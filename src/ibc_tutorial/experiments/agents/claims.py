@@ -24,7 +24,8 @@ every part does (``combine``).
   independent, and claim 5 by ten DFO draws at one moment of one agent: chapter 09 says why not.)
 
 ``compare_verdicts(a, b)`` says which claims get the same verdict in two folders (chapter 09: are
-the verdicts the same when the whole replication runs again on another CPU?).
+the verdicts the same when the whole replication runs again on another CPU?). ``judge_stem_claims``
+judges claims 4 and 5 on any stem analysis, e.g. the same agents driven again on another CPU.
 """
 
 from __future__ import annotations
@@ -88,9 +89,11 @@ def minority(p):
 
 def stem_files(folder) -> dict[str, dict]:
     """{driver: its stem-analysis file} of ``folder/stems/analysis`` ({} if there is none)."""
-    d = Path(folder) / STEM_ANALYSIS
-    return {p.stem: read_json_dict(p, "re-run " + STEM_COMMAND.format(folder=folder))
-            for p in sorted(d.glob("*.json")) if p.name != "provenance.json"}  # fmt: skip
+    return _analysis_files(Path(folder) / STEM_ANALYSIS, "re-run " + STEM_COMMAND.format(folder=folder))
+
+
+def _analysis_files(d: Path, fix: str) -> dict[str, dict]:
+    return {p.stem: read_json_dict(p, fix) for p in sorted(d.glob("*.json")) if p.name != "provenance.json"}
 
 
 def _agents_of(files: dict[str, dict], method: str) -> list[dict]:
@@ -249,10 +252,16 @@ def judge_claims(folder) -> ClaimVerdicts:
         claims[k] = ClaimVerdict(k, CLAIMS[k], combine(*(j.verdict for j in parts)), parts)
 
     # claims 4 and 5: the stem analysis of every agent's table episodes
-    files = stem_files(folder)
+    claims.update(stem_claims(stem_files(folder), folder / STEM_ANALYSIS, STEM_COMMAND.format(folder=folder)))
+    return ClaimVerdicts(folder, preset.name, dict(sorted(claims.items())))
+
+
+def stem_claims(files: dict[str, dict], where, make: str) -> dict[int, ClaimVerdict]:
+    """Claims 4 and 5 judged on stem-analysis files (``stem_files``) read from ``where``; ``make`` is the
+    command that makes them, named in what is missing."""
+    claims: dict[int, ClaimVerdict] = {}
     have = {m: bool(_agents_of(files, m)) for m in ("bc", "da-ibc")}
-    make = STEM_COMMAND.format(folder=folder)
-    no_stems = f"no stem analysis of the {{}} agents in {folder / STEM_ANALYSIS} ({make})"
+    no_stems = f"no stem analysis of the {{}} agents in {where} ({make})"
     # claim 4 (Fig. 5): DA-IBC takes the minority exit of a stem more often than BC
     tables = {m: stem_exit_tables(files, m) for m, h in have.items() if h}  # (left, crossings), (A, E) each
     empty = [m for m, (_, c) in tables.items() if c.sum() == 0]
@@ -276,7 +285,18 @@ def judge_claims(folder) -> ClaimVerdicts:
             no_stems.format("da-ibc") if not have["da-ibc"] else "fewer than 2 DA-IBC agents with both states"
         )
         claims[5] = ClaimVerdict(5, CLAIMS[5], stats.CANNOT_TELL, (), missing=(why,))
-    return ClaimVerdicts(folder, preset.name, dict(sorted(claims.items())))
+    return claims
+
+
+def judge_stem_claims(analysis) -> dict[int, ClaimVerdict]:
+    """Claims 4 and 5 on a stem analysis folder (``ibc-tutorial stems analyse --out OUT``: ``OUT/analysis``),
+    e.g. the same agents driven again on another CPU; ValueError if it is not a folder."""
+    analysis = Path(analysis)
+    if not analysis.is_dir():
+        raise ValueError(f"analysis must be a stem analysis folder (stems analyse --out OUT: OUT/analysis), "
+                         f"got {analysis}")  # fmt: skip
+    make = f"ibc-tutorial stems analyse --out {analysis.parent}"
+    return stem_claims(_analysis_files(analysis, "re-run " + make), analysis, make)
 
 
 # --------------------------------------------------------------------------- two folders
