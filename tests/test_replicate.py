@@ -339,18 +339,26 @@ def test_observation_and_landscape_at_a_kept_state(replicated, tmp_path):
     assert (np.abs(land["points"]) <= 1).all() and land["steer"][0] == -1.0
 
 
-def test_the_shipped_turn_hold_ablation_is_the_laptop_preset_with_its_overrides():
-    folder = SHIPPED.parent / "ablations" / "turn-hold"
+STEM_ABLATIONS = {  # folder -> (its --set overrides, its seeds)
+    "turn-hold": (["turn_hold_m=0.5", "seeds=0,1,2", "heldout_episodes=0", "routeless_episodes=0"], (0, 1, 2)),
+    "more-routes": (
+        ["collect.routes=20", "epochs=4", "heldout_episodes=0", "routeless_episodes=0"],
+        (0, 1, 2, 3, 4),
+    ),
+}
+
+
+@pytest.mark.parametrize("name", sorted(STEM_ABLATIONS))
+def test_the_shipped_stem_ablations_are_the_laptop_preset_with_their_overrides(name):
+    folder = SHIPPED.parent / "ablations" / name
+    if not (folder / "provenance.json").exists():
+        pytest.skip(f"no shipped {name} ablation")
     prov = json.loads((folder / "provenance.json").read_text())
     from ibc_tutorial.experiments.agents.presets import with_overrides
 
-    assert prov["overrides"] == [
-        "turn_hold_m=0.5",
-        "seeds=0,1,2",
-        "heldout_episodes=0",
-        "routeless_episodes=0",
-    ]
+    overrides, seeds = STEM_ABLATIONS[name]
+    assert prov["overrides"] == overrides
     assert differences(Preset.from_dict(prov["preset"]), with_overrides(LAPTOP, prov["overrides"])) == {}
-    assert prov["complete"] and "uncommitted" not in prov["commit"]
+    assert prov["complete"] and "uncommitted" not in prov["commit"] and len(prov["invocations"]) == 1
     analysed = sorted(p.stem for p in (folder / "stems" / "analysis").glob("*-seed*.json"))
-    assert analysed == sorted(f"{m}-seed{s}" for m in METHODS for s in (0, 1, 2))
+    assert analysed == sorted(f"{m}-seed{s}" for m in METHODS for s in seeds)
