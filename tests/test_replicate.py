@@ -340,7 +340,10 @@ def test_observation_and_landscape_at_a_kept_state(replicated, tmp_path):
 
 
 STEM_ABLATIONS = {  # folder -> (its --set overrides, its seeds)
-    "turn-hold": (["turn_hold_m=0.5", "seeds=0,1,2", "heldout_episodes=0", "routeless_episodes=0"], (0, 1, 2)),
+    "turn-hold": (
+        ["turn_hold_m=0.5", "seeds=0,1,2", "heldout_episodes=0", "routeless_episodes=0"],
+        (0, 1, 2),
+    ),
     "more-routes": (
         ["collect.routes=20", "epochs=4", "heldout_episodes=0", "routeless_episodes=0"],
         (0, 1, 2, 3, 4),
