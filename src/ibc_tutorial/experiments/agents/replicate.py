@@ -257,11 +257,10 @@ def run_one(
     d = run_dir(out, method, seed)
     res = train_agent(
         method,
-        data,
+        _training_data(data, preset),  # rendered once per worker process, shared by its runs
         preset,
         seed,
         d,
-        dataset=_training_data(data, preset),
         show_progress=show_progress,
         log=log,
         device=device,
