@@ -101,12 +101,10 @@ def test_the_commands_refuse_an_absent_device_first(command, tmp_path, monkeypat
 
 # --------------------------------------------------------------------------- device="cpu" changes nothing
 @pytest.mark.parametrize("method", ["bc", "da-ibc"])
-def test_device_cpu_is_bit_identical_to_the_default(method, data, dataset, tmp_path):
+def test_device_cpu_is_bit_identical_to_the_default(method, dataset, tmp_path):
     runs = {}
     for name, kwargs in (("default", {}), ("cpu", {"device": "cpu"})):
-        res = train_agent(
-            method, data, TINY, 0, tmp_path / name, dataset=dataset, log=None, show_progress=False, **kwargs
-        )
+        res = train_agent(method, dataset, TINY, 0, tmp_path / name, log=None, show_progress=False, **kwargs)
         runs[name] = (res, torch.load(tmp_path / name / "final.pt", weights_only=True))
     (a, ca), (b, cb) = runs["default"], runs["cpu"]
     assert [m["loss"] for m in a.metrics] == [m["loss"] for m in b.metrics]

@@ -83,7 +83,6 @@ def test_common_figures_have_titles_and_labels():
             xlabel="x",
             ylabel="y",
             title="t",
-            markers=False,
         )
     )
     fig = common.plot_bars(

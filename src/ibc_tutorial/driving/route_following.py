@@ -267,8 +267,7 @@ def drive_routes(
     policy: RoutePolicy | str,
     routes,
     *,
-    bev_size: int = 64,
-    light_encoding: str = "intensity",
+    bev: tuple[int, str] = (64, "intensity"),
     seed: int = 0,
     commands: bool = True,
     max_steps: int | None = None,
@@ -280,7 +279,7 @@ def drive_routes(
     Args:
         policy: a ``RoutePolicy`` or "expert" (the PID expert follows the route itself).
         routes: the routes.
-        bev_size, light_encoding: the observation's (the agent's preset's).
+        bev: the observation's BEV, ``(bev_size, light_encoding)`` (the agent's preset's).
         seed: the light phases of route ``k`` are drawn from ``[seed, k]``.
         commands: give the policy the route's command (``batch["command"]``, (B,) int64 indices into
             ``driving.commands.COMMANDS``); False: a routeless policy, which sees no command.
@@ -288,6 +287,9 @@ def drive_routes(
         record_xy: keep the car's positions and the command at each (``RouteResult.xy``, ``.commands``).
     """
     seed = check_int("seed", seed, minimum=0)
+    if not isinstance(bev, tuple) or len(bev) != 2:
+        raise ValueError(f"bev must be a pair (bev_size, light_encoding), got {bev!r}")
+    bev_size, light_encoding = bev
     if isinstance(policy, str):
         check_choice("policy", policy, ("expert",))
     elif not callable(policy):

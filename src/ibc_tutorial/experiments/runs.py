@@ -8,7 +8,7 @@ imports the other:
 
 - reading and writing: ``write_json``, ``read_json_dict``, ``write_npz``, ``read_folder`` (every
   file checked as it is read; a damaged one is a ``ValueError`` naming it and what to do);
-- folder checks for ``--force``: ``check_only_entries``, ``delete_entries``;
+- the folder cleared by ``--force``: ``clear_entries``;
 - provenance: ``machine``, ``git_commit``, ``now``, and ``Provenance``, which records every
   invocation of a resumable command (its start and its last heartbeat, so a killed invocation's
   time counts up to its last heartbeat) and writes ``provenance.json`` and ``PROVENANCE.md``.
@@ -139,14 +139,21 @@ def read_run_file(path, valid, what: str) -> dict:
     return d
 
 
-def check_only_entries(out, entries: tuple, what: str) -> None:
-    """Refuse (ValueError) ``out`` if it holds files other than ``entries`` (hidden ones aside): what
-    ``--force`` may delete is a ``what``'s files (e.g. "replication"), never anything else."""
+def clear_entries(out, entries: tuple, what: str) -> None:
+    """``--force``: delete ``entries`` (files or folders) from ``out``, nothing else. ValueError, before
+    anything is deleted, if ``out`` holds files other than ``entries`` (hidden ones aside): what ``--force``
+    may delete is a ``what``'s files (e.g. "replication"), never anything else."""
     out = Path(out)
     if out.is_dir() and any(p.name not in entries and not p.name.startswith(".") for p in out.iterdir()):
         raise ValueError(
             f"{out} holds files that are not a {what}'s: --force deletes only a {what}; use another --out"
         )
+    for name in entries:
+        p = out / name
+        if p.is_dir():
+            shutil.rmtree(p)
+        elif p.exists():
+            p.unlink()
 
 
 def check_folder_entries(out, entries: tuple, what: str, allowed=None) -> bool:
@@ -165,17 +172,6 @@ def check_folder_entries(out, entries: tuple, what: str, allowed=None) -> bool:
             f"{out} holds other files ({', '.join(foreign[:3])}), not a {what}: use another --out"
         )
     return True
-
-
-def delete_entries(out, entries: tuple) -> None:
-    """Delete ``entries`` (files or folders) from ``out``, nothing else (``--force``, after
-    ``check_only_entries``)."""
-    for name in entries:
-        p = Path(out) / name
-        if p.is_dir():
-            shutil.rmtree(p)
-        elif p.exists():
-            p.unlink()
 
 
 # ---------------------------------------------------------------------- provenance

@@ -8,12 +8,45 @@ the library config's own name for it (``dfo.n_samples``, via the preset's ``CONF
 value is read as the field's type (an integer, a number, a word, a comma-separated tuple). An unknown
 field, an unreadable value or a value the configs refuse is a ``ValueError`` naming ``--set`` and the
 field, raised before any work.
+
+``StoredSettings`` is what every preset and the sweep's settings share: their flat JSON form
+(``to_dict``, ``from_dict``) and the fields that differ between two of them (``differences``).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import json
+from typing import ClassVar
+
+
+class StoredSettings:
+    """Base of the settings dataclasses stored flat as JSON in checkpoints and results folders (the two
+    studies' presets, the sweep's settings): tuples are stored as lists and read back as tuples."""
+
+    STORED_DEFAULTS: ClassVar[dict] = {}
+    """Values of fields that a stored dict written before they existed meant, whatever today's defaults."""
+
+    def to_dict(self) -> dict:
+        """JSON- and checkpoint-friendly form (tuples become lists)."""
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in dataclasses.asdict(self).items()}
+
+    @classmethod
+    def from_dict(cls, d: dict):
+        """Inverse of ``to_dict``; a field missing from ``d`` takes its ``STORED_DEFAULTS`` value, else its
+        default. ValueError if ``d`` is not a dict or names unknown fields."""
+        if not isinstance(d, dict):
+            raise ValueError(f"a stored {cls.__name__} must be a dict, got {type(d).__name__}")
+        unknown = set(d) - {f.name for f in dataclasses.fields(cls)}
+        if unknown:
+            raise ValueError(f"unknown {cls.__name__} fields {sorted(unknown)}")
+        d = {**cls.STORED_DEFAULTS, **d}
+        return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
+
+    def differences(self, other) -> dict[str, tuple]:
+        """Fields whose values differ: ``{field: (self's value, other's value)}`` (the name excluded)."""
+        mine, theirs = self.to_dict(), other.to_dict()
+        return {k: (mine[k], theirs[k]) for k in mine if k != "name" and mine[k] != theirs[k]}
 
 
 def _parse(name: str, text: str, current):

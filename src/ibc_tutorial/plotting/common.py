@@ -70,22 +70,23 @@ def plot_lines(
     logx: bool = False,
     logy: bool = False,
     ax=None,
-    markers: bool = True,
 ):
     """Several lines against one x axis (e.g. hit rate against the number of samples, one per init).
 
     Args:
-        x: (K,) shared x values, or {label: (K_label,)} one x axis per series.
+        x: (K,) shared x values, a few settings compared, each marked with a dot; or {label: (K_label,)},
+            one x axis per series, curves drawn as plain lines.
         series: {label: (K,) y values}.
     """
     check_panels("series", series)
     fig, ax, own = figure_and_axes(ax, (6.0, 3.8))
+    shared = not isinstance(x, dict)
     for i, (label, v) in enumerate(series.items()):
-        xs = as_array(x[label] if isinstance(x, dict) else x, float)
-        ax.plot(xs, as_array(v, float), marker="o" if markers else None, ms=4, color=f"C{i}", label=label)
+        xs = as_array(x if shared else x[label], float)
+        ax.plot(xs, as_array(v, float), marker="o" if shared else None, ms=4, color=f"C{i}", label=label)
     if logx:
         ax.set_xscale("log")
-        if not isinstance(x, dict):  # label the x values themselves, not the decades
+        if shared:  # label the x values themselves, not the decades
             xs = as_array(x, float)
             ax.set_xticks(xs)
             ax.set_xticklabels([f"{v:g}" for v in xs])

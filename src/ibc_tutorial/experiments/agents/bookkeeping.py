@@ -52,10 +52,14 @@ class TrainingData:
     sample_probs: torch.Tensor
     """(M,) w ∝ 1 / ĝ of the expert actions (eqs. 4-5): the minibatch probabilities and DA-IBC's DFO initial
     weights."""
+    source: Path | None = None
+    """The file the demonstrations were read from (None: given in memory); a run compares it with the
+    checksums of older versions' runs (``run_folder.inspect_run``)."""
 
     @classmethod
     def of(cls, data, preset: Preset) -> TrainingData:
-        """``data`` (a path, a ``DemoLog`` or a ``DemoDataset``) rendered as ``preset`` asks."""
+        """``data`` (a path, a ``DemoLog`` or a ``DemoDataset``) rendered as ``preset`` asks; a path is kept
+        as ``source``."""
         ds = data if isinstance(data, DemoDataset) else None
         if ds is None:
             log = data if isinstance(data, DemoLog) else DemoLog.load(data)
@@ -78,7 +82,8 @@ class TrainingData:
             )
         if ds.bev_size != preset.bev_size:
             raise ValueError(f"dataset must be rendered at bev_size {preset.bev_size}, got {ds.bev_size}")
-        return cls(ds, inverse_density_weights(ds.actions, preset.kde_bandwidth))  # (M,) eqs. 4-5
+        source = None if isinstance(data, (DemoDataset, DemoLog)) else Path(data)
+        return cls(ds, inverse_density_weights(ds.actions, preset.kde_bandwidth), source)  # (M,) eqs. 4-5
 
 
 @dataclass
@@ -95,29 +100,27 @@ class OpenedRun:
     """Epochs already trained."""
 
 
-def open_run(method: str, data, preset: Preset, seed: int, out: Path, dataset=None) -> OpenedRun:
+def open_run(method: str, data, preset: Preset, seed: int, out: Path) -> OpenedRun:
     """Check the data and the folder before any work; write ``run.json`` unless the run is finished.
 
-    ``dataset``: an already rendered ``DemoDataset`` or ``TrainingData`` of ``data`` (saves rendering it
-    again when several runs share it). ValueError: see ``run_folder.inspect_run``."""
-    if isinstance(dataset, DemoDataset):
-        dataset = TrainingData.of(dataset, preset)
-    if dataset is not None:
-        TrainingData.of(dataset.dataset, preset)  # the same checks, for a shared one
-    log = (
-        dataset.dataset.log
-        if dataset is not None
-        else data
-        if isinstance(data, DemoLog)
-        else DemoLog.load(data)
-    )
+    ``data``: a file, a ``DemoLog``, or the demonstrations already rendered, a ``DemoDataset`` or a
+    ``TrainingData`` (saves rendering them again when several runs share them). ValueError: see
+    ``run_folder.inspect_run``."""
+    if isinstance(data, DemoDataset):
+        data = TrainingData.of(data, preset)
+    if isinstance(data, TrainingData):
+        TrainingData.of(data.dataset, preset)  # the same checks, for a shared one
+        rendered, log, data_file = data, data.dataset.log, data.source
+    else:
+        rendered, log = None, data if isinstance(data, DemoLog) else DemoLog.load(data)
+        data_file = None if isinstance(data, DemoLog) else data
     sha = log.checksum()  # the demonstrations' content
-    state = inspect_run(out, method, preset, seed, sha, None if isinstance(data, DemoLog) else data)
+    state = inspect_run(out, method, preset, seed, sha, data_file)
     if state.status == "done":
         return OpenedRun(None, sha, state.status, state.epoch)
     out.mkdir(parents=True, exist_ok=True)
     write_run_info(out, method, preset, seed, sha)
-    return OpenedRun(dataset or TrainingData.of(log, preset), sha, state.status, state.epoch)
+    return OpenedRun(rendered or TrainingData.of(log, preset), sha, state.status, state.epoch)
 
 
 def finished_run(out: Path, method: str, preset: Preset, device) -> tuple[Agent, list]:

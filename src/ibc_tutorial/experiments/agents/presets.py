@@ -47,10 +47,11 @@ none of the expert's labels), is chapter 08's ``intensity-lights`` ablation.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, fields
+from dataclasses import dataclass
 
 from ibc_tutorial.driving.bev import LIGHT_ENCODINGS, check_bev_size
 from ibc_tutorial.driving.collect import CollectConfig
+from ibc_tutorial.experiments.settings import StoredSettings
 from ibc_tutorial.experiments.settings import with_overrides as _with_overrides
 from ibc_tutorial.optimizers.dfo import DFOConfig
 from ibc_tutorial.training import LR_SCHEDULES, TrainConfig
@@ -63,8 +64,12 @@ METHODS = ("bc", "ibc", "da-ibc")
 
 
 @dataclass(frozen=True)
-class Preset:
-    """One complete set of settings for training, evaluating and replicating."""
+class Preset(StoredSettings):
+    """One complete set of settings for training, evaluating and replicating (stored flat: ``to_dict``,
+    ``from_dict``; a preset stored before ``light_encoding`` existed drew the lights by intensity,
+    ``LEGACY_LIGHT_ENCODING``, whatever today's default)."""
+
+    STORED_DEFAULTS = {"light_encoding": LEGACY_LIGHT_ENCODING}
 
     name: str
     """The preset's name."""
@@ -249,22 +254,6 @@ class Preset:
             **extra,
         )
 
-    def to_dict(self) -> dict:
-        """JSON- and checkpoint-friendly form (tuples become lists)."""
-        d = asdict(self)
-        return {k: list(v) if isinstance(v, tuple) else v for k, v in d.items()}
-
-    @classmethod
-    def from_dict(cls, d: dict) -> Preset:
-        """Inverse of ``to_dict``; unknown keys are refused. A preset stored before ``light_encoding`` existed
-        drew the lights by intensity (``LEGACY_LIGHT_ENCODING``), whatever today's default."""
-        names = {f.name for f in fields(cls)}
-        unknown = set(d) - names
-        if unknown:
-            raise ValueError(f"unknown preset fields {sorted(unknown)}")
-        d = {"light_encoding": LEGACY_LIGHT_ENCODING, **d}
-        return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
-
 
 PAPER_UNSTATED = frozenset(
     {"lr_schedule", "brake_noise", "turn_hold_m", "neg_sigma", "heldout_episodes", "routeless_episodes"}
@@ -377,9 +366,8 @@ def with_overrides(preset: Preset, overrides) -> Preset:
 def differences(a: Preset, b: Preset) -> dict[str, tuple]:
     """Fields whose values differ: ``{field: (a's value, b's value)}`` (the name excluded). Compared with
     ``PAPER``, a value the paper does not state (``PAPER_UNSTATED``) is given as "<value> (not stated)"."""
-    da, db = a.to_dict(), b.to_dict()
 
-    def shown(p: Preset, d: dict, k: str):
-        return f"{d[k]} (not stated)" if p == PAPER and k in PAPER_UNSTATED else d[k]
+    def shown(p: Preset, k: str, value):
+        return f"{value} (not stated)" if p == PAPER and k in PAPER_UNSTATED else value
 
-    return {k: (shown(a, da, k), shown(b, db, k)) for k in da if k != "name" and da[k] != db[k]}
+    return {k: (shown(a, k, va), shown(b, k, vb)) for k, (va, vb) in a.differences(b).items()}

@@ -76,8 +76,7 @@ from ibc_tutorial.experiments.agents.stems import recorded_drive
 from ibc_tutorial.experiments.agents.train import train_agent
 from ibc_tutorial.experiments.runs import (
     Provenance,
-    check_only_entries,
-    delete_entries,
+    clear_entries,
     read_json_dict,
     write_json,
     write_npz,
@@ -148,8 +147,7 @@ def check_folder(out, preset: Preset) -> None:
 def clear_folder(out) -> None:
     """Delete a replication's entries (``ENTRIES``) from ``out``, nothing else: ``--force``. ValueError if
     ``out`` holds other files (they are not a replication's to delete)."""
-    check_only_entries(out, ENTRIES, "replication")
-    delete_entries(out, ENTRIES)
+    clear_entries(out, ENTRIES, "replication")
 
 
 _WORKER_DATA: dict = {}
@@ -259,11 +257,10 @@ def run_one(
     d = run_dir(out, method, seed)
     res = train_agent(
         method,
-        data,
+        _training_data(data, preset),  # rendered once per worker process, shared by its runs
         preset,
         seed,
         d,
-        dataset=_training_data(data, preset),
         show_progress=show_progress,
         log=log,
         device=device,

@@ -53,8 +53,7 @@ def evaluate_on_routes(
         results = drive_routes(
             policy,
             list(routes),
-            bev_size=bev_size,
-            light_encoding=encoding,
+            bev=(bev_size, encoding),
             seed=seed + k,
             commands=commands,
             max_steps=max_steps,

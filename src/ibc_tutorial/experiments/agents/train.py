@@ -138,7 +138,6 @@ def train_agent(
     seed: int,
     out,
     *,
-    dataset: TrainingData | DemoDataset | None = None,
     show_progress: bool | None = None,
     log=print,
     device: torch.device | str = "cpu",
@@ -151,13 +150,13 @@ def train_agent(
 
     Args:
         method: "bc", "ibc" or "da-ibc".
-        data: the demonstrations: a file (its content's SHA-256 goes into every checkpoint) or a ``DemoLog``.
+        data: the demonstrations (their content's SHA-256 goes into every checkpoint): a file, a ``DemoLog``,
+            or already rendered at the preset's BEV, a ``DemoDataset`` or a ``TrainingData`` (with its
+            minibatch probabilities: saves making them again when several runs share them).
         preset: the settings.
         seed: seeds the network's initialisation, the minibatches, the counter-examples and the
             evaluations' DFO draws.
         out: the run's folder.
-        dataset: ``data`` already rendered at the preset's BEV, a ``DemoDataset`` or a ``TrainingData``
-            (with its minibatch probabilities: saves making them again when several runs share them).
         show_progress: a progress bar (None: tqdm's choice; ``TQDM_DISABLE=1`` silences it).
         log: where one line per evaluation goes (``None``: nowhere).
         device: where the network trains and acts ("cpu", "cuda", "cuda:1", "mps"; see the module
@@ -167,7 +166,7 @@ def train_agent(
     seed = check_int("seed", seed, minimum=0)
     device = check_device("device", device)
     out, t0 = Path(out), time.perf_counter()
-    run = open_run(method, data, preset, seed, out, dataset)  # the folder checked, run.json written
+    run = open_run(method, data, preset, seed, out)  # the folder checked, run.json written
     if run.status == "done":
         agent, metrics = finished_run(out, method, preset, device)
         if log:

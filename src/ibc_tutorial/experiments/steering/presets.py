@@ -6,9 +6,10 @@ so; where it differs, it says why. ``differences(a, b)`` lists what two presets 
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, fields
+from dataclasses import dataclass
 
 from ibc_tutorial.driving.bev import check_bev_size
+from ibc_tutorial.experiments.settings import StoredSettings
 from ibc_tutorial.experiments.settings import with_overrides as _with_overrides
 from ibc_tutorial.training import TrainConfig
 from ibc_tutorial.utils import check_choice, check_int, check_positive, check_probability
@@ -46,8 +47,9 @@ def book_temperature(
 
 
 @dataclass(frozen=True)
-class SteeringPreset:
-    """Everything ``ibc-tutorial replicate-steering`` needs: data, models, training, evaluation."""
+class SteeringPreset(StoredSettings):
+    """Everything ``ibc-tutorial replicate-steering`` needs: data, models, training, evaluation (stored flat:
+    ``to_dict``, ``from_dict``)."""
 
     name: str
     """The preset's name."""
@@ -133,20 +135,6 @@ class SteeringPreset:
         """The ``TrainConfig`` of one model's run (``extra``: its other fields, e.g. ``log_every``)."""
         return TrainConfig(steps=self.steps, batch_size=self.batch_size, lr=self.lr, seed=seed, **extra)
 
-    def to_dict(self) -> dict:
-        """JSON-friendly form (tuples become lists)."""
-        return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
-
-    @classmethod
-    def from_dict(cls, d: dict) -> SteeringPreset:
-        """Inverse of ``to_dict``; unknown keys are refused."""
-        names = {f.name for f in fields(cls)}
-        if not isinstance(d, dict) or set(d) - names:
-            raise ValueError(
-                f"unknown preset fields {sorted(set(d) - names) if isinstance(d, dict) else d!r}"
-            )
-        return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
-
 
 LAPTOP = SteeringPreset(name="laptop")
 """The chapter's study: 18 models trained and driven in about half an hour on 2 cores."""
@@ -195,5 +183,4 @@ def get_preset(name: str) -> SteeringPreset:
 
 def differences(a: SteeringPreset, b: SteeringPreset) -> dict[str, tuple]:
     """Fields whose values differ: ``{field: (a's value, b's value)}`` (the name excluded)."""
-    da, db = a.to_dict(), b.to_dict()
-    return {k: (da[k], db[k]) for k in da if k != "name" and da[k] != db[k]}
+    return a.differences(b)

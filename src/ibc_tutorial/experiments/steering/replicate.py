@@ -34,8 +34,7 @@ from ibc_tutorial.experiments.runs import (
     PROVENANCE_MD,
     Provenance,
     check_folder_entries,
-    check_only_entries,
-    delete_entries,
+    clear_entries,
     read_folder,
     read_json_dict,
     read_npz,
@@ -230,8 +229,7 @@ def collect_results(out: Path, preset: SteeringPreset) -> dict:
 
 def clear_folder(out) -> None:
     """Delete a study's entries (``ENTRIES``) from ``out``, nothing else: ``--force``."""
-    check_only_entries(out, ENTRIES, "study")
-    delete_entries(out, ENTRIES)
+    clear_entries(out, ENTRIES, "study")
 
 
 def finished_runs(out, preset: SteeringPreset) -> list[str]:

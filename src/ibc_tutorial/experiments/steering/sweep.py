@@ -38,8 +38,7 @@ from ibc_tutorial.driving.dataset import DemoDataset, DemoLog
 from ibc_tutorial.experiments.runs import (
     Provenance,
     check_folder_entries,
-    check_only_entries,
-    delete_entries,
+    clear_entries,
     read_folder,
     read_json_dict,
     read_npz,
@@ -109,8 +108,7 @@ def clear_folder(out) -> None:
     if not out.is_dir():
         return
     shares = tuple(p.name for p in out.iterdir() if p.is_dir() and p.name.startswith("share"))
-    check_only_entries(out, ENTRIES + shares, "sweep")
-    delete_entries(out, ENTRIES + shares)
+    clear_entries(out, ENTRIES + shares, "sweep")
 
 
 def read_sweep_eval(path) -> dict:

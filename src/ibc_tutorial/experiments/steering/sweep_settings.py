@@ -6,10 +6,11 @@
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, fields, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from ibc_tutorial.experiments.runs import PROVENANCE, PROVENANCE_MD
+from ibc_tutorial.experiments.settings import StoredSettings
 from ibc_tutorial.experiments.steering.junctions import MASS_THRESHOLD
 from ibc_tutorial.experiments.steering.models import MODELS
 from ibc_tutorial.experiments.steering.presets import SteeringPreset
@@ -32,8 +33,9 @@ MEASURES = ("peak_m", "side_mass", "section_w_cmd", "w_cmd", "crashes_per_km", "
 
 
 @dataclass(frozen=True)
-class SweepSettings:
-    """What the sweep varies and how much of it it runs (the base preset holds everything else)."""
+class SweepSettings(StoredSettings):
+    """What the sweep varies and how much of it it runs (the base preset holds everything else); stored flat
+    (``to_dict``, ``from_dict``)."""
 
     shares: tuple = (0.15, 0.3, 0.5)
     """The side-road shares (``SteeringPreset.side_road_share``); 0.5 is the limit where the side road is
@@ -62,16 +64,6 @@ class SweepSettings:
             check_int("seeds", s, minimum=0)
         check_int("sessions", self.sessions, minimum=1)
         check_positive("mass_threshold", self.mass_threshold, allow_zero=True)
-
-    def to_dict(self) -> dict:
-        return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
-
-    @classmethod
-    def from_dict(cls, d: dict) -> SweepSettings:
-        names = {f.name for f in fields(cls)}
-        if not isinstance(d, dict) or set(d) - names:
-            raise ValueError(f"not sweep settings: {d!r}")
-        return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
 
 
 def check_shares(shares) -> tuple:
