@@ -213,6 +213,21 @@ def _ratio_replicates(num: np.ndarray, den: np.ndarray, n_resamples: int, rng) -
     return np.concatenate(reps)
 
 
+def _resampled_shares(tables, transform, n_resamples: int, seed) -> tuple[list, list]:
+    """f(pooled share) and the (R,) f(resampled shares) of each method's checked (numerators, denominators)
+    tables, f = ``transform`` or the identity: one two-level bootstrap per method (``_ratio_replicates``),
+    drawn in turn from one generator. Resamples in which any method drew denominators summing to 0 are
+    left out of every method's; at least one must remain."""
+    n_resamples = check_int("n_resamples", n_resamples, minimum=1)
+    rng = _rng(seed)
+    reps = [_ratio_replicates(num, den, n_resamples, rng) for num, den in tables]
+    keep = np.logical_and.reduce([np.isfinite(r) for r in reps])  # (R,)
+    if not keep.any():
+        raise ValueError("every resample drew denominators summing to 0")
+    f = (lambda p: p) if transform is None else transform
+    return [f(num.sum() / den.sum()) for num, den in tables], [f(r[keep]) for r in reps]
+
+
 def _check_ratio_tables(num_name: str, numerators, den_name: str, denominators):
     num, den = check_scores(num_name, numerators), check_scores(den_name, denominators)
     if num.shape != den.shape:
@@ -243,13 +258,8 @@ def ratio_of_sums_interval(
     """
     num, den = _check_ratio_tables("numerators", numerators, "denominators", denominators)
     level = _check_level(level)
-    n_resamples = check_int("n_resamples", n_resamples, minimum=1)
-    reps = _ratio_replicates(num, den, n_resamples, _rng(seed))
-    reps = reps[np.isfinite(reps)]
-    if not len(reps):
-        raise ValueError("every resample drew denominators summing to 0")
-    f = (lambda p: p) if transform is None else transform
-    return _interval(float(f(num.sum() / den.sum())), np.asarray(f(reps), dtype=float), level)
+    (share,), (reps,) = _resampled_shares([(num, den)], transform, n_resamples, seed)
+    return _interval(float(share), np.asarray(reps, dtype=float), level)
 
 
 def ratio_of_sums_difference(
@@ -271,15 +281,8 @@ def ratio_of_sums_difference(
     na, da = _check_ratio_tables("numerators_a", numerators_a, "denominators_a", denominators_a)
     nb, db = _check_ratio_tables("numerators_b", numerators_b, "denominators_b", denominators_b)
     level = _check_level(level)
-    n_resamples = check_int("n_resamples", n_resamples, minimum=1)
-    rng = _rng(seed)
-    ra, rb = _ratio_replicates(na, da, n_resamples, rng), _ratio_replicates(nb, db, n_resamples, rng)
-    keep = np.isfinite(ra) & np.isfinite(rb)
-    if not keep.any():
-        raise ValueError("every resample drew denominators summing to 0")
-    f = (lambda p: p) if transform is None else transform
-    estimate = float(f(na.sum() / da.sum()) - f(nb.sum() / db.sum()))
-    return _interval(estimate, np.asarray(f(ra[keep]) - f(rb[keep]), dtype=float), level)
+    (sa, sb), (ra, rb) = _resampled_shares([(na, da), (nb, db)], transform, n_resamples, seed)
+    return _interval(float(sa - sb), np.asarray(ra - rb, dtype=float), level)
 
 
 # --------------------------------------------------------------------------- few seeds: Welch's t

@@ -28,17 +28,9 @@ def collect(args: argparse.Namespace) -> int:
     """``ibc-tutorial collect``: drive the expert, store the demonstrations in ``--out``."""
     from ibc_tutorial.driving.collect import CollectConfig
     from ibc_tutorial.driving.collect import collect as collect_demonstrations
+    from ibc_tutorial.experiments.settings import config_from
 
-    config = CollectConfig(
-        town=args.town,
-        routes=args.routes,
-        seed=args.seed,
-        min_minutes=args.min_minutes,
-        max_minutes=args.max_minutes,
-        routeless=args.routeless,
-        steer_noise=args.steer_noise,
-        brake_noise=args.brake_noise,
-    )
+    config = config_from(CollectConfig, args)  # --town, --routes, --seed, ...: options named after its fields
     t0 = time.perf_counter()
     log = collect_demonstrations(config)
     seconds = time.perf_counter() - t0

@@ -11,6 +11,9 @@ field, raised before any work.
 
 ``StoredSettings`` is what every preset and the sweep's settings share: their flat JSON form
 (``to_dict``, ``from_dict``) and the fields that differ between two of them (``differences``).
+
+``config_from`` builds a library config from a preset by its ``CONFIG_FIELDS`` (the one map between the
+two), or from a sub-command's arguments named after the config's fields.
 """
 
 from __future__ import annotations
@@ -47,6 +50,21 @@ class StoredSettings:
         """Fields whose values differ: ``{field: (self's value, other's value)}`` (the name excluded)."""
         mine, theirs = self.to_dict(), other.to_dict()
         return {k: (mine[k], theirs[k]) for k in mine if k != "name" and mine[k] != theirs[k]}
+
+
+def config_from(config_type, source, aliases: dict[str, str] | None = None, section: str = "", /, **given):
+    """A library config (``config_type``, a dataclass: ``CollectConfig``, ``DFOConfig``, ...) whose fields
+    are read from ``source``'s attributes; ``given``: fields set here; the others keep their defaults.
+
+    With ``aliases`` (a preset's ``CONFIG_FIELDS``): the fields of ``section`` ("collect": each
+    ``"collect.FIELD": "attribute"`` entry). Without: every field that ``source`` has an attribute of the
+    same name for (a sub-command's arguments, named after the config's fields)."""
+    if aliases is None:
+        names = {f.name: f.name for f in dataclasses.fields(config_type) if hasattr(source, f.name)}
+    else:
+        prefix = f"{section}."
+        names = {k.removeprefix(prefix): v for k, v in aliases.items() if k.startswith(prefix)}
+    return config_type(**{field: getattr(source, name) for field, name in names.items()}, **given)
 
 
 def _parse(name: str, text: str, current):

@@ -3,6 +3,8 @@ function, the final choice.
 
 - ``INITS``, ``initial_weights``, ``initial_samples``: the initialisation, Algorithm 1 line 2 of
   the DA-IBC paper (Langevin starts its chains the same way).
+- ``check_search_settings``: the settings both configs share (population, iterations, bandwidth,
+  initialisation, final choice, action box), checked in one place.
 
 Energy functions come in two forms:
 
@@ -27,7 +29,7 @@ import torch
 
 from ibc_tutorial.kde import inverse_density_weights, kde_density
 from ibc_tutorial.utils import check_box as check_action_box
-from ibc_tutorial.utils import check_choice, check_int, check_tensor, draw_device
+from ibc_tutorial.utils import check_choice, check_int, check_positive, check_tensor, draw_device
 
 SELECTIONS = ("sample", "argmax")
 """Final choice: "sample" ŷ ~ Categorical({ỹ_i}, {p̃_i}) (Algorithm 1 line 14 of the DA-IBC paper)
@@ -52,6 +54,22 @@ def check_box(low, high) -> tuple[float | tuple[float, ...], float | tuple[float
         return tuple(float(x) for x in t) if isinstance(v, Sequence) else float(t[0])
 
     return as_given(low, lo), as_given(high, hi)
+
+
+def check_search_settings(config) -> None:
+    """Validate and normalise, in place, the fields every search's frozen config shares (``DFOConfig``,
+    ``LangevinConfig``): the population ``n_samples`` and the iterations ``n_iters`` (integers >= 1), the
+    KDE ``bandwidth`` (> 0), ``init`` (``INITS``), ``select`` (``SELECTIONS``) and the box ``low``,
+    ``high`` (``check_box``)."""
+    set_ = object.__setattr__  # frozen: the fields are normalised once, when the config is built
+    set_(config, "n_samples", check_int("n_samples", config.n_samples, minimum=1))
+    set_(config, "n_iters", check_int("n_iters", config.n_iters, minimum=1))
+    set_(config, "bandwidth", check_positive("bandwidth", config.bandwidth))
+    check_choice("init", config.init, INITS)
+    check_choice("select", config.select, SELECTIONS)
+    low, high = check_box(config.low, config.high)
+    set_(config, "low", low)
+    set_(config, "high", high)
 
 
 def bounds(low, high, d: int) -> tuple[torch.Tensor, torch.Tensor]:

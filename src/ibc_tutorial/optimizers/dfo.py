@@ -18,10 +18,9 @@ from ibc_tutorial.kde import DEFAULT_BANDWIDTH
 from ibc_tutorial.optimizers import EnergyPolicy, embedded_energy, eval_mode
 from ibc_tutorial.optimizers.common import (  # INITS and the initialisation: importable from here too
     INITS,
-    SELECTIONS,
-    check_box,
     check_call,
     check_expert_actions,
+    check_search_settings,
     energies,
     initial_samples,
     initial_weights,
@@ -29,7 +28,7 @@ from ibc_tutorial.optimizers.common import (  # INITS and the initialisation: im
     prepare_call,
     select_action,
 )
-from ibc_tutorial.utils import check_choice, check_int, check_positive, draw_device
+from ibc_tutorial.utils import check_positive, draw_device
 
 __all__ = [
     "INITS",
@@ -75,17 +74,10 @@ class DFOConfig:
     """Final choice (line 14): "sample" ŷ ~ Categorical({ỹ_i}, {p̃_i}) (the paper) or "argmax" (IBC)."""
 
     def __post_init__(self) -> None:
+        check_search_settings(self)  # n_samples, n_iters, bandwidth, init, select, low, high
         set_ = object.__setattr__  # frozen: normalise the fields once, here
-        set_(self, "n_samples", check_int("n_samples", self.n_samples, minimum=1))
-        set_(self, "n_iters", check_int("n_iters", self.n_iters, minimum=1))
         set_(self, "sigma_init", check_positive("sigma_init", self.sigma_init, allow_zero=True))
         set_(self, "shrink", check_positive("shrink", self.shrink, allow_zero=True))
-        set_(self, "bandwidth", check_positive("bandwidth", self.bandwidth))
-        check_choice("init", self.init, INITS)
-        check_choice("select", self.select, SELECTIONS)
-        low, high = check_box(self.low, self.high)
-        set_(self, "low", low)
-        set_(self, "high", high)
 
 
 @dataclass

@@ -26,9 +26,7 @@ import torch
 
 from ibc_tutorial.kde import DEFAULT_BANDWIDTH
 from ibc_tutorial.optimizers.common import (
-    INITS,
-    SELECTIONS,
-    check_box,
+    check_search_settings,
     energies,
     prepare_call,
     select_action,
@@ -77,19 +75,13 @@ class LangevinConfig:
     """"ibc": noise ε_k · n (the reference: annealing, not sampling); "ula": √ε_k · n (samples exp(−E))."""
 
     def __post_init__(self) -> None:
+        check_search_settings(self)  # n_samples, n_iters, bandwidth, init, select, low, high: as DFOConfig's
         set_ = object.__setattr__  # frozen: normalise the fields once, here
-        set_(self, "n_samples", check_int("n_samples", self.n_samples, minimum=1))
-        set_(self, "n_iters", check_int("n_iters", self.n_iters, minimum=1))
-        for name in ("step_init", "step_final", "delta_clip", "bandwidth"):
+        for name in ("step_init", "step_final", "delta_clip"):
             set_(self, name, check_positive(name, getattr(self, name)))
         for name in ("power", "noise_scale"):
             set_(self, name, check_positive(name, getattr(self, name), allow_zero=True))
-        check_choice("init", self.init, INITS)
-        check_choice("select", self.select, SELECTIONS)
         check_choice("noise", self.noise, NOISES)
-        low, high = check_box(self.low, self.high)
-        set_(self, "low", low)
-        set_(self, "high", high)
 
 
 @dataclass

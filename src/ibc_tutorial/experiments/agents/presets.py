@@ -51,7 +51,7 @@ from dataclasses import dataclass
 
 from ibc_tutorial.driving.bev import LIGHT_ENCODINGS, check_bev_size
 from ibc_tutorial.driving.collect import CollectConfig
-from ibc_tutorial.experiments.settings import StoredSettings
+from ibc_tutorial.experiments.settings import StoredSettings, config_from
 from ibc_tutorial.experiments.settings import with_overrides as _with_overrides
 from ibc_tutorial.optimizers.dfo import DFOConfig
 from ibc_tutorial.training import LR_SCHEDULES, TrainConfig
@@ -61,6 +61,28 @@ LEGACY_LIGHT_ENCODING = "intensity"
 """How presets stored without a ``light_encoding`` field (written before it existed) drew the lights."""
 METHODS = ("bc", "ibc", "da-ibc")
 """The three agents of the DA-IBC paper's sec. 4: Beta BC, conventional IBC and DA-IBC."""
+
+CONFIG_FIELDS = {
+    "collect.routes": "routes",
+    "collect.seed": "collect_seed",
+    "collect.min_minutes": "min_minutes",
+    "collect.max_minutes": "max_minutes",
+    "collect.brake_noise": "brake_noise",
+    "collect.turn_hold_m": "turn_hold_m",
+    "bev.size": "bev_size",
+    "bev.light_encoding": "light_encoding",
+    "train.lr": "lr",
+    "train.lr_schedule": "lr_schedule",
+    "train.batch_size": "batch_size",
+    "dfo.n_samples": "dfo_samples",
+    "dfo.n_iters": "dfo_iters",
+    "dfo.sigma_init": "dfo_sigma_init",
+    "dfo.shrink": "dfo_shrink",
+    "dfo.bandwidth": "kde_bandwidth",
+}
+"""The one map between the library configs' names (``CollectConfig``, the renderer's, ``TrainConfig``,
+``DFOConfig``) and a preset's fields: what ``collect_config``, ``dfo_config`` and ``train_config`` build
+those configs from (``settings.config_from``), and the names ``--set`` accepts beside the fields' own."""
 
 
 @dataclass(frozen=True)
@@ -208,15 +230,7 @@ class Preset(StoredSettings):
     # ---- the library's configs (CONFIG_FIELDS says which field goes where)
     def collect_config(self) -> CollectConfig:
         """The demonstrations' ``CollectConfig``: town01 routes (the paper's sec. 4.1)."""
-        return CollectConfig(
-            town="town01",
-            routes=self.routes,
-            seed=self.collect_seed,
-            min_minutes=self.min_minutes,
-            max_minutes=self.max_minutes,
-            brake_noise=self.brake_noise,
-            turn_hold_m=self.turn_hold_m,
-        )
+        return config_from(CollectConfig, self, CONFIG_FIELDS, "collect", town="town01")
 
     def dfo_config(self, method: str) -> DFOConfig | None:
         """How ``method`` runs Algorithm 1 (None for bc): the original IBC's DFO, or DA-IBC's (module
@@ -231,24 +245,17 @@ class Preset(StoredSettings):
                 "inverse-kde",
                 "sample",
             )  # Algorithm 1: w ∝ 1 / ĝ start, ŷ ~ Categorical(p̃) (line 14)
-        return DFOConfig(
-            n_samples=self.dfo_samples,
-            n_iters=self.dfo_iters,
-            sigma_init=self.dfo_sigma_init,
-            shrink=self.dfo_shrink,
-            bandwidth=self.kde_bandwidth,
-            init=init,
-            select=select,
-        )
+        return config_from(DFOConfig, self, CONFIG_FIELDS, "dfo", init=init, select=select)
 
     def train_config(self, steps_per_epoch: int, seed: int, **extra) -> TrainConfig:
         """The ``TrainConfig`` of a run: ``epochs`` x ``steps_per_epoch`` Adam steps, a callback (evaluation
         and checkpoint) every ``eval_every`` epochs; ``extra``: its other fields (``progress``, ``desc``)."""
-        return TrainConfig(
+        return config_from(
+            TrainConfig,
+            self,
+            CONFIG_FIELDS,
+            "train",
             steps=self.epochs * steps_per_epoch,
-            batch_size=self.batch_size,
-            lr=self.lr,
-            lr_schedule=self.lr_schedule,
             seed=seed,
             log_every=self.eval_every * steps_per_epoch,
             **extra,
@@ -328,29 +335,6 @@ TINY = Preset(
 
 PRESETS = {p.name: p for p in (PAPER, LAPTOP, TINY)}
 """All named presets."""
-
-
-CONFIG_FIELDS = {
-    "collect.routes": "routes",
-    "collect.seed": "collect_seed",
-    "collect.min_minutes": "min_minutes",
-    "collect.max_minutes": "max_minutes",
-    "collect.brake_noise": "brake_noise",
-    "collect.turn_hold_m": "turn_hold_m",
-    "bev.size": "bev_size",
-    "bev.light_encoding": "light_encoding",
-    "train.lr": "lr",
-    "train.lr_schedule": "lr_schedule",
-    "train.batch_size": "batch_size",
-    "dfo.n_samples": "dfo_samples",
-    "dfo.n_iters": "dfo_iters",
-    "dfo.sigma_init": "dfo_sigma_init",
-    "dfo.shrink": "dfo_shrink",
-    "dfo.bandwidth": "kde_bandwidth",
-}
-"""The one map between the library configs' names (``CollectConfig``, the renderer's, ``TrainConfig``,
-``DFOConfig``) and a preset's fields: what ``collect_config``, ``dfo_config`` and ``train_config`` read,
-and the names ``--set`` accepts beside the fields' own."""
 
 
 def get_preset(name: str) -> Preset:

@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from ibc_tutorial.driving.bev import check_bev_size
-from ibc_tutorial.experiments.settings import StoredSettings
+from ibc_tutorial.experiments.settings import StoredSettings, config_from
 from ibc_tutorial.experiments.settings import with_overrides as _with_overrides
 from ibc_tutorial.training import TrainConfig
 from ibc_tutorial.utils import check_choice, check_int, check_positive, check_probability
@@ -133,7 +133,7 @@ class SteeringPreset(StoredSettings):
 
     def train_config(self, seed: int, **extra) -> TrainConfig:
         """The ``TrainConfig`` of one model's run (``extra``: its other fields, e.g. ``log_every``)."""
-        return TrainConfig(steps=self.steps, batch_size=self.batch_size, lr=self.lr, seed=seed, **extra)
+        return config_from(TrainConfig, self, CONFIG_FIELDS, "train", seed=seed, **extra)
 
 
 LAPTOP = SteeringPreset(name="laptop")
@@ -168,7 +168,8 @@ CONFIG_FIELDS = {
     "bev.size": "bev_size",
 }
 """The library configs' names of a preset's fields (``training.TrainConfig``, the renderer's): what
-``train_config`` reads, and names ``--set`` accepts beside the fields' own."""
+``train_config`` builds its config from (``settings.config_from``), and names ``--set`` accepts beside the
+fields' own."""
 
 
 def with_overrides(preset: SteeringPreset, overrides) -> SteeringPreset:
