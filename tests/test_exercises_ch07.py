@@ -294,3 +294,69 @@ def test_exercise_5_text_matches_the_chapter():
     text = next("".join(c["source"]) for c in nb["cells"] if "".join(c["source"]).startswith("## Exercise 5"))
     assert "flag, which draws a yellow line exactly like a red one" in text
     assert "yellow 0.6" in text and abs(float(LIGHT_LEVELS[1]) - 0.6) < 1e-9
+
+
+def _red_light_rule(s0_ok, s1_ok, lateral_ok, at="after"):
+    """The red-light rule with its three comparisons and the point the lane test reads made pluggable."""
+
+    def fn(before, after, entry, direction, state):
+        right = np.array([direction[1], -direction[0]])
+        s0, s1 = (before - entry) @ direction, (after - entry) @ direction
+        point = {"after": after, "before": before, "middle": (before + after) / 2}[at]
+        return bool(state == 2 and s0_ok(s0) and s1_ok(s1) and lateral_ok(abs((point - entry) @ right)))
+
+    return fn
+
+
+@pytest.mark.parametrize(
+    "wrong, words",
+    [
+        (_red_light_rule(lambda s: s < 0, lambda s: s > 0, lambda x: x <= 2.0), "ends the step exactly on"),
+        (_red_light_rule(lambda s: s <= 0, lambda s: s >= 0, lambda x: x <= 2.0), "starts the step exactly"),
+        (_red_light_rule(lambda s: s < 0, lambda s: s >= 0, lambda x: x < 2.0), "edges included"),
+        (_red_light_rule(lambda s: s < 0, lambda s: s >= 0, lambda x: x <= 2.0, at="before"), "*after*"),
+        (_red_light_rule(lambda s: s < 0, lambda s: s >= 0, lambda x: x <= 2.0, at="middle"), "*after*"),
+    ],
+)
+def test_red_light_edges_of_the_rule_get_a_hint(wrong, words):
+    """Strict where the rule is not (and the converse), and the lane tested at another point: each passed
+    before the edges were asked about."""
+    fb = ch07.check_ran_red_light(wrong)
+    assert fb.status == "hint" and words in fb.message, fb.message
+
+
+def test_red_light_edges_are_the_monitors():
+    """The edge cases the checker asks about are decided as ``RedLightMonitor`` decides them."""
+    from types import SimpleNamespace
+
+    for entry, d, _ in ch07.RED_LIGHT_LANES:
+        right = np.array([d[1], -d[0]])
+        monitor = RedLightMonitor([SimpleNamespace(entry=tuple(entry), direction=tuple(d))])
+        cases = [
+            (entry - 0.3 * d, entry.copy()),
+            (entry.copy(), entry + 0.4 * d),
+            (entry - 0.3 * d + 2.5 * right, entry + 0.4 * d + 1.5 * right),
+            (entry - 0.3 * d + 1.5 * right, entry + 0.4 * d + 2.5 * right),
+            (entry - 0.3 * d + 2.0 * right, entry + 0.4 * d + 2.0 * right),
+        ]
+        for before, after in cases:
+            expected = 0 in monitor.crossed(before, after)
+            assert solutions.ch07_ran_red_light(before, after, entry, d, RED) == expected
+
+
+@pytest.mark.parametrize(
+    "wrong, words",
+    [
+        (  # the horizon exclusive: "less than 9.5 m"
+            lambda s, g, v: False if (g >= 9.5 or s == 0) else (s == 2 or (g > 0 and v * v / (2 * g) <= 4.0)),
+            "9.5 m included",
+        ),
+        (  # yellow stops only strictly below the expert's deceleration
+            lambda s, g, v: False if (g > 9.5 or s == 0) else (s == 2 or (g > 0 and v * v / (2 * g) < 4.0)),
+            "<=, not <",
+        ),
+    ],
+)
+def test_expert_stops_strict_where_the_rule_is_not_gets_a_hint(wrong, words):
+    fb = ch07.check_expert_stops(wrong)
+    assert fb.status == "hint" and words in fb.message, fb.message

@@ -19,7 +19,15 @@ import math
 
 import torch
 
-from ibc_tutorial.exercises.core import Feedback, close, correct, hint, mistake_hint, run_check
+from ibc_tutorial.exercises.core import (
+    Feedback,
+    close,
+    correct,
+    hint,
+    mistake_hint,
+    run_check,
+    unnormalised_hint,
+)
 
 _EXPERT = torch.tensor([[0.0, 0.4], [0.1, 0.5], [-0.5, 0.3], [0.4, -0.6], [0.0, 0.45]])
 
@@ -208,12 +216,20 @@ def check_grid_nll(fn) -> Feedback:
                     -(pos.double() + lse + math.log(cell)),
                     "the overall sign: this is the *negative* log-likelihood.",
                 ),
+                (
+                    pos.double()
+                    + torch.logsumexp(torch.cat([-pos.double()[:, None], -grid_e.double()], 1), 1)
+                    + math.log(cell),
+                    "what Z(x) sums over: the grid points alone, not the expert's action as well (the grid "
+                    "already covers the box).",
+                ),
             ]
             if (mistake := mistake_hint(out, mistakes)) is not None:
                 return mistake
+            worst = int((out.double() - ref).abs().argmax())  # the sample the reader's NLL misses most
             return hint(
-                f"your NLL of the first sample is {float(out[0]):.4g} where −log p = E + log Σ e^(−E_g) + "
-                f"log ΔA gives {float(ref[0]):.4g}."
+                f"your NLL of sample {worst} is {float(out[worst]):.4g} where −log p = E + log Σ e^(−E_g) + "
+                f"log ΔA gives {float(ref[worst]):.4g}."
             )
         out2 = fn(pos + 1000, grid_e + 1000, cell)
         if not isinstance(out2, torch.Tensor) or not close(out2, ref, rtol=1e-3, atol=1e-2):
@@ -282,11 +298,10 @@ def check_predicted_shares(fn) -> Feedback:
                     "q is the density of the counter-examples: expert actions plus N(0, σ²I), a KDE with "
                     "bandwidth σ, not chapter 05's 0.2."
                 )
-            if close(out / out.sum(), ref, rtol=1e-3, atol=1e-4):
-                return hint(
-                    "the proportions are right; make the shares sum to 1 (they are shares of the mass near "
-                    "the K actions)."
-                )
+            if (
+                fb := unnormalised_hint(out, ref, "they are shares of the mass near the K actions")
+            ) is not None:
+                return fb
             return hint(
                 f"your shares are {[round(v, 3) for v in out.tolist()]}: compute q at each valid action "
                 "(the expert actions blurred by σ), then share ∝ 1/q."

@@ -16,7 +16,16 @@ import math
 
 import torch
 
-from ibc_tutorial.exercises.core import Feedback, close, correct, hint, mistake_hint, run_check, tensor_answer
+from ibc_tutorial.exercises.core import (
+    Feedback,
+    close,
+    correct,
+    hint,
+    mistake_hint,
+    run_check,
+    tensor_answer,
+    unnormalised_hint,
+)
 from ibc_tutorial.kde import inverse_density_weights
 
 
@@ -141,11 +150,10 @@ def check_inverse_weights(fn) -> Feedback:
         ref = (1 / g) / (1 / g).sum()
         if not close(out, ref, rtol=1e-3, atol=1e-12):
             if abs(float(out.sum()) - 1) > 1e-3:
-                if close(out / out.sum(), ref, rtol=1e-3, atol=1e-12):
-                    return hint(
-                        "the weights are proportional to the right values, but they must sum to 1 (they "
-                        "become sampling probabilities)."
-                    )
+                if (
+                    fb := unnormalised_hint(out, ref, "they become sampling probabilities", atol=1e-12)
+                ) is not None:
+                    return fb
                 return hint(
                     f"your weights sum to {float(out.sum()):.4g}: normalise them so that they sum to 1."
                 )

@@ -219,6 +219,40 @@ def _red_light_lane(ask, entry, d, name) -> Feedback | None:
                     else f" (This lane heads {name}: across the lane is perpendicular to `direction`.)"
                 )
             )
+    return _red_light_edges(ask, entry, d, right, name)
+
+
+def _red_light_edges(ask, entry, d, right, name) -> Feedback | None:
+    """The rule's edges on one lane: a rear that ends exactly on the line has crossed it, one that starts
+    on it had crossed it the step before; a rear exactly 2 m from the centre line is still in the lane
+    (axis-aligned lanes only, where that offset is exact in floating point); the lane test is on the
+    rear's position after the step."""
+    from ibc_tutorial.driving.lights import RED
+
+    if not ask(entry - 0.3 * d, entry.copy(), RED):
+        return hint(
+            "a rear that ends the step exactly on the stop line has crossed it (after the step it is on the "
+            "line or past it): that step counts, with >= where the position after the step is compared."
+        )
+    if ask(entry.copy(), entry + 0.4 * d, RED):
+        return hint(
+            "a rear that starts the step exactly on the stop line reached it in the step before, which "
+            "counted it: before the step the rear must be strictly before the line."
+        )
+    if name in ("north", "east", "south"):
+        for side in (2.0, -2.0):
+            if not ask(entry - 0.3 * d + side * right, entry + 0.4 * d + side * right, RED):
+                return hint(
+                    "a crossing exactly 2 m from the lane's centre line is on the lane's edge and counts: "
+                    "the lane reaches 2 m to each side, edges included (<=, not <)."
+                )
+    into = (entry - 0.3 * d + 2.5 * right, entry + 0.4 * d + 1.5 * right)  # ends inside the lane
+    out_of = (entry - 0.3 * d + 1.5 * right, entry + 0.4 * d + 2.5 * right)  # ends outside it
+    if not ask(*into, RED) or ask(*out_of, RED):
+        return hint(
+            "the lane test is on where the rear is *after* the step: a rear that ends the step within 2 m of "
+            "the centre line counts, wherever it came from; one that ends it further out does not."
+        )
     return None
 
 
@@ -324,6 +358,7 @@ STOP_CASES = [  # (state, gap_m, speed): 0 green, 1 yellow, 2 red
     (1, 1.5, 6.0),
     (2, 9.7, 6.0),  # just beyond the horizon (9.5 m): a horizon of 10 m stops here
     (2, 9.3, 6.0),  # just within it: a horizon of 9 m drives on here
+    (2, 9.5, 6.0),  # exactly at it: within (<=), so red stops here
     (1, 9.4, 3.0),  # yellow, within it, slow enough to stop
     (1, 9.8, 2.0),  # yellow, beyond it
 ]
@@ -361,11 +396,16 @@ def check_expert_stops(fn) -> Feedback:
             )
         if any(s == 2 and g <= config.stop_distance_m for s, g, _ in wrong):
             return hint(
-                f"distance: the expert considers its light within {config.stop_distance_m} m of the line, "
-                "and a "
-                "red light within that distance always stops it."
+                f"distance: the expert considers its light within {config.stop_distance_m} m of the line "
+                f"({config.stop_distance_m} m included), and a red light within that distance always stops "
+                "it."
             )
         yellow = [c for c in wrong if c[0] == 1]
+        if yellow and all(c[0] == 1 and c[2] ** 2 / (2 * c[1]) == config.yellow_brake for c in wrong):
+            return hint(
+                f"at yellow, a stop that needs exactly the expert's {config.yellow_brake} m/s^2 is one it "
+                "makes: it stops when v^2 / (2 gap) is at or below that deceleration (<=, not <)."
+            )
         near_yellow = [k for k, c in enumerate(STOP_CASES) if c[0] == 1 and c[1] <= config.stop_distance_m]
         if yellow and all(answers[k] for k in near_yellow) and all(c[0] == 1 for c in wrong):
             return hint(

@@ -105,6 +105,14 @@ def mistake_hint(out, mistakes, rtol: float = 1e-4, atol: float = 1e-4) -> Feedb
     return None
 
 
+def unnormalised_hint(out, ref, what: str, rtol: float = 1e-3, atol: float = 1e-4) -> Feedback | None:
+    """The hint "right proportions, but not summing to 1" when ``out`` rescaled to sum to 1 is ``close``
+    to ``ref`` (which sums to 1), else None; ``what`` says what the values are ("shares of ...")."""
+    if close(out / out.sum(), ref, rtol=rtol, atol=atol):
+        return hint(f"the proportions are right; make them sum to 1 ({what}).")
+    return None
+
+
 def close(a, b, rtol: float = 1e-4, atol: float = 1e-4) -> bool:
     """Whether the reader's ``a`` and the reference ``b`` (tensors, arrays or numbers) have the same
     shape and are finite and equal within ``rtol`` and ``atol`` (compared in float64)."""
