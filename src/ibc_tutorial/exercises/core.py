@@ -7,6 +7,7 @@ import traceback
 from collections.abc import Callable
 from dataclasses import dataclass
 
+import numpy as np
 import torch
 
 NOT_ATTEMPTED = "not attempted"
@@ -128,7 +129,7 @@ def close(a, b, rtol: float = 1e-4, atol: float = 1e-4) -> bool:
 def number_answer(value, name: str) -> float | Feedback:
     """A reader's function's return value as a finite float, or the hint that says why it is not one
     (``name`` is the function's name in the exercise). True and False are refused: they are not numbers."""
-    if isinstance(value, bool) or type(value).__name__ == "bool_":
+    if isinstance(value, (bool, np.bool_)):
         return hint(f"{name} must return a number, got {type(value).__name__}.")
     try:
         v = float(value)
