@@ -360,3 +360,35 @@ def test_red_light_edges_are_the_monitors():
 def test_expert_stops_strict_where_the_rule_is_not_gets_a_hint(wrong, words):
     fb = ch07.check_expert_stops(wrong)
     assert fb.status == "hint" and words in fb.message, fb.message
+
+
+def test_exercise_3_text_states_the_edges_the_checker_asks_about():
+    """The checker asks about a rear ending or starting exactly on the line, a crossing exactly 2 m from
+    the centre line and the lane tested after the step: the exercise says how each is decided."""
+    import json
+    from pathlib import Path
+
+    nb = json.loads(Path(__file__).parents[1].joinpath("exercises/07_car_and_town.ipynb").read_text())
+    text = next("".join(c["source"]) for c in nb["cells"] if "".join(c["source"]).startswith("## Exercise 3"))
+    for words in (
+        "strictly before it before the step",
+        "on it or past it after the step",
+        "after the step must",
+    ):
+        assert words in text, words
+    assert "at most 2 m, edge included" in text
+
+
+def test_chapter_07_states_the_experts_horizon_as_the_library_applies_it():
+    """Exercise 5 sends the reader to the chapter's item 4: the horizon is inclusive, as in
+    ``stops_for_light``."""
+    import json
+    from pathlib import Path
+
+    from ibc_tutorial.driving.expert import ExpertConfig, stops_for_light
+
+    nb = json.loads(Path(__file__).parents[1].joinpath("book/07_car_and_town.ipynb").read_text())
+    text = "".join("".join(c["source"]) for c in nb["cells"] if c["cell_type"] == "markdown")
+    horizon = ExpertConfig().stop_distance_m
+    assert f"A red or yellow stop line of its lane {horizon} m ahead or closer makes it stop" in text
+    assert stops_for_light(2, horizon, 6.0) and not stops_for_light(2, horizon + 1e-9, 6.0)
