@@ -198,3 +198,29 @@ def test_grid_nll_hint_quotes_a_sample_the_answer_gets_wrong(k, offset):
     assert fb.status == "hint", fb.message
     if "sample" in fb.message:
         assert f"sample {k} " in fb.message, fb.message
+
+
+def _distinct_rows(acts, b, n, sigma, generator=None):
+    """Draws from the set's distinct actions, as if repeated ones were one."""
+    rows = torch.unique(acts, dim=0)
+    idx = torch.randint(0, len(rows), (b, n), generator=generator)
+    return rows[idx] + sigma * torch.randn(b, n, acts.shape[1], generator=generator)
+
+
+@settings(max_examples=10, deadline=None)
+@given(batch_size=st.integers(1, 39))
+def test_sampler_that_draws_from_the_first_rows_only_gets_a_hint(batch_size):
+    """Rows drawn among the first ``batch_size`` (or fewer) of the expert set: correct while the set is no
+    larger than the batch, which every case was."""
+
+    def fn(acts, b, n, sigma, generator=None):
+        idx = torch.randint(0, min(batch_size, len(acts)), (b, n), generator=generator)
+        return acts[idx] + sigma * torch.randn(b, n, acts.shape[1], generator=generator)
+
+    fb = ch04.check_expert_negatives(fn)
+    assert fb.status == "hint", fb.message
+
+
+def test_sampler_over_distinct_actions_gets_a_hint():
+    fb = ch04.check_expert_negatives(_distinct_rows)
+    assert fb.status == "hint" and "repeated actions included" in fb.message, fb.message

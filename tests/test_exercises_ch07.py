@@ -5,7 +5,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from ibc_tutorial.driving import get_renderer
@@ -392,3 +392,33 @@ def test_chapter_07_states_the_experts_horizon_as_the_library_applies_it():
     horizon = ExpertConfig().stop_distance_m
     assert f"A red or yellow stop line of its lane {horizon} m ahead or closer makes it stop" in text
     assert stops_for_light(2, horizon, 6.0) and not stops_for_light(2, horizon + 1e-9, 6.0)
+
+
+@settings(max_examples=15, deadline=None)
+@given(limit=st.floats(0.9, 3.0))
+@example(limit=1.0)
+def test_pid_that_clips_its_output_gets_a_hint(limit):
+    """The exercise asks for u_t unclipped; the first case's outputs stay within ±0.9, so only a case with
+    large errors tells a clip apart."""
+
+    def fn(errors, kp, ki, kd, dt):
+        return [max(-limit, min(limit, u)) for u in solutions.ch07_pid_outputs(errors, kp, ki, kd, dt)]
+
+    fb = ch07.check_pid(fn)
+    assert fb.status == "hint", fb.message
+    if limit == 1.0:
+        assert "you clip them" in fb.message, fb.message
+
+
+def test_pid_whose_sum_lags_one_step_gets_a_hint():
+    def fn(errors, kp, ki, kd, dt):
+        out, integral, prev = [], 0.0, None
+        for e in errors:
+            d = 0.0 if prev is None else (e - prev) / dt
+            out.append(kp * e + ki * integral + kd * d)
+            integral += e * dt
+            prev = e
+        return out
+
+    fb = ch07.check_pid(fn)
+    assert fb.status == "hint" and "k <= t" in fb.message, fb.message

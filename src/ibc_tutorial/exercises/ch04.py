@@ -97,6 +97,29 @@ def check_expert_negatives(fn) -> Feedback:
                 "some expert actions are drawn far more often than others: draw each one with equal "
                 "probability (uniformly over the M rows)."
             )
+        # every row counts, a repeated action as often as it stands in the set, beyond the first B rows
+        repeated = torch.tensor([[-1.0], [-1.0], [-1.0], [1.0]])  # (4, 1): full brake three times of four
+        draws = fn(repeated.clone(), 200, 100, 0.0, _gen(5))
+        bad = _shape_feedback(draws, (200, 100, 1))
+        if bad:
+            return bad
+        if abs(float((draws == -1.0).float().mean()) - 0.75) > 0.03:
+            return hint(
+                "an action that stands in `expert_actions` three times of four must be drawn three times "
+                "of four: draw rows of the set with equal probability, repeated actions included (as the "
+                "minibatch holds them), not its distinct values."
+            )
+        many_rows = torch.linspace(-1, 1, 40)[:, None]  # (40, 1): more expert actions than samples
+        draws = fn(many_rows.clone(), 2, 500, 0.0, _gen(6))
+        bad = _shape_feedback(draws, (2, 500, 1))
+        if bad:
+            return bad
+        if len(torch.unique(draws)) < len(many_rows):
+            return hint(
+                f"from {len(many_rows)} expert actions and a batch of 2, your counter-examples use "
+                f"{len(torch.unique(draws))} of them: draw from all M rows of `expert_actions`, whatever "
+                "batch_size is."
+            )
         # the noise: mean and variance = expert set's + sigma^2
         sigma = 0.1
         big = fn(_EXPERT.clone(), 400, 250, sigma, _gen(4)).reshape(-1, 2).double()

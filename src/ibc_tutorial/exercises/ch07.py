@@ -77,16 +77,17 @@ def check_yaw_rate(fn) -> Feedback:
 
 
 # --------------------------------------------------------------------------- 2. PID
-def _pid_ref(errors, kp, ki, kd, dt, integral_dt=True, deriv_dt=True, first_deriv=False):
+def _pid_ref(errors, kp, ki, kd, dt, integral_dt=True, deriv_dt=True, first_deriv=False, late_sum=False):
     out, integral, prev = [], 0.0, None
     for e in errors:
+        before = integral  # the sum up to the step before (late_sum: the current error not yet in it)
         integral += e * (dt if integral_dt else 1.0)
         if prev is None:
             d = (e / (dt if deriv_dt else 1.0)) if first_deriv else 0.0
         else:
             d = (e - prev) / (dt if deriv_dt else 1.0)
         prev = e
-        out.append(kp * e + ki * integral + kd * d)
+        out.append(kp * e + ki * (before if late_sum else integral) + kd * d)
     return out
 
 
@@ -109,7 +110,22 @@ def check_pid(fn) -> Feedback:
         pid = PID(*gains)
         ref = [pid.step(e) for e in errors]
         if np.allclose(out, ref, rtol=1e-6, atol=1e-9):
-            return correct("Your PID matches the expert's controller step by step.")
+            # large errors: outputs beyond ±1, which the exercise asks for unclipped
+            big = [3.0, -2.5, 0.5, 4.0]
+            pid = PID(*gains)
+            ref_big = [pid.step(e) for e in big]
+            out_big = [float(u) for u in fn(list(big), *gains)]
+            if np.allclose(out_big, ref_big, rtol=1e-6, atol=1e-9):
+                return correct("Your PID matches the expert's controller step by step.")
+            if np.allclose(out_big, np.clip(ref_big, -1.0, 1.0), rtol=1e-6, atol=1e-9):
+                return hint(
+                    "right while the outputs stay within ±1, but you clip them: the exercise asks for u_t "
+                    "itself (the expert clips the steering afterwards, outside the controller)."
+                )
+            return hint(
+                f"right for errors {errors}, wrong for errors {big}: check that nothing in your code depends "
+                "on the size of the errors."
+            )
         mistakes = [
             (
                 dict(integral_dt=False),
@@ -118,6 +134,11 @@ def check_pid(fn) -> Feedback:
             (
                 dict(deriv_dt=False),
                 "the derivative term: it is the change of the error divided by dt, a rate.",
+            ),
+            (
+                dict(late_sum=True),
+                "the integral term: the sum runs over k <= t, so the current error e_t is in it already at "
+                "step t (add it before computing u_t).",
             ),
             (
                 dict(first_deriv=True),
