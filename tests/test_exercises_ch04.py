@@ -224,3 +224,9 @@ def test_sampler_that_draws_from_the_first_rows_only_gets_a_hint(batch_size):
 def test_sampler_over_distinct_actions_gets_a_hint():
     fb = ch04.check_expert_negatives(_distinct_rows)
     assert fb.status == "hint" and "repeated actions included" in fb.message, fb.message
+
+
+def test_grid_nll_with_the_chapters_cell_area_hard_coded_gets_a_hint():
+    """The chapter's cell area, 0.04, fixed in the code: the checker's only area used to be 0.04."""
+    fb = ch04.check_grid_nll(lambda p, e, c: solutions.ch04_grid_nll(p, e, (2 / 10) ** 2))
+    assert fb.status == "hint" and "use the `cell_volume` you are given" in fb.message, fb.message

@@ -220,3 +220,17 @@ def test_verdict_by_width_and_estimate_gets_a_hint():
 
     fb = ch09.check_verdict(fn)
     assert fb.status == "hint" and "whole interval lies" in fb.message, fb.message
+
+
+def test_verdict_with_the_upper_end_non_strict_gets_a_hint():
+    """'does not hold' for an interval ending exactly on the threshold: no case had its upper end there."""
+
+    def fn(estimate, low, high, threshold):
+        if low > threshold:
+            return "holds"
+        if high <= threshold:
+            return "does not hold"
+        return "cannot tell at this scale"
+
+    fb = ch09.check_verdict(fn)
+    assert fb.status == "hint" and "ends exactly on the threshold" in fb.message, fb.message

@@ -254,6 +254,13 @@ def check_grid_nll(fn) -> Feedback:
                 f"your NLL of sample {worst} is {float(out[worst]):.4g} where −log p = E + log Σ e^(−E_g) + "
                 f"log ΔA gives {float(ref[worst]):.4g}."
             )
+        other_cell = (2 / 40) ** 2  # a finer grid: the cell area is an argument, not the chapter's number
+        out_cell = fn(pos.clone(), grid_e.clone(), other_cell)
+        if not isinstance(out_cell, torch.Tensor) or not close(out_cell, _nll_ref(pos, grid_e, other_cell)):
+            return hint(
+                f"right for a cell area of {cell:g}, wrong for {other_cell:g}: use the `cell_volume` you are "
+                "given."
+            )
         out2 = fn(pos + 1000, grid_e + 1000, cell)
         if not isinstance(out2, torch.Tensor) or not close(out2, ref, rtol=1e-3, atol=1e-2):
             return hint(

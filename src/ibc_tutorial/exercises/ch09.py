@@ -277,6 +277,7 @@ VERDICT_CASES = [  # (estimate, low, high, threshold)
     (40.0, 0.0, 90.0, 0.0),
     (0.62, 0.60, 0.66, 0.60),
     (30.0, 2.0, 150.0, 0.0),  # asymmetric about the estimate: "wide, so cannot tell" is wrong here
+    (-25.0, -60.0, 0.0, 0.0),  # the upper end on the threshold: not below it
     (0.80, 0.52, 0.84, 0.85),
 ]
 
