@@ -273,3 +273,19 @@ def test_predict_mae_side_by_a_share_above_half_is_not_correct(share):
         return "anywhere in the gap"
 
     assert ch01.check_predict_mae_side(fn).status == "hint"
+
+
+@pytest.mark.parametrize(
+    "wrong, words",
+    [
+        (lambda a: float(a[1:].mean()), "leaves one action out"),
+        (lambda a: float(a[:-1].mean()), "leaves one action out"),
+        (lambda a: float(a.sum() / (len(a) - 1)), "N - 1"),
+        (lambda a: float((a[a > 0].mean() + a[a <= 0].mean()) / 2), "two groups"),
+    ],
+)
+def test_best_constant_near_misses_are_named(wrong, words):
+    """Off by one action, or the two groups weighed alike: the hint says which, not "a grid search"."""
+    fb = ch01.check_best_constant_mse(wrong)
+    assert fb.status == "hint" and words in fb.message, fb.message
+    assert "mean" not in fb.message.lower().replace("mean squared", "")  # the answer is not given

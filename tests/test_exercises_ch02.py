@@ -244,3 +244,13 @@ def test_beta_nan_to_num_at_the_bounds_gets_a_hint():
         return -torch.nan_to_num(log_f, neginf=-30.0).sum(1).mean()
 
     assert ch02.check_beta_nll(fn).status == "hint"
+
+
+def test_beta_can_represent_accepts_numpy_booleans():
+    """A prediction computed with numpy answers np.True_ / np.False_: an answer, not a type error."""
+    import numpy as np
+
+    fb = ch02.check_beta_can_represent(lambda shape: np.bool_(solutions.ch02_beta_can_represent(shape)))
+    assert fb.status == "correct", fb.message
+    fb = ch02.check_beta_can_represent(lambda shape: np.bool_(shape != "flat"))
+    assert fb.status == "hint" and "alpha = beta = 1" in fb.message, fb.message

@@ -5,6 +5,8 @@ import math
 
 import pytest
 import torch
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from ibc_tutorial.exercises import ch04, solutions
 from ibc_tutorial.metrics import grid_nll
@@ -169,3 +171,62 @@ def test_predicted_shares_mistakes(name):
     fn, words = SHARE_MISTAKES[name]
     fb = ch04.check_predicted_shares(fn)
     assert fb.status == "hint" and words in fb.message, fb.message
+
+
+def test_grid_nll_with_the_expert_among_the_grid_gets_a_hint():
+    """Z(x) over the grid and the expert's action too: the first sample's NLL agrees to four digits, and
+    the hint used to quote that sample."""
+
+    def fn(p, e, c):
+        return p + torch.logsumexp(torch.cat([-p[:, None], -e], 1), 1) + math.log(c)
+
+    fb = ch04.check_grid_nll(fn)
+    assert fb.status == "hint" and "grid points alone" in fb.message, fb.message
+
+
+@settings(max_examples=30, deadline=None)
+@given(k=st.integers(0, 5), offset=st.one_of(st.floats(-5.0, -0.05), st.floats(0.05, 5.0)))
+def test_grid_nll_hint_quotes_a_sample_the_answer_gets_wrong(k, offset):
+    """An answer wrong at one sample only: the fallback hint names that sample, never one it got right."""
+
+    def fn(p, e, c):
+        out = solutions.ch04_grid_nll(p, e, c).clone()
+        out[k] += offset
+        return out
+
+    fb = ch04.check_grid_nll(fn)
+    assert fb.status == "hint", fb.message
+    if "sample" in fb.message:
+        assert f"sample {k} " in fb.message, fb.message
+
+
+def _distinct_rows(acts, b, n, sigma, generator=None):
+    """Draws from the set's distinct actions, as if repeated ones were one."""
+    rows = torch.unique(acts, dim=0)
+    idx = torch.randint(0, len(rows), (b, n), generator=generator)
+    return rows[idx] + sigma * torch.randn(b, n, acts.shape[1], generator=generator)
+
+
+@settings(max_examples=10, deadline=None)
+@given(batch_size=st.integers(1, 39))
+def test_sampler_that_draws_from_the_first_rows_only_gets_a_hint(batch_size):
+    """Rows drawn among the first ``batch_size`` (or fewer) of the expert set: correct while the set is no
+    larger than the batch, which every case was."""
+
+    def fn(acts, b, n, sigma, generator=None):
+        idx = torch.randint(0, min(batch_size, len(acts)), (b, n), generator=generator)
+        return acts[idx] + sigma * torch.randn(b, n, acts.shape[1], generator=generator)
+
+    fb = ch04.check_expert_negatives(fn)
+    assert fb.status == "hint", fb.message
+
+
+def test_sampler_over_distinct_actions_gets_a_hint():
+    fb = ch04.check_expert_negatives(_distinct_rows)
+    assert fb.status == "hint" and "repeated actions included" in fb.message, fb.message
+
+
+def test_grid_nll_with_the_chapters_cell_area_hard_coded_gets_a_hint():
+    """The chapter's cell area, 0.04, fixed in the code: the checker's only area used to be 0.04."""
+    fb = ch04.check_grid_nll(lambda p, e, c: solutions.ch04_grid_nll(p, e, (2 / 10) ** 2))
+    assert fb.status == "hint" and "use the `cell_volume` you are given" in fb.message, fb.message

@@ -128,11 +128,11 @@ BANDWIDTH_MISTAKES = {
     "largest effective sample size": (_max_ess, "nearly uniform"),
     "another ESS formula": (_ess_without_square, "nearly uniform"),
     "the paper's h whatever the data": (lambda a, r, c, m: 0.2, "compute it as 1 / Σ w_i²"),
-    "smallest passing bandwidth": (_smallest_passing, "another candidate that passes"),
+    "smallest passing bandwidth": (_smallest_passing, "passes it too"),
     "index instead of bandwidth": (lambda a, r, c, m: 4, "not its index"),
     "not a candidate": (lambda a, r, c, m: 0.25, "not one of the candidates"),
     "not a number": (lambda a, r, c, m: "0.2", "one bandwidth"),
-    "fixed answer": (lambda a, r, c, m: 0.3, "another candidate"),
+    "fixed answer": (lambda a, r, c, m: 0.3, "use the min_ess you are given"),
 }
 
 
@@ -145,3 +145,31 @@ def test_choose_bandwidth_mistakes(name):
     fn, words = BANDWIDTH_MISTAKES[name]
     fb = ch05.check_choose_bandwidth(fn)
     assert fb.status == "hint" and words in fb.message, fb.message
+
+
+def test_choose_bandwidth_with_a_hard_coded_floor_is_told_to_use_min_ess():
+    """min_ess hard-coded to the first case's 200: the hint names the floor, not the share comparison
+    (which the answer gets right)."""
+    fb = ch05.check_choose_bandwidth(lambda a, r, c, m: solutions.ch05_choose_bandwidth(a, r, c, 200.0))
+    assert fb.status == "hint" and "use the min_ess you are given" in fb.message, fb.message
+
+
+def test_choose_bandwidth_with_a_wrong_effective_sample_size_is_not_sent_to_the_shares_alone():
+    """An effective sample size of the unnormalised weights (M w) rejects every candidate: the hint names
+    the test as well as the shares."""
+    from ibc_tutorial.kde import inverse_density_weights
+
+    def fn(actions, rare, candidates, min_ess):
+        ok = [
+            h
+            for h in candidates
+            if float(1 / ((len(actions) * inverse_density_weights(actions, h)) ** 2).sum()) >= min_ess
+        ]
+        return (
+            max(ok, key=lambda h: float(inverse_density_weights(actions, h)[rare].sum()))
+            if ok
+            else candidates[0]
+        )
+
+    fb = ch05.check_choose_bandwidth(fn)
+    assert fb.status == "hint" and "normalised to sum to 1" in fb.message, fb.message

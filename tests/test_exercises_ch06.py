@@ -267,3 +267,16 @@ def test_dfo_step_noise_a_few_percent_off_gets_a_hint_about_the_spread(scale):
 
     fb = ch06.check_dfo_step(fn)
     assert fb.status == "hint" and "standard deviation" in fb.message, fb.message
+
+
+@pytest.mark.parametrize("width", ["half", "whole"])
+def test_dfo_step_sigma_relative_to_the_box_gets_a_hint(width):
+    """σ read as a share of the box (times its half-width, or its width) passed while the noise was only
+    tested in [-1, 1], whose half-width is 1."""
+
+    def fn(samples, energies, sigma, low, high, generator):
+        scale = (high - low) / 2 if width == "half" else high - low
+        return solutions.ch06_dfo_step(samples, energies, sigma * scale, low, high, generator)
+
+    fb = ch06.check_dfo_step(fn)
+    assert fb.status == "hint" and "standard deviation" in fb.message, fb.message

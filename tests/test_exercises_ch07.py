@@ -5,7 +5,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from ibc_tutorial.driving import get_renderer
@@ -294,3 +294,131 @@ def test_exercise_5_text_matches_the_chapter():
     text = next("".join(c["source"]) for c in nb["cells"] if "".join(c["source"]).startswith("## Exercise 5"))
     assert "flag, which draws a yellow line exactly like a red one" in text
     assert "yellow 0.6" in text and abs(float(LIGHT_LEVELS[1]) - 0.6) < 1e-9
+
+
+def _red_light_rule(s0_ok, s1_ok, lateral_ok, at="after"):
+    """The red-light rule with its three comparisons and the point the lane test reads made pluggable."""
+
+    def fn(before, after, entry, direction, state):
+        right = np.array([direction[1], -direction[0]])
+        s0, s1 = (before - entry) @ direction, (after - entry) @ direction
+        point = {"after": after, "before": before, "middle": (before + after) / 2}[at]
+        return bool(state == 2 and s0_ok(s0) and s1_ok(s1) and lateral_ok(abs((point - entry) @ right)))
+
+    return fn
+
+
+@pytest.mark.parametrize(
+    "wrong, words",
+    [
+        (_red_light_rule(lambda s: s < 0, lambda s: s > 0, lambda x: x <= 2.0), "ends the step exactly on"),
+        (_red_light_rule(lambda s: s <= 0, lambda s: s >= 0, lambda x: x <= 2.0), "starts the step exactly"),
+        (_red_light_rule(lambda s: s < 0, lambda s: s >= 0, lambda x: x < 2.0), "edges included"),
+        (_red_light_rule(lambda s: s < 0, lambda s: s >= 0, lambda x: x <= 2.0, at="before"), "*after*"),
+        (_red_light_rule(lambda s: s < 0, lambda s: s >= 0, lambda x: x <= 2.0, at="middle"), "*after*"),
+    ],
+)
+def test_red_light_edges_of_the_rule_get_a_hint(wrong, words):
+    """Strict where the rule is not (and the converse), and the lane tested at another point: each passed
+    before the edges were asked about."""
+    fb = ch07.check_ran_red_light(wrong)
+    assert fb.status == "hint" and words in fb.message, fb.message
+
+
+def test_red_light_edges_are_the_monitors():
+    """The edge cases the checker asks about are decided as ``RedLightMonitor`` decides them."""
+    from types import SimpleNamespace
+
+    for entry, d, _ in ch07.RED_LIGHT_LANES:
+        right = np.array([d[1], -d[0]])
+        monitor = RedLightMonitor([SimpleNamespace(entry=tuple(entry), direction=tuple(d))])
+        cases = [
+            (entry - 0.3 * d, entry.copy()),
+            (entry.copy(), entry + 0.4 * d),
+            (entry - 0.3 * d + 2.5 * right, entry + 0.4 * d + 1.5 * right),
+            (entry - 0.3 * d + 1.5 * right, entry + 0.4 * d + 2.5 * right),
+            (entry - 0.3 * d + 2.0 * right, entry + 0.4 * d + 2.0 * right),
+        ]
+        for before, after in cases:
+            expected = 0 in monitor.crossed(before, after)
+            assert solutions.ch07_ran_red_light(before, after, entry, d, RED) == expected
+
+
+@pytest.mark.parametrize(
+    "wrong, words",
+    [
+        (  # the horizon exclusive: "less than 9.5 m"
+            lambda s, g, v: False if (g >= 9.5 or s == 0) else (s == 2 or (g > 0 and v * v / (2 * g) <= 4.0)),
+            "9.5 m included",
+        ),
+        (  # yellow stops only strictly below the expert's deceleration
+            lambda s, g, v: False if (g > 9.5 or s == 0) else (s == 2 or (g > 0 and v * v / (2 * g) < 4.0)),
+            "<=, not <",
+        ),
+    ],
+)
+def test_expert_stops_strict_where_the_rule_is_not_gets_a_hint(wrong, words):
+    fb = ch07.check_expert_stops(wrong)
+    assert fb.status == "hint" and words in fb.message, fb.message
+
+
+def test_exercise_3_text_states_the_edges_the_checker_asks_about():
+    """The checker asks about a rear ending or starting exactly on the line, a crossing exactly 2 m from
+    the centre line and the lane tested after the step: the exercise says how each is decided."""
+    import json
+    from pathlib import Path
+
+    nb = json.loads(Path(__file__).parents[1].joinpath("exercises/07_car_and_town.ipynb").read_text())
+    text = next("".join(c["source"]) for c in nb["cells"] if "".join(c["source"]).startswith("## Exercise 3"))
+    for words in (
+        "strictly before it before the step",
+        "on it or past it after the step",
+        "after the step must",
+    ):
+        assert words in text, words
+    assert "at most 2 m, edge included" in text
+
+
+def test_chapter_07_states_the_experts_horizon_as_the_library_applies_it():
+    """Exercise 5 sends the reader to the chapter's item 4: the horizon is inclusive, as in
+    ``stops_for_light``."""
+    import json
+    from pathlib import Path
+
+    from ibc_tutorial.driving.expert import ExpertConfig, stops_for_light
+
+    nb = json.loads(Path(__file__).parents[1].joinpath("book/07_car_and_town.ipynb").read_text())
+    text = "".join("".join(c["source"]) for c in nb["cells"] if c["cell_type"] == "markdown")
+    horizon = ExpertConfig().stop_distance_m
+    assert f"A red or yellow stop line of its lane {horizon} m ahead or closer makes it stop" in text
+    assert stops_for_light(2, horizon, 6.0) and not stops_for_light(2, horizon + 1e-9, 6.0)
+
+
+@settings(max_examples=15, deadline=None)
+@given(limit=st.floats(0.9, 3.0))
+@example(limit=1.0)
+def test_pid_that_clips_its_output_gets_a_hint(limit):
+    """The exercise asks for u_t unclipped; the first case's outputs stay within ±0.9, so only a case with
+    large errors tells a clip apart."""
+
+    def fn(errors, kp, ki, kd, dt):
+        return [max(-limit, min(limit, u)) for u in solutions.ch07_pid_outputs(errors, kp, ki, kd, dt)]
+
+    fb = ch07.check_pid(fn)
+    assert fb.status == "hint", fb.message
+    if limit == 1.0:
+        assert "you clip them" in fb.message, fb.message
+
+
+def test_pid_whose_sum_lags_one_step_gets_a_hint():
+    def fn(errors, kp, ki, kd, dt):
+        out, integral, prev = [], 0.0, None
+        for e in errors:
+            d = 0.0 if prev is None else (e - prev) / dt
+            out.append(kp * e + ki * integral + kd * d)
+            integral += e * dt
+            prev = e
+        return out
+
+    fb = ch07.check_pid(fn)
+    assert fb.status == "hint" and "k <= t" in fb.message, fb.message

@@ -212,3 +212,9 @@ def test_exercise_1_says_the_score_is_the_papers_own():
     text = next("".join(c["source"]) for c in nb["cells"] if "".join(c["source"]).startswith("## Exercise 1"))
     assert "as CARLA's leaderboard does" not in text
     assert "its own score" in text and "route completion" in text
+
+
+def test_a_numpy_boolean_is_not_a_number():
+    """np.True_ converts to 1.0 like True; numpy 2 names its type "bool", which the check used to miss."""
+    fb = ch08.check_unseen_share(lambda probs, batch_size: np.bool_(True))
+    assert fb.status == "hint" and "must return a number" in fb.message, fb.message

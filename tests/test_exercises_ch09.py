@@ -180,3 +180,57 @@ def test_verdict_mistakes(name):
     fn, words = VERDICT_MISTAKES[name]
     fb = ch09.check_verdict(fn)
     assert fb.status == "hint" and words in fb.message, fb.message
+
+
+def _symmetric_interval(kind):
+    """The two-level bootstrap's differences, read as mean ± 1.96 sd or reflected about the estimate."""
+
+    def fn(a, b, n, rng):
+        ref = solutions.ch09_bootstrap_difference(a, b, n, rng)  # consumes rng like the reference
+        diffs = []
+        for x in (a, b):
+            agents = rng.integers(len(x), size=(n, len(x)))
+            episodes = rng.integers(x.shape[1], size=(n, len(x), x.shape[1]))
+            diffs.append(x[agents[:, :, None], episodes].mean(axis=(1, 2)))
+        d = diffs[0] - diffs[1]
+        if kind == "normal":
+            return d.mean() - 1.96 * d.std(), d.mean() + 1.96 * d.std()
+        estimate = a.mean() - b.mean()
+        return 2 * estimate - ref[1], 2 * estimate - ref[0]
+
+    return fn
+
+
+@pytest.mark.parametrize("kind", ["normal", "basic"])
+def test_bootstrap_symmetric_intervals_get_a_hint_about_the_percentiles(kind):
+    """With one agent far from its siblings the differences are skewed: mean ± 1.96 sd and the 'basic'
+    bootstrap's reflection both passed when every case was nearly symmetric."""
+    fb = ch09.check_bootstrap_difference(_symmetric_interval(kind))
+    assert fb.status == "hint" and "percentiles" in fb.message, fb.message
+
+
+def test_verdict_by_width_and_estimate_gets_a_hint():
+    """'Cannot tell when the interval is wider than twice the distance of the estimate from the
+    threshold, else the estimate's side' is the rule itself for intervals symmetric about the estimate."""
+
+    def fn(estimate, low, high, threshold):
+        if high - low > 2 * abs(estimate - threshold):
+            return "cannot tell at this scale"
+        return "holds" if estimate > threshold else "does not hold"
+
+    fb = ch09.check_verdict(fn)
+    assert fb.status == "hint" and "whole interval lies" in fb.message, fb.message
+
+
+def test_verdict_with_the_upper_end_non_strict_gets_a_hint():
+    """'does not hold' for an interval ending exactly on the threshold: no case had its upper end there."""
+
+    def fn(estimate, low, high, threshold):
+        if low > threshold:
+            return "holds"
+        if high <= threshold:
+            return "does not hold"
+        return "cannot tell at this scale"
+
+    fb = ch09.check_verdict(fn)
+    assert fb.status == "hint" and "ends exactly on the threshold" in fb.message, fb.message

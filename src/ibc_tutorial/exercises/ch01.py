@@ -83,10 +83,24 @@ def check_best_constant_mse(fn) -> Feedback:
                     f"({loss(c):.4f}) is not the smallest: "
                     "try c a little to either side. The optimum need not be an action anyone took."
                 )
+            n = len(actions)
+            total = float(actions.sum())
+            off_by_one = [total / (n - 1)] + [(total - float(a)) / (n - 1) for a in (actions[0], actions[-1])]
+            if any(abs(c - v) < 1e-6 for v in off_by_one):
+                return hint(
+                    "close, but your constant leaves one action out or divides by N - 1: the loss averages "
+                    "over all N actions, each counted once."
+                )
+            pos, neg = actions[actions > 0], actions[actions <= 0]
+            if len(pos) and len(neg) and abs(c - (float(pos.mean()) + float(neg.mean())) / 2) < 1e-6:
+                return hint(
+                    "your constant weighs the two groups of actions equally, whatever their sizes: in the "
+                    "loss every action counts once, so the bigger group pulls harder."
+                )
             if abs(c - ref) < 2e-2:
                 return hint(
-                    "close, but not exact (a search over a grid?): set the derivative of the loss with "
-                    "respect to c to zero and solve."
+                    "close, but not exact: set the derivative of the loss with respect to c to zero and "
+                    "solve it exactly (a search over a grid of constants only lands near the optimum)."
                 )
             return hint(
                 f"for one of the test sets your constant gives a mean squared error of {loss(c):.4f}; a "

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import torch
 
 from ibc_tutorial.exercises.core import Feedback, close, correct, hint, mistake_hint, run_check, scalar_answer
@@ -440,6 +441,8 @@ def check_beta_can_represent(fn) -> Feedback:
     def check() -> Feedback:
         for shape in BETA_SHAPES:
             answer = fn(shape)
+            if isinstance(answer, np.bool_):  # numpy's True and False are answers too
+                answer = bool(answer)
             if not isinstance(answer, bool):
                 return hint(f"answer True or False for each shape, got {answer!r} for {shape!r}.")
             truth = _beta_shape_exists(shape)

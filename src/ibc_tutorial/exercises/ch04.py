@@ -19,7 +19,15 @@ import math
 
 import torch
 
-from ibc_tutorial.exercises.core import Feedback, close, correct, hint, mistake_hint, run_check
+from ibc_tutorial.exercises.core import (
+    Feedback,
+    close,
+    correct,
+    hint,
+    mistake_hint,
+    run_check,
+    unnormalised_hint,
+)
 
 _EXPERT = torch.tensor([[0.0, 0.4], [0.1, 0.5], [-0.5, 0.3], [0.4, -0.6], [0.0, 0.45]])
 
@@ -88,6 +96,29 @@ def check_expert_negatives(fn) -> Feedback:
             return hint(
                 "some expert actions are drawn far more often than others: draw each one with equal "
                 "probability (uniformly over the M rows)."
+            )
+        # every row counts, a repeated action as often as it stands in the set, beyond the first B rows
+        repeated = torch.tensor([[-1.0], [-1.0], [-1.0], [1.0]])  # (4, 1): full brake three times of four
+        draws = fn(repeated.clone(), 200, 100, 0.0, _gen(5))
+        bad = _shape_feedback(draws, (200, 100, 1))
+        if bad:
+            return bad
+        if abs(float((draws == -1.0).float().mean()) - 0.75) > 0.03:
+            return hint(
+                "an action that stands in `expert_actions` three times of four must be drawn three times "
+                "of four: draw rows of the set with equal probability, repeated actions included (as the "
+                "minibatch holds them), not its distinct values."
+            )
+        many_rows = torch.linspace(-1, 1, 40)[:, None]  # (40, 1): more expert actions than samples
+        draws = fn(many_rows.clone(), 2, 500, 0.0, _gen(6))
+        bad = _shape_feedback(draws, (2, 500, 1))
+        if bad:
+            return bad
+        if len(torch.unique(draws)) < len(many_rows):
+            return hint(
+                f"from {len(many_rows)} expert actions and a batch of 2, your counter-examples use "
+                f"{len(torch.unique(draws))} of them: draw from all M rows of `expert_actions`, whatever "
+                "batch_size is."
             )
         # the noise: mean and variance = expert set's + sigma^2
         sigma = 0.1
@@ -208,12 +239,27 @@ def check_grid_nll(fn) -> Feedback:
                     -(pos.double() + lse + math.log(cell)),
                     "the overall sign: this is the *negative* log-likelihood.",
                 ),
+                (
+                    pos.double()
+                    + torch.logsumexp(torch.cat([-pos.double()[:, None], -grid_e.double()], 1), 1)
+                    + math.log(cell),
+                    "what Z(x) sums over: the grid points alone, not the expert's action as well (the grid "
+                    "already covers the box).",
+                ),
             ]
             if (mistake := mistake_hint(out, mistakes)) is not None:
                 return mistake
+            worst = int((out.double() - ref).abs().argmax())  # the sample the reader's NLL misses most
             return hint(
-                f"your NLL of the first sample is {float(out[0]):.4g} where −log p = E + log Σ e^(−E_g) + "
-                f"log ΔA gives {float(ref[0]):.4g}."
+                f"your NLL of sample {worst} is {float(out[worst]):.4g} where −log p = E + log Σ e^(−E_g) + "
+                f"log ΔA gives {float(ref[worst]):.4g}."
+            )
+        other_cell = (2 / 40) ** 2  # a finer grid: the cell area is an argument, not the chapter's number
+        out_cell = fn(pos.clone(), grid_e.clone(), other_cell)
+        if not isinstance(out_cell, torch.Tensor) or not close(out_cell, _nll_ref(pos, grid_e, other_cell)):
+            return hint(
+                f"right for a cell area of {cell:g}, wrong for {other_cell:g}: use the `cell_volume` you are "
+                "given."
             )
         out2 = fn(pos + 1000, grid_e + 1000, cell)
         if not isinstance(out2, torch.Tensor) or not close(out2, ref, rtol=1e-3, atol=1e-2):
@@ -282,11 +328,10 @@ def check_predicted_shares(fn) -> Feedback:
                     "q is the density of the counter-examples: expert actions plus N(0, σ²I), a KDE with "
                     "bandwidth σ, not chapter 05's 0.2."
                 )
-            if close(out / out.sum(), ref, rtol=1e-3, atol=1e-4):
-                return hint(
-                    "the proportions are right; make the shares sum to 1 (they are shares of the mass near "
-                    "the K actions)."
-                )
+            if (
+                fb := unnormalised_hint(out, ref, "they are shares of the mass near the K actions")
+            ) is not None:
+                return fb
             return hint(
                 f"your shares are {[round(v, 3) for v in out.tolist()]}: compute q at each valid action "
                 "(the expert actions blurred by σ), then share ∝ 1/q."

@@ -16,7 +16,16 @@ import math
 
 import torch
 
-from ibc_tutorial.exercises.core import Feedback, close, correct, hint, mistake_hint, run_check, tensor_answer
+from ibc_tutorial.exercises.core import (
+    Feedback,
+    close,
+    correct,
+    hint,
+    mistake_hint,
+    run_check,
+    tensor_answer,
+    unnormalised_hint,
+)
 from ibc_tutorial.kde import inverse_density_weights
 
 
@@ -141,11 +150,10 @@ def check_inverse_weights(fn) -> Feedback:
         ref = (1 / g) / (1 / g).sum()
         if not close(out, ref, rtol=1e-3, atol=1e-12):
             if abs(float(out.sum()) - 1) > 1e-3:
-                if close(out / out.sum(), ref, rtol=1e-3, atol=1e-12):
-                    return hint(
-                        "the weights are proportional to the right values, but they must sum to 1 (they "
-                        "become sampling probabilities)."
-                    )
+                if (
+                    fb := unnormalised_hint(out, ref, "they become sampling probabilities", atol=1e-12)
+                ) is not None:
+                    return fb
                 return hint(
                     f"your weights sum to {float(out.sum()):.4g}: normalise them so that they sum to 1."
                 )
@@ -175,6 +183,8 @@ def check_inverse_weights(fn) -> Feedback:
 
 # -------------------------------------------------------------- choosing a bandwidth by effective sample size
 _CANDIDATES = (0.02, 0.05, 0.1, 0.2, 0.3, 0.5, 1.0)
+_MIN_ESS = (200.0, 160.0)
+"""The floors the checker asks about: they choose different bandwidths."""
 
 
 def _driving_like() -> tuple[torch.Tensor, torch.Tensor]:
@@ -213,7 +223,7 @@ def check_choose_bandwidth(fn) -> Feedback:
     def check() -> Feedback:
         actions, rare = _driving_like()
         table = _bandwidth_table(actions, rare)
-        for min_ess in (200.0, 160.0):
+        for min_ess in _MIN_ESS:
             ref = _reference_choice(table, min_ess)
             out = fn(actions.clone(), rare.clone(), list(_CANDIDATES), min_ess)
             try:
@@ -246,17 +256,26 @@ def check_choose_bandwidth(fn) -> Feedback:
             if h == max(_CANDIDATES, key=lambda c: table[c][1]):
                 return hint(
                     f"h = {h:g} has the largest effective sample size, because its weights are nearly "
-                    f"uniform: its minibatches hold only {share:.0%} rare samples. Among the bandwidths "
-                    "that pass, maximise the rare share."
+                    f"uniform: its minibatches hold only {share:.0%} rare samples, and candidates with more "
+                    "pass the test too. Among the bandwidths that pass (1 / Σ w_i² of the weights normalised "
+                    "to sum to 1, at least min_ess), take the one with the largest rare share."
                 )
             if ess < min_ess:
                 return hint(
                     f"h = {h:g} has an effective sample size of {ess:.0f}, below min_ess = {min_ess:.0f}: "
                     "compute it as 1 / Σ w_i² of the normalised weights."
                 )
+            other = [m for m in _MIN_ESS if m != min_ess and _reference_choice(table, m) == h]
+            if other:
+                return hint(
+                    f"h = {h:g} is the choice for min_ess = {other[0]:.0f}, not for min_ess = {min_ess:.0f}: "
+                    "use the min_ess you are given."
+                )
             return hint(
-                f"h = {h:g} passes the effective-sample-size test, but another candidate that passes puts "
-                f"more rare samples into minibatches than its {share:.0%}: compare the shares Σ_rare w_i."
+                f"h = {h:g} passes the effective-sample-size test, but a candidate whose minibatches hold "
+                f"more rare samples than its {share:.0%} passes it too. Check both halves of the choice: the "
+                "test (1 / Σ w_i² of the weights normalised to sum to 1: computed otherwise, it can drop a "
+                "candidate that passes) and the share compared, Σ w_i over the rare samples."
             )
         return correct(
             "Right: the narrowest bandwidths let a few stray actions take over (low effective sample "

@@ -164,12 +164,14 @@ def check_dfo_step(fn) -> Feedback:
         fb = _generator_check(fn, samples, energies)
         if fb is not None:
             return fb
-        # 3. the noise, on a multi-valued 2-D population: three values, p̃ ∝ 4 : 2 : 1
+        # 3. the noise, on a multi-valued 2-D population: three values, p̃ ∝ 4 : 2 : 1, in a box of
+        # half-width 1.5 that the noise never reaches (so a σ read relative to the box is told apart)
         values = torch.tensor([[-0.4, -0.4], [0.0, 0.0], [0.4, 0.4]])
         which = torch.arange(n) % 3  # (n,)
         e3 = torch.tensor([0.0, math.log(2.0), math.log(4.0)])[which]  # (n,)
+        low, high = -1.5, 1.5
         out = _out(
-            fn(values[which].clone(), e3.clone(), 0.1, -1.0, 1.0, torch.Generator().manual_seed(1)), (n, 2)
+            fn(values[which].clone(), e3.clone(), 0.1, low, high, torch.Generator().manual_seed(1)), (n, 2)
         )
         if isinstance(out, Feedback):
             return out
@@ -189,23 +191,30 @@ def check_dfo_step(fn) -> Feedback:
                 "the coordinates of a sample move together: draw an independent N(0, σ) for each "
                 "coordinate (line 9)."
             )
-        share = torch.bincount(nearest, minlength=3).float() / n
-        if (share - torch.tensor([4.0, 2.0, 1.0]) / 7).abs().max() > 0.03:
-            return hint(
-                "with σ = 0.1 the new samples sit around the three old values in shares "
-                f"{[round(float(x), 2) for x in share]}, "
-                "where p̃ gives 0.57, 0.29, 0.14: resample by p̃ first (lines 5, 7-8), then add the noise."
-            )
         std = float(resid.std())
         if abs(std - 0.01) < 0.003:
             return hint(
                 "your noise has standard deviation σ², not σ: the paper's N(0, σ) takes σ as the standard "
                 "deviation."
             )
+        if any(abs(std - 0.1 * width) < 0.01 for width in ((high - low) / 2, high - low)):
+            return hint(
+                f"with σ = 0.1 in the box [{low}, {high}] your noise spreads with standard deviation "
+                f"{std:.3g}: σ is the standard deviation in the action's own units, not a share of the "
+                "box's width."
+            )
         if abs(std - 0.1) > 0.003:  # 40,000 draws: the standard deviation's own error is about 0.35 %
             return hint(
                 f"with σ = 0.1 the new samples spread with standard deviation {std:.3g}; line 9 adds N(0, "
                 "σ) to each coordinate."
+            )
+        # the shares after the spread: noise far wider than σ blurs which value a sample came from
+        share = torch.bincount(nearest, minlength=3).float() / n
+        if (share - torch.tensor([4.0, 2.0, 1.0]) / 7).abs().max() > 0.03:
+            return hint(
+                "with σ = 0.1 the new samples sit around the three old values in shares "
+                f"{[round(float(x), 2) for x in share]}, "
+                "where p̃ gives 0.57, 0.29, 0.14: resample by p̃ first (lines 5, 7-8), then add the noise."
             )
         fb = _gaussian_check(resid.reshape(-1) / std)  # the shape, whatever the spread
         if fb is not None:

@@ -77,16 +77,17 @@ def check_yaw_rate(fn) -> Feedback:
 
 
 # --------------------------------------------------------------------------- 2. PID
-def _pid_ref(errors, kp, ki, kd, dt, integral_dt=True, deriv_dt=True, first_deriv=False):
+def _pid_ref(errors, kp, ki, kd, dt, integral_dt=True, deriv_dt=True, first_deriv=False, late_sum=False):
     out, integral, prev = [], 0.0, None
     for e in errors:
+        before = integral  # the sum up to the step before (late_sum: the current error not yet in it)
         integral += e * (dt if integral_dt else 1.0)
         if prev is None:
             d = (e / (dt if deriv_dt else 1.0)) if first_deriv else 0.0
         else:
             d = (e - prev) / (dt if deriv_dt else 1.0)
         prev = e
-        out.append(kp * e + ki * integral + kd * d)
+        out.append(kp * e + ki * (before if late_sum else integral) + kd * d)
     return out
 
 
@@ -109,7 +110,22 @@ def check_pid(fn) -> Feedback:
         pid = PID(*gains)
         ref = [pid.step(e) for e in errors]
         if np.allclose(out, ref, rtol=1e-6, atol=1e-9):
-            return correct("Your PID matches the expert's controller step by step.")
+            # large errors: outputs beyond ±1, which the exercise asks for unclipped
+            big = [3.0, -2.5, 0.5, 4.0]
+            pid = PID(*gains)
+            ref_big = [pid.step(e) for e in big]
+            out_big = [float(u) for u in fn(list(big), *gains)]
+            if np.allclose(out_big, ref_big, rtol=1e-6, atol=1e-9):
+                return correct("Your PID matches the expert's controller step by step.")
+            if np.allclose(out_big, np.clip(ref_big, -1.0, 1.0), rtol=1e-6, atol=1e-9):
+                return hint(
+                    "right while the outputs stay within ±1, but you clip them: the exercise asks for u_t "
+                    "itself (the expert clips the steering afterwards, outside the controller)."
+                )
+            return hint(
+                f"right for errors {errors}, wrong for errors {big}: check that nothing in your code depends "
+                "on the size of the errors."
+            )
         mistakes = [
             (
                 dict(integral_dt=False),
@@ -118,6 +134,11 @@ def check_pid(fn) -> Feedback:
             (
                 dict(deriv_dt=False),
                 "the derivative term: it is the change of the error divided by dt, a rate.",
+            ),
+            (
+                dict(late_sum=True),
+                "the integral term: the sum runs over k <= t, so the current error e_t is in it already at "
+                "step t (add it before computing u_t).",
             ),
             (
                 dict(first_deriv=True),
@@ -219,6 +240,40 @@ def _red_light_lane(ask, entry, d, name) -> Feedback | None:
                     else f" (This lane heads {name}: across the lane is perpendicular to `direction`.)"
                 )
             )
+    return _red_light_edges(ask, entry, d, right, name)
+
+
+def _red_light_edges(ask, entry, d, right, name) -> Feedback | None:
+    """The rule's edges on one lane: a rear that ends exactly on the line has crossed it, one that starts
+    on it had crossed it the step before; a rear exactly 2 m from the centre line is still in the lane
+    (axis-aligned lanes only, where that offset is exact in floating point); the lane test is on the
+    rear's position after the step."""
+    from ibc_tutorial.driving.lights import RED
+
+    if not ask(entry - 0.3 * d, entry.copy(), RED):
+        return hint(
+            "a rear that ends the step exactly on the stop line has crossed it (after the step it is on the "
+            "line or past it): that step counts, with >= where the position after the step is compared."
+        )
+    if ask(entry.copy(), entry + 0.4 * d, RED):
+        return hint(
+            "a rear that starts the step exactly on the stop line reached it in the step before, which "
+            "counted it: before the step the rear must be strictly before the line."
+        )
+    if name in ("north", "east", "south"):
+        for side in (2.0, -2.0):
+            if not ask(entry - 0.3 * d + side * right, entry + 0.4 * d + side * right, RED):
+                return hint(
+                    "a crossing exactly 2 m from the lane's centre line is on the lane's edge and counts: "
+                    "the lane reaches 2 m to each side, edges included (<=, not <)."
+                )
+    into = (entry - 0.3 * d + 2.5 * right, entry + 0.4 * d + 1.5 * right)  # ends inside the lane
+    out_of = (entry - 0.3 * d + 1.5 * right, entry + 0.4 * d + 2.5 * right)  # ends outside it
+    if not ask(*into, RED) or ask(*out_of, RED):
+        return hint(
+            "the lane test is on where the rear is *after* the step: a rear that ends the step within 2 m of "
+            "the centre line counts, wherever it came from; one that ends it further out does not."
+        )
     return None
 
 
@@ -324,6 +379,7 @@ STOP_CASES = [  # (state, gap_m, speed): 0 green, 1 yellow, 2 red
     (1, 1.5, 6.0),
     (2, 9.7, 6.0),  # just beyond the horizon (9.5 m): a horizon of 10 m stops here
     (2, 9.3, 6.0),  # just within it: a horizon of 9 m drives on here
+    (2, 9.5, 6.0),  # exactly at it: within (<=), so red stops here
     (1, 9.4, 3.0),  # yellow, within it, slow enough to stop
     (1, 9.8, 2.0),  # yellow, beyond it
 ]
@@ -361,11 +417,16 @@ def check_expert_stops(fn) -> Feedback:
             )
         if any(s == 2 and g <= config.stop_distance_m for s, g, _ in wrong):
             return hint(
-                f"distance: the expert considers its light within {config.stop_distance_m} m of the line, "
-                "and a "
-                "red light within that distance always stops it."
+                f"distance: the expert considers its light within {config.stop_distance_m} m of the line "
+                f"({config.stop_distance_m} m included), and a red light within that distance always stops "
+                "it."
             )
         yellow = [c for c in wrong if c[0] == 1]
+        if yellow and all(c[0] == 1 and c[2] ** 2 / (2 * c[1]) == config.yellow_brake for c in wrong):
+            return hint(
+                f"at yellow, a stop that needs exactly the expert's {config.yellow_brake} m/s^2 is one it "
+                "makes: it stops when v^2 / (2 gap) is at or below that deceleration (<=, not <)."
+            )
         near_yellow = [k for k, c in enumerate(STOP_CASES) if c[0] == 1 and c[1] <= config.stop_distance_m]
         if yellow and all(answers[k] for k in near_yellow) and all(c[0] == 1 for c in wrong):
             return hint(

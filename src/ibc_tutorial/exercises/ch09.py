@@ -51,7 +51,12 @@ def _cases() -> list[tuple[np.ndarray, np.ndarray]]:
     c = 500 + rng.normal(0, 400, (4, 8))
     c -= c.mean(1, keepdims=True) - 500  # (4, 8) every agent's mean exactly 500
     d = 450 + rng.normal(0, 100, (4, 8))
-    return [(a, b), (c, d)]
+    # one agent far above its two siblings: the resampled differences are skewed, so an interval drawn
+    # symmetrically about them (mean ± 1.96 sd, or the "basic" bootstrap's reflection) misses the percentiles
+    rng = np.random.default_rng(5)
+    e = np.array([150.0, 200.0, 1000.0])[:, None] + rng.normal(0, 50, (3, 10))
+    f = np.array([300.0, 320.0, 340.0])[:, None] + rng.normal(0, 50, (3, 10))
+    return [(a, b), (c, d), (e, f)]
 
 
 def _q(reps: np.ndarray, level: float = 0.95) -> tuple[float, float]:
@@ -79,9 +84,23 @@ def _mistakes(a: np.ndarray, b: np.ndarray) -> list[tuple[tuple[float, float], s
     r = RESAMPLES
     full_a, full_b = _boot(a, r, rng), _boot(b, r, rng)
     shared = (rng.integers(a.shape[0], size=(r, a.shape[0])), rng.integers(a.shape[1], size=(r, *a.shape)))
-    lo, hi = _q(full_a - full_b)
+    diffs = full_a - full_b  # (R,)
+    lo, hi = _q(diffs)
+    estimate = float(a.mean() - b.mean())
+    spread = 1.96 * float(diffs.std())
     return [
         ((-hi, -lo), "the sign: the interval is for mean(A) - mean(B)."),
+        (
+            (float(diffs.mean()) - spread, float(diffs.mean()) + spread),
+            "the percentiles: a percentile interval reads the 2.5th and 97.5th percentiles of the "
+            "resampled differences themselves, not their mean ± 1.96 standard deviations (with one agent far "
+            "from the others the differences are skewed, and the interval is not symmetric).",
+        ),
+        (
+            (2 * estimate - hi, 2 * estimate - lo),
+            "the percentiles: the percentile interval is [2.5th, 97.5th percentile] of the resampled "
+            "differences as they are, not reflected about the estimate (that is the 'basic' bootstrap).",
+        ),
         (
             _q(_boot(a, r, rng, pooled=True) - _boot(b, r, rng, pooled=True)),
             "you resampled all episodes of a method as one pool: that treats the episodes of one agent as if "
@@ -257,6 +276,9 @@ VERDICT_CASES = [  # (estimate, low, high, threshold)
     (0.70, 0.55, 0.83, 0.85),
     (40.0, 0.0, 90.0, 0.0),
     (0.62, 0.60, 0.66, 0.60),
+    (30.0, 2.0, 150.0, 0.0),  # asymmetric about the estimate: "wide, so cannot tell" is wrong here
+    (-25.0, -60.0, 0.0, 0.0),  # the upper end on the threshold: not below it
+    (0.80, 0.52, 0.84, 0.85),
 ]
 
 

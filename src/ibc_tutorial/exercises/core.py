@@ -7,6 +7,7 @@ import traceback
 from collections.abc import Callable
 from dataclasses import dataclass
 
+import numpy as np
 import torch
 
 NOT_ATTEMPTED = "not attempted"
@@ -105,6 +106,14 @@ def mistake_hint(out, mistakes, rtol: float = 1e-4, atol: float = 1e-4) -> Feedb
     return None
 
 
+def unnormalised_hint(out, ref, what: str, rtol: float = 1e-3, atol: float = 1e-4) -> Feedback | None:
+    """The hint "right proportions, but not summing to 1" when ``out`` rescaled to sum to 1 is ``close``
+    to ``ref`` (which sums to 1), else None; ``what`` says what the values are ("shares of ...")."""
+    if close(out / out.sum(), ref, rtol=rtol, atol=atol):
+        return hint(f"the proportions are right; make them sum to 1 ({what}).")
+    return None
+
+
 def close(a, b, rtol: float = 1e-4, atol: float = 1e-4) -> bool:
     """Whether the reader's ``a`` and the reference ``b`` (tensors, arrays or numbers) have the same
     shape and are finite and equal within ``rtol`` and ``atol`` (compared in float64)."""
@@ -120,7 +129,7 @@ def close(a, b, rtol: float = 1e-4, atol: float = 1e-4) -> bool:
 def number_answer(value, name: str) -> float | Feedback:
     """A reader's function's return value as a finite float, or the hint that says why it is not one
     (``name`` is the function's name in the exercise). True and False are refused: they are not numbers."""
-    if isinstance(value, bool) or type(value).__name__ == "bool_":
+    if isinstance(value, (bool, np.bool_)):
         return hint(f"{name} must return a number, got {type(value).__name__}.")
     try:
         v = float(value)
