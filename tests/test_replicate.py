@@ -348,6 +348,10 @@ STEM_ABLATIONS = {  # folder -> (its --set overrides, its seeds)
         ["collect.routes=20", "epochs=4", "heldout_episodes=0", "routeless_episodes=0"],
         (0, 1, 2, 3, 4),
     ),
+    "half-epochs": (
+        ["epochs=4", "heldout_episodes=0", "routeless_episodes=0"],
+        (0, 1, 2, 3, 4),
+    ),
 }
 
 
