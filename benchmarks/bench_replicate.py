@@ -231,6 +231,7 @@ def limits_and_prototypes(p, args) -> None:
         rl.proto_pool(ds, rounds=args.reps)
         rl.proto_rollout(p, ds, probs)
         rl.proto_sim_profile()
+        rl.proto_fused_first_layer(p, ds, probs, rounds=args.reps)
     print(
         f"load average after: {os.getloadavg()[0]:.2f} (2 cores; above ~1 the times are inflated, "
         "not the ratios)"

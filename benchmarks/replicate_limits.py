@@ -645,3 +645,58 @@ def proto_sim_profile(steps=3000, top=10) -> None:
     ]:
         where = file.split("/src/")[-1] if "/src/" in file else file.split("/")[-1]
         print(f"      {tt / total:6.1%}  {nc / steps:5.1f} calls/step  {fn} ({where}:{line})")
+
+
+def _fused_energy_from_embedding(self, z: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
+    """``EnergyModel.energy_from_embedding`` with the first layer always in its inference form: one batched
+    multiply-add ``baddbmm(W_z z + b, y, W_a^T)`` and ReLU, under autograd too (the training form adds a
+    broadcast ``y W_a^T`` to ``W_z z + b``: two (B, N, H) temporaries more, and a K = 2 matrix product)."""
+    h_obs = self.obs_proj(z)  # (B, H)
+    if actions.ndim == 2:
+        actions = actions.expand(len(z), -1, -1)  # (B, N, D)
+    w_a = self.act_proj.weight.T.expand(len(z), -1, -1)  # (B, D, H)
+    h = torch.baddbmm(h_obs[:, None, :], actions, w_a).relu()  # (B, N, H)
+    return self.head(h).squeeze(-1)  # (B, N)
+
+
+def proto_fused_first_layer(p, ds, probs, rounds=5, steps=20) -> dict:
+    """(g) the energy head's first layer in training as one batched multiply-add (the form DFO already uses)
+    against today's broadcast form: the whole IBC and DA-IBC training step, and how far the two runs are
+    apart after ``steps`` steps (not bit for bit: the sums are ordered otherwise)."""
+    import types
+
+    out = {}
+    cfg = TrainConfig(steps=10**6, batch_size=p.batch_size, lr=p.lr, progress=False)
+    for method in ("ibc", "da-ibc"):
+        trainers = []
+        for fused in (False, True):
+            torch.manual_seed(0)
+            net = build_network(method, p)
+            if fused:
+                net.energy_from_embedding = types.MethodType(_fused_energy_from_embedding, net)
+            trainers.append(
+                Trainer(net, objective_for(method, net, p), DemoBatches(ds), cfg, sample_probs=probs)
+            )
+        for (
+            tr
+        ) in trainers:  # the same minibatches and counter-examples: each trainer has its own seeded draws
+            tr.config.steps = steps
+            tr.run()
+        drift = max(
+            float((a - b).detach().abs().max())
+            for a, b in zip(trainers[0].model.parameters(), trainers[1].model.parameters(), strict=True)
+        )
+
+        def step(tr):
+            def one():
+                tr.config.steps = tr.step + 1
+                tr.run()
+
+            return one
+
+        out[method] = ratio(step(trainers[0]), step(trainers[1]), rounds)[0]
+        print(
+            f"  (g) fused first layer, the whole {method} training step: {out[method]:.2f}x; largest weight "
+            f"difference after {steps} steps {drift:.1e}"
+        )
+    return out
