@@ -5,6 +5,8 @@
     python benchmarks/bench_replicate.py --preset laptop --data book/results/laptop/data/town01.npz
     python benchmarks/bench_replicate.py --train-steps 40 --eval-steps 300
     python benchmarks/bench_replicate.py --limits --prototypes    # how far from the peak; what speed-ups buy
+    python benchmarks/bench_replicate.py --set collect.routes=20 --set epochs=4 --set seeds=0,1,2,3,4,5,6,7
+                                                                  # what a variant of the preset would cost
 
 With ``--limits`` / ``--prototypes`` (``replicate_limits.py`` beside this file, whose docstring says how
 the shares and ratios are measured), the run prints instead, on a rendered sample of the demonstrations
@@ -48,7 +50,7 @@ from ibc_tutorial.driving.collect import CollectConfig, collect
 from ibc_tutorial.driving.dataset import DemoDataset, DemoLog
 from ibc_tutorial.experiments.agents.agent import Agent, build_network
 from ibc_tutorial.experiments.agents.evaluate import evaluate_agent
-from ibc_tutorial.experiments.agents.presets import METHODS, get_preset
+from ibc_tutorial.experiments.agents.presets import METHODS, get_preset, with_overrides
 from ibc_tutorial.experiments.agents.replicate import FIGURE_METHODS
 from ibc_tutorial.experiments.agents.train import DemoBatches, objective_for, steps_per_epoch
 from ibc_tutorial.experiments.runs import git_commit, machine, now, write_json
@@ -65,6 +67,13 @@ def timed(fn):
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--preset", default="laptop")
+    ap.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="FIELD=VALUE",
+        help="override a preset setting, as replicate's --set (e.g. --set collect.routes=20 --set epochs=4)",
+    )
     ap.add_argument(
         "--data", help="demonstrations already collected with the preset (skips timing a collection)"
     )
@@ -86,7 +95,7 @@ def main() -> None:
     args = ap.parse_args()
     torch.set_num_threads(1)
     os.environ.setdefault("TQDM_DISABLE", "1")
-    p = get_preset(args.preset)
+    p = with_overrides(get_preset(args.preset), args.set)
     print(
         f"preset {p.name}; {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, torch "
         f"{torch.__version__}, 1 thread; load average before: {os.getloadavg()[0]:.2f}"
