@@ -22,10 +22,11 @@ thread (as each of ``replicate --workers 2 --threads 1``'s workers), and scaled 
 - render: the dataset's BEV cache (``DemoDataset(cache=True)``) and the KDE weights;
 - train: ``--train-steps`` minibatches of each method (scaled by epochs x steps per epoch);
 - evaluate: ``--eval-episodes`` batched episodes of ``--eval-steps`` steps of each method's
-  freshly built agent (scaled by the periodic evaluations, the final table and, for BC and
-  DA-IBC, the free-driving episodes); an untrained agent drives about as long per step as a
-  trained one (the cost is the network and the DFO, not the road);
-- the expert's own row: ``--eval-episodes`` batched episodes of the expert.
+  freshly built agent, per step driven (an untrained agent's episode may end early), scaled by the
+  periodic evaluations, the final table, the held-out episodes and, for BC and DA-IBC, the
+  free-driving episodes; a step costs about as much for an untrained agent as for a trained one
+  (the cost is the network and the DFO, not the road);
+- the expert's own rows (the table's and the held-out starts): ``--eval-episodes`` batched episodes.
 
 Printed: seconds per unit of work, the scaled total of each stage, its share of the serial
 total, and the wall time expected with ``--workers`` processes (runs in parallel, the shared
@@ -78,7 +79,9 @@ def main() -> None:
         "--data", help="demonstrations already collected with the preset (skips timing a collection)"
     )
     ap.add_argument("--train-steps", type=int, default=30, help="minibatches timed per method")
-    ap.add_argument("--eval-episodes", type=int, default=4, help="batched episodes timed per method")
+    ap.add_argument(
+        "--eval-episodes", type=int, default=10, help="batched episodes timed per method (the table's 10)"
+    )
     ap.add_argument("--eval-steps", type=int, default=200, help="steps of each timed episode")
     ap.add_argument("--workers", type=int, default=2, help="worker processes the wall-time estimate assumes")
     ap.add_argument("--limits", action="store_true", help="print each stage's share of the machine's peak")
@@ -142,34 +145,34 @@ def main() -> None:
         per = t / args.train_steps
         rows.append((f"train {method}", "minibatch", per, n_steps, per * n_steps * len(p.seeds), True))
         agent = Agent(method, net.eval(), p, ds.actions, init_weights=probs if method == "da-ibc" else None)
-        _, t = timed(
+        results, t = timed(
             lambda agent=agent: evaluate_agent(
                 agent, "town02", args.eval_episodes, args.eval_steps, show_progress=False
             )
         )
-        per = t / (args.eval_episodes * args.eval_steps)  # seconds per episode-step, batched
-        ep_steps = n_evals * p.eval_episodes * p.eval_steps + p.final_episodes * p.final_steps
+        # seconds per episode-step driven, batched: an untrained agent's episode may end early (in a
+        # building), so the steps it drove, not the steps asked for, are the denominator
+        per = t / sum(int(r.steps) for r in results)
+        # the periodic evaluations, the table's final episodes and the held-out ones
+        ep_steps = (
+            n_evals * p.eval_episodes * p.eval_steps + (p.final_episodes + p.heldout_episodes) * p.final_steps
+        )
         rows.append(
             (f"evaluate {method}", "episode-step", per, ep_steps, per * ep_steps * len(p.seeds), True)
         )
         if method in FIGURE_METHODS:
             fd = p.routeless_episodes * p.routeless_steps
-            per1 = per * args.eval_episodes  # free driving runs one episode at a time
+            one, t1 = timed(  # free driving runs one episode at a time: timed so, per step driven
+                lambda agent=agent: evaluate_agent(agent, "town02", 1, args.eval_steps, show_progress=False)
+            )
+            per1 = t1 / int(one[0].steps)
             rows.append((f"free driving {method}", "step", per1, fd, per1 * fd, False))
-    _, t = timed(
+    results, t = timed(
         lambda: evaluate_agent("expert", "town02", args.eval_episodes, args.eval_steps, show_progress=False)
     )
-    per = t / (args.eval_episodes * args.eval_steps)
-    rows.append(
-        (
-            "evaluate expert",
-            "episode-step",
-            per,
-            p.final_episodes * p.final_steps,
-            per * p.final_episodes * p.final_steps,
-            False,
-        )
-    )
+    per = t / sum(int(r.steps) for r in results)
+    expert_steps = (p.final_episodes + p.heldout_episodes) * p.final_steps  # its table and held-out rows
+    rows.append(("evaluate expert", "episode-step", per, expert_steps, per * expert_steps, False))
 
     serial = sum(r[4] for r in rows if not math.isnan(r[4]))
     parallel = sum(r[4] for r in rows if r[5])
