@@ -98,7 +98,10 @@ def main() -> None:
     args = ap.parse_args()
     torch.set_num_threads(1)
     os.environ.setdefault("TQDM_DISABLE", "1")
-    p = with_overrides(get_preset(args.preset), args.set)
+    try:
+        p = with_overrides(get_preset(args.preset), args.set)
+    except ValueError as e:  # a bad --set: one line, before any work
+        ap.error(str(e))
     print(
         f"preset {p.name}; {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, torch "
         f"{torch.__version__}, 1 thread; load average before: {os.getloadavg()[0]:.2f}"

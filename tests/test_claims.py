@@ -115,6 +115,36 @@ def _analysis(lefts, crossings, stem_range, red_range):
     return {"episodes": eps, "states": states}
 
 
+def test_stem_counts_read_hand_made_analysis_files():
+    """``stem_counts``: exits, episodes ended at a stem, agents taking both or only left, and valleys."""
+    from ibc_tutorial.experiments.agents.claims import stem_counts
+
+    def agent(lefts, crossings, ended, valleys):
+        f = _analysis(lefts, crossings, 0.2, 0.1)
+        for e, end in zip(f["episodes"], ended, strict=True):
+            e["ended_at_stem"] = end
+        f["states"] += [{"kind": "stem", "window": True, "valleys": v} for v in valleys]
+        return f
+
+    files = {
+        "ibc-seed0": agent([2, 1], [4, 1], [False, True], [1, 2]),  # both exits; one stem end
+        "ibc-seed1": agent([3, 0], [3, 0], [False, False], [1]),  # left at every completed crossing
+        "ibc-seed2": agent([0, 0], [2, 2], [True, True], []),  # right only; two stem ends
+        "ibc": agent([9, 9], [9, 9], [True, True], [5]),  # a driver named by its method alone, as "expert" is
+        "da-ibc-seed0": agent([1, 1], [1, 1], [True, True], [3]),  # another method: not read
+    }
+    c = stem_counts(files, "ibc")
+    assert (c.method, c.agents, c.episodes) == ("ibc", 4, 8)
+    assert (c.left, c.crossings) == (2 + 1 + 3 + 18, 5 + 3 + 4 + 18)
+    assert c.minority.estimate == pytest.approx(min(24 / 30, 6 / 30))
+    assert c.minority.low <= c.minority.estimate <= c.minority.high
+    assert c.ended_at_stem == 1 + 2 + 2
+    assert c.agents_both == 1 and c.agents_left_only == 2  # seed 1 and "ibc"
+    assert sorted(c.valleys) == [1, 1, 2, 5]
+    with pytest.raises(ValueError, match="no bc agents"):
+        stem_counts(files, "bc")
+
+
 def test_claims_4_and_5_read_the_stem_analysis(replicated, tmp_path):
     folder = tmp_path / "rep"
     shutil.copytree(replicated, folder)

@@ -12,11 +12,19 @@ import torch
 from ibc_tutorial import cli
 from ibc_tutorial.experiments.agents.ablations import ABLATION_SEEDS, ablation_preset
 from ibc_tutorial.experiments.agents.checkpoints import load_agent
-from ibc_tutorial.experiments.agents.presets import LAPTOP, METHODS, TINY, Preset, differences
+from ibc_tutorial.experiments.agents.presets import (
+    LAPTOP,
+    METHODS,
+    PREVIOUS_LAPTOP,
+    TINY,
+    Preset,
+    differences,
+)
 from ibc_tutorial.experiments.agents.results import collect_results, load_results, run_dir
 from ibc_tutorial.experiments.runs import machine
 
 SHIPPED = Path(__file__).resolve().parents[1] / "book" / "results" / "laptop"
+PREVIOUS = SHIPPED.parent / "previous-laptop"  # the replication of PREVIOUS_LAPTOP, chapter 08's diagnosis
 
 
 @pytest.fixture(scope="module")
@@ -106,7 +114,8 @@ def test_the_shipped_results_load():
 
 SHIPPED_RUNS = [
     "laptop",
-    "laptop-emulated",
+    "previous-laptop",
+    "previous-laptop-emulated",
     "ablations/flag-lights",
     "ablations/previous-preset",
     "ablations/intensity-lights",
@@ -133,16 +142,17 @@ def test_the_shipped_results_are_a_clean_run_of_an_ancestor_commit(name):
 
 
 def test_the_shipped_route_drives_cover_every_shipped_agent_from_a_clean_ancestor_commit():
-    """Chapter 11's ``routes`` folder: chapter 09's every agent and the expert on the town02 routes, without
-    commands, from clean ancestor commits, each driver's every route once."""
+    """Chapter 11's route drives: every agent of the previous laptop replication and the expert on the town02
+    routes, without commands, from clean ancestor commits, each driver's every route once (made when that
+    replication's folder was ``laptop``)."""
     from ibc_tutorial.driving.route_following import ROUTES
     from ibc_tutorial.experiments.agents.route_drives import load_route_drives
 
-    folder = SHIPPED.parent / "routeless-on-routes"
+    folder = SHIPPED.parent / "previous-laptop-on-routes"
     if not folder.exists():
         pytest.skip("no shipped route drives")
     drives = load_route_drives(folder)
-    assert set(drives) == {f"{m}-seed{s}" for m in METHODS for s in LAPTOP.seeds} | {"expert"}
+    assert set(drives) == {f"{m}-seed{s}" for m in METHODS for s in PREVIOUS_LAPTOP.seeds} | {"expert"}
     for name, d in drives.items():
         assert d["commands"] is False and sorted(r["route"] for r in d["episodes"]) == sorted(ROUTES), name
     prov = json.loads((folder / "provenance.json").read_text())
@@ -157,12 +167,14 @@ def test_the_shipped_route_drives_cover_every_shipped_agent_from_a_clean_ancesto
 
 
 def test_the_shipped_crossings_are_clean_runs_of_an_ancestor_commit():
-    """Chapter 08's ``evaluate --crossings`` files: one per shipped agent, each from a clean ancestor
-    commit."""
-    files = sorted((SHIPPED / "crossings").glob("*.json"))
+    """Chapter 08's ``evaluate --crossings`` files: one per agent of the previous laptop replication, each
+    from a clean ancestor commit."""
+    files = sorted((PREVIOUS / "crossings").glob("*.json"))
     if not files:
         pytest.skip("no shipped crossings")
-    assert [f.name for f in files] == sorted(f"{m}-seed{s}.json" for m in METHODS for s in LAPTOP.seeds)
+    assert [f.name for f in files] == sorted(
+        f"{m}-seed{s}.json" for m in METHODS for s in PREVIOUS_LAPTOP.seeds
+    )
     root = SHIPPED.parents[2]
     for f in files:
         commit = json.loads(f.read_text())["commit"]
@@ -175,12 +187,12 @@ def test_the_shipped_crossings_are_clean_runs_of_an_ancestor_commit():
 @pytest.mark.parametrize(
     "folder, variant", [("flag-lights", "no-brake-noise"), ("previous-preset", "previous-preset")]
 )
-def test_the_shipped_ablation_folders_are_todays_variants_of_the_laptop_preset(folder, variant):
-    """Chapter 08 compares each shipped ablation folder with today's replication as the variant named here:
-    the
-    folder's preset must be that variant of today's laptop preset in every setting (its name aside)."""
+def test_the_shipped_ablation_folders_are_variants_of_the_previous_laptop_preset(folder, variant):
+    """Chapter 08 compares each shipped ablation folder with the previous laptop replication as the variant
+    named here: the folder's preset must be that variant of ``PREVIOUS_LAPTOP`` in every setting (its name
+    aside)."""
     stored = json.loads((SHIPPED.parent / "ablations" / folder / "provenance.json").read_text())["preset"]
-    assert differences(Preset.from_dict(stored), ablation_preset(LAPTOP, variant)) == {}
+    assert differences(Preset.from_dict(stored), ablation_preset(PREVIOUS_LAPTOP, variant)) == {}
 
 
 def test_an_ablation_is_a_smaller_replication_of_a_variant(tmp_path):
@@ -251,17 +263,23 @@ def test_compare_folders_reads_shared_seeds_and_counts_standstills(tmp_path):
         compare_folders(var, lone, methods=("bc",))
 
 
-def test_the_shipped_stem_analysis_is_complete_and_from_clean_ancestor_commits():
-    """``book/results/laptop/stems``: a drive and an analysis file for every shipped agent and the expert,
-    every invocation (drives, their resumption, the analyses) from a clean commit that is an ancestor."""
-    folder = SHIPPED / "stems"
+@pytest.mark.parametrize("replication", ["laptop", "previous-laptop"])
+def test_the_shipped_stem_analysis_is_complete_and_from_clean_ancestor_commits(replication):
+    """``book/results/<replication>/stems``: a drive (its own, or the one ``replicate`` recorded) and an
+    analysis file for every shipped agent and the expert, every invocation (drives, their resumption, the
+    analyses) from a clean commit that is an ancestor."""
+    from ibc_tutorial.experiments.agents.stems import drive_file
+
+    root_folder = SHIPPED.parent / replication
+    folder = root_folder / "stems"
     if not (folder / "summary.json").exists():
         pytest.skip("no shipped stem analysis")
-    names = sorted([f"{m}-seed{s}" for m in METHODS for s in LAPTOP.seeds] + ["expert"])
-    assert sorted(f.stem for f in (folder / "drives").glob("*.npz")) == names
+    preset = {"laptop": LAPTOP, "previous-laptop": PREVIOUS_LAPTOP}[replication]
+    names = sorted([f"{m}-seed{s}" for m in METHODS for s in preset.seeds] + ["expert"])
+    assert all(drive_file(root_folder, folder, n) is not None for n in names)
     assert sorted(f.stem for f in (folder / "analysis").glob("*.json") if f.stem != "provenance") == names
     summary = json.loads((folder / "summary.json").read_text())
-    assert all(summary["methods"][m]["agents"] == len(LAPTOP.seeds) for m in METHODS)
+    assert all(summary["methods"][m]["agents"] == len(preset.seeds) for m in METHODS)
     root = SHIPPED.parents[2]
     files = sorted(folder.glob("provenance*.json")) + [folder / "analysis" / "provenance.json"]
     commits = {i["commit"] for f in files for i in json.loads(f.read_text())["invocations"]}
@@ -316,6 +334,27 @@ def test_stem_drives_with_a_changed_dfo(replicated, tmp_path):
         with_dfo(agent, {"temperature": 2})
 
 
+def test_stem_drives_with_the_table_seeds_repeat_the_recorded_table_episodes(replicated, tmp_path):
+    """``stems drive --table-seeds``: each agent's DFO draws seeded with its training seed, so that a second
+    drive of the table's starts repeats, on the same machine, the episodes ``replicate`` recorded."""
+    from ibc_tutorial.experiments.agents.layout import STEM_DRIVE
+    from ibc_tutorial.experiments.agents.stems import run_drives, table_policy_seed
+
+    assert table_policy_seed("da-ibc-seed3") == 3 and table_policy_seed("expert") == 0
+    out = tmp_path / "again"
+    done = run_drives(replicated, out, episodes=TINY.final_episodes, steps=TINY.final_steps,
+                      only=["da-ibc-seed0"], log=None, table_seeds=True)  # fmt: skip
+    assert done == ["da-ibc-seed0"]
+    assert json.loads((out / "provenance.json").read_text())["protocol"]["policy_seed"] == "training seed"
+    with (
+        np.load(out / "drives" / "da-ibc-seed0.npz") as again,
+        np.load(run_dir(replicated, "da-ibc", 0) / STEM_DRIVE) as recorded,
+    ):
+        assert sorted(again.files) == sorted(recorded.files)
+        for k in recorded.files:
+            assert np.array_equal(again[k], recorded[k]), k
+
+
 def test_observation_and_landscape_at_a_kept_state(replicated, tmp_path):
     from ibc_tutorial.experiments.agents.stem_analysis import landscape_at, observation_at
     from ibc_tutorial.experiments.agents.stems import TRACE
@@ -356,7 +395,7 @@ STEM_ABLATIONS = {  # folder -> (its --set overrides, its seeds)
 
 
 @pytest.mark.parametrize("name", sorted(STEM_ABLATIONS))
-def test_the_shipped_stem_ablations_are_the_laptop_preset_with_their_overrides(name):
+def test_the_shipped_stem_ablations_are_the_previous_laptop_preset_with_their_overrides(name):
     folder = SHIPPED.parent / "ablations" / name
     if not (folder / "provenance.json").exists():
         pytest.skip(f"no shipped {name} ablation")
@@ -365,7 +404,10 @@ def test_the_shipped_stem_ablations_are_the_laptop_preset_with_their_overrides(n
 
     overrides, seeds = STEM_ABLATIONS[name]
     assert prov["overrides"] == overrides
-    assert differences(Preset.from_dict(prov["preset"]), with_overrides(LAPTOP, prov["overrides"])) == {}
+    assert (
+        differences(Preset.from_dict(prov["preset"]), with_overrides(PREVIOUS_LAPTOP, prov["overrides"]))
+        == {}
+    )
     assert prov["complete"] and "uncommitted" not in prov["commit"] and len(prov["invocations"]) == 1
     analysed = sorted(p.stem for p in (folder / "stems" / "analysis").glob("*-seed*.json"))
     assert analysed == sorted(f"{m}-seed{s}" for m in METHODS for s in seeds)

@@ -355,6 +355,12 @@ def _stems_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--dfo-samples", type=int, help="drive: the energy agents' DFO samples changed")
     p.add_argument("--dfo-iters", type=int, help="drive: the energy agents' DFO iterations changed")
     p.add_argument(
+        "--table-seeds",
+        action="store_true",
+        help="drive: each agent's DFO draws seeded with its training seed, as the table's episodes that "
+        "replicate records (default: seed 0)",
+    )
+    p.add_argument(
         "--summary-only", action="store_true", help="analyse: only pool the analysis files into summary.json"
     )
 

@@ -237,6 +237,12 @@ def _check_ratio_tables(num_name: str, numerators, den_name: str, denominators):
     return num, den
 
 
+def minority(p):
+    """min(p, 1 - p): the share of the less taken of two choices, given the share ``p`` of one of them
+    (a ``transform`` for ``ratio_of_sums_interval``: the minority exit at the stem of a T)."""
+    return np.minimum(p, 1 - p)
+
+
 def ratio_of_sums_interval(
     numerators,
     denominators,

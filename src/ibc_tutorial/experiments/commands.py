@@ -219,7 +219,14 @@ def stems(args: argparse.Namespace) -> int:
         dfo = {k: getattr(args, f"dfo_{k}") for k in ("select", "samples", "iters")}
         dfo = {k: v for k, v in dfo.items() if v is not None}
         stem_drives.run_drives(
-            args.folder, args.out, args.episodes, args.steps, args.only, command=command, dfo=dfo or None
+            args.folder,
+            args.out,
+            args.episodes,
+            args.steps,
+            args.only,
+            command=command,
+            dfo=dfo or None,
+            table_seeds=args.table_seeds,
         )
         return 0
     if not args.summary_only:

@@ -42,6 +42,7 @@ from ibc_tutorial.experiments.agents.presets import Preset
 from ibc_tutorial.experiments.agents.results import episode_table, load_results
 from ibc_tutorial.experiments.agents.run_folder import read_metrics
 from ibc_tutorial.experiments.runs import read_json_dict
+from ibc_tutorial.stats import minority  # noqa: F401  (chapters 08-09 import it from here)
 
 CLAIMS = {
     1: "BC reaches higher scores sooner",
@@ -82,11 +83,6 @@ def combine(*verdicts: str) -> str:
     return stats.DOES_NOT_HOLD if stats.DOES_NOT_HOLD in verdicts else stats.CANNOT_TELL
 
 
-def minority(p):
-    """min(p, 1 - p): the share of the less taken of two exits, given the share ``p`` of one of them."""
-    return np.minimum(p, 1 - p)
-
-
 def stem_files(folder) -> dict[str, dict]:
     """{driver: its stem-analysis file} of ``folder/stems/analysis`` ({} if there is none)."""
     return _analysis_files(Path(folder) / STEM_ANALYSIS, "re-run " + STEM_COMMAND.format(folder=folder))
@@ -110,6 +106,52 @@ def stem_exit_tables(files: dict[str, dict], method: str) -> tuple[np.ndarray, n
     left = np.array([[e["left"] for e in f["episodes"]] for f in agents], dtype=float)
     cross = np.array([[e["stem_crossings"] for e in f["episodes"]] for f in agents], dtype=float)
     return left, cross
+
+
+@dataclass(frozen=True)
+class StemCounts:
+    """What one method's agents did at the stems of the T-junctions, read from a stem analysis."""
+
+    method: str
+    """The method read."""
+    agents: int
+    """Its agents in the analysis."""
+    episodes: int
+    """Their free-driving episodes, all together."""
+    left: int
+    """Left turns of the completed crossings from a stem."""
+    crossings: int
+    """Completed crossings from a stem."""
+    minority: stats.Interval
+    """The share of the minority exit, min(p, 1 - p) of the left share p, with its agents x episodes
+    bootstrap interval (``stats.ratio_of_sums_interval``)."""
+    ended_at_stem: int
+    """Episodes that ended inside a crossing from a stem (in a building or off the road)."""
+    agents_both: int
+    """Agents that took a left and a right turn from stems (not necessarily at the same stem)."""
+    agents_left_only: int
+    """Agents with completed crossings from stems, every one of them a left turn."""
+    valleys: tuple[int, ...]
+    """The number of valleys of the energy over steering at every state read (energy agents; () for BC)."""
+
+
+def stem_counts(files: dict[str, dict], method: str, seed: int = 0) -> StemCounts:
+    """``StemCounts`` of ``method`` from the stem-analysis files ``files`` ({driver: file}, ``stem_files``)."""
+    agents = _agents_of(files, method)
+    left, cross = stem_exit_tables(files, method)  # (A, E) each
+    per_agent_left, per_agent_cross = left.sum(1), cross.sum(1)  # (A,) each
+    return StemCounts(
+        method=method,
+        agents=len(agents),
+        episodes=int(left.size),
+        left=int(left.sum()),
+        crossings=int(cross.sum()),
+        minority=stats.ratio_of_sums_interval(left, cross, transform=minority, seed=seed),
+        ended_at_stem=int(sum(e["ended_at_stem"] for f in agents for e in f["episodes"])),
+        agents_both=int(((per_agent_left > 0) & (per_agent_cross - per_agent_left > 0)).sum()),
+        agents_left_only=int(((per_agent_left == per_agent_cross) & (per_agent_cross > 0)).sum()),
+        valleys=tuple(int(s["valleys"]) for f in agents for s in f["states"] if "valleys" in s),
+    )
 
 
 def range_differences(files: dict[str, dict], method: str = "da-ibc", key: str = RANGE_KEY) -> np.ndarray:

@@ -47,7 +47,7 @@ none of the expert's labels), is chapter 08's ``intensity-lights`` ablation.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from ibc_tutorial.driving.bev import LIGHT_ENCODINGS, check_bev_size
 from ibc_tutorial.driving.collect import CollectConfig
@@ -303,6 +303,18 @@ LAPTOP = Preset(
 )
 """What a 2-core CPU can replicate in under an hour (``ibc-tutorial replicate --preset laptop``)."""
 
+PREVIOUS_LAPTOP = replace(
+    LAPTOP,
+    name="previous-laptop",
+    routes=10,  # the paper's 10 routes
+    epochs=8,
+    seeds=(0, 1, 2, 3, 4),
+)
+"""The laptop preset until 2026-11-27: the paper's 10 demonstration routes, 8 epochs, five agents per method,
+otherwise today's. Its replication (``book/results/previous-laptop``) is where chapter 08 found the agents
+turning right at the stems of the T-junctions, and what its stem ablations and chapter 11's command agents
+vary; the laptop preset's 20 routes x 4 epochs came out of them."""
+
 TINY = Preset(
     name="tiny",
     routes=1,
@@ -334,12 +346,12 @@ TINY = Preset(
 )
 """A seconds-long preset for the tests and the chapters' live demonstrations."""
 
-PRESETS = {p.name: p for p in (PAPER, LAPTOP, TINY)}
+PRESETS = {p.name: p for p in (PAPER, LAPTOP, PREVIOUS_LAPTOP, TINY)}
 """All named presets."""
 
 
 def get_preset(name: str) -> Preset:
-    """The preset called ``name`` ("paper", "laptop" or "tiny")."""
+    """The preset called ``name`` ("paper", "laptop", "previous-laptop" or "tiny")."""
     return PRESETS[check_choice("preset", name, tuple(PRESETS))]
 
 

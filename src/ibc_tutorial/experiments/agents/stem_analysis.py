@@ -252,10 +252,6 @@ def _table(files: list[dict], key) -> np.ndarray:
     return np.array([[float(key(e)) for e in f["episodes"]] for f in files])  # (A, E)
 
 
-def _minority(p):
-    return np.minimum(p, 1 - p)
-
-
 def method_summary(files: list[dict], seed: int = 0) -> dict:
     """Per-method measures with agents x episodes bootstrap intervals, and the state readings pooled.
 
@@ -272,7 +268,9 @@ def method_summary(files: list[dict], seed: int = 0) -> dict:
                  "left": int(left.sum())}  # fmt: skip
     if cross.sum() > 0:
         out["left_share"] = str(stats.ratio_of_sums_interval(left, cross, seed=seed))
-        out["minority_share"] = str(stats.ratio_of_sums_interval(left, cross, transform=_minority, seed=seed))
+        out["minority_share"] = str(
+            stats.ratio_of_sums_interval(left, cross, transform=stats.minority, seed=seed)
+        )
     out["ended_at_stem"] = int(_table(files, lambda e: e["ended_at_stem"]).sum())
     out["terminated"] = int(_table(files, lambda e: bool(e["row"]["termination"])).sum())
     for key in ("distinct_approaches", "lanes_covered"):

@@ -144,14 +144,25 @@ def with_dfo(agent, dfo: dict | None):
 
 
 def drive(
-    checkpoint: Path | None, episodes: int, steps: int, seed: int = EVAL_SEED, dfo: dict | None = None
+    checkpoint: Path | None,
+    episodes: int,
+    steps: int,
+    seed: int = EVAL_SEED,
+    dfo: dict | None = None,
+    policy_seed: int = POLICY_SEED,
 ) -> dict:
     """Drive one agent (``checkpoint``; None: the expert) for ``episodes`` free-driving episodes, an energy
-    agent's DFO changed by ``dfo`` (``with_dfo``).
+    agent's DFO changed by ``dfo`` (``with_dfo``), its DFO draws seeded with ``policy_seed``.
 
     Returns the arrays of its drive file (see the module's docstring)."""
     agent = "expert" if checkpoint is None else with_dfo(load_agent(checkpoint)[0], dfo)
-    return recorded_drive(agent, episodes, steps, seed)[1]
+    return recorded_drive(agent, episodes, steps, seed, policy_seed)[1]
+
+
+def table_policy_seed(name: str) -> int:
+    """The policy seed ``replicate`` drives driver ``name``'s table episodes with: an agent's training seed
+    (``<method>-seed<k>``: k), the expert's ``POLICY_SEED``."""
+    return POLICY_SEED if name == "expert" else int(name.rsplit("-seed", 1)[1])
 
 
 def run_drives(
@@ -163,17 +174,22 @@ def run_drives(
     log=print,
     command: str = "",
     dfo: dict | None = None,
+    table_seeds: bool = False,
 ) -> list[str]:
     """Drive each agent of ``folder``, and the expert, without a file in ``out/drives``; the names driven.
 
     ``command``: the command line, recorded in ``out/provenance.json`` (``ibc-tutorial stems drive``);
-    ``dfo``: the energy agents' DFO changed (``with_dfo``), part of the folder's protocol."""
+    ``dfo``: the energy agents' DFO changed (``with_dfo``), part of the folder's protocol; ``table_seeds``:
+    each agent's DFO draws seeded with its training seed (``table_policy_seed``), as the table's episodes
+    that ``replicate`` records, instead of ``POLICY_SEED`` (so that the drives repeat those episodes, e.g.
+    on another CPU)."""
     episodes = check_int("episodes", episodes, minimum=1)
     steps = check_int("steps", steps, minimum=1)
     out = Path(out)
     prov_path = out / "provenance.json"
     prov = json.loads(prov_path.read_text()) if prov_path.exists() else {"invocations": []}
-    same = {"episodes": episodes, "steps": steps, "town": TOWN, "seed": EVAL_SEED, "policy_seed": POLICY_SEED}
+    policy_seed = "training seed" if table_seeds else POLICY_SEED
+    same = {"episodes": episodes, "steps": steps, "town": TOWN, "seed": EVAL_SEED, "policy_seed": policy_seed}
     if dfo:
         same["dfo"] = dict(sorted(dfo.items()))
     if prov.get("protocol", same) != same:
@@ -184,7 +200,8 @@ def run_drives(
     write_json(prov_path, prov)
 
     def drive_one(name, ck, path):
-        write_npz(path, drive(ck, episodes, steps, dfo=dfo))
+        ps = table_policy_seed(name) if table_seeds else POLICY_SEED
+        write_npz(path, drive(ck, episodes, steps, dfo=dfo, policy_seed=ps))
 
     def record(name, cpu):
         inv.setdefault("cpu_seconds", {})[name] = round(cpu, 1)
