@@ -136,7 +136,7 @@ class StemCounts:
 
 
 def stem_counts(files: dict[str, dict], method: str, seed: int = 0) -> StemCounts:
-    """``StemCounts`` of ``method`` from the stem-analysis files ``files`` ({driver: file}, ``stem_files``)."""
+    """``StemCounts`` of ``method`` from stem-analysis files ``files`` ({driver: file}, ``stem_files``)."""
     agents = _agents_of(files, method)
     left, cross = stem_exit_tables(files, method)  # (A, E) each
     per_agent_left, per_agent_cross = left.sum(1), cross.sum(1)  # (A,) each
