@@ -43,12 +43,6 @@ class SideRoadConfig(ToyConfig):
     """Probability that an expert keeps straight (mode 0); it takes the side road otherwise (mode 1)."""
     horizon: int = 64
     """Steps per episode: the car ends about 12 m past the branch point."""
-    start_lateral_range: float = 0.2
-    """The start's lateral offset y (m) is uniform in [-range, range], close to the centre line."""
-    obs_lateral: bool = False
-    """The policy observes only the distance to the branch point (as in the tree world)."""
-    expert_holds_start_offset: bool = False
-    """The side-road experts steer back to the centre line of the main road (lane keeping)."""
     corner_length: float = 6.0
     """Length (m, along x) over which the side-road expert's path bends from the main road into the side road.
     """

@@ -41,12 +41,6 @@ class TreeConfig(ToyConfig):
 
     heading_max: float = 0.7
     """Direction of travel at full steering (rad): enough for the expert's swerve."""
-    start_lateral_range: float = 0.2
-    """The start's lateral offset y (m) is uniform in [-range, range]: close to the centre line."""
-    expert_holds_start_offset: bool = False
-    """The tree expert's path runs along the centre line away from the tree."""
-    obs_lateral: bool = False
-    """The policy observes only the distance to the tree (see the module docstring for why)."""
     tree_x: float = 20.0
     """x of the tree's centre (m); the tree stands on the centre line y = 0."""
     tree_radius: float = 1.5

@@ -51,19 +51,22 @@ class ToyConfig:
     gives heading -heading_max, to the right)."""
     horizon: int = 80
     """Steps per episode (the car covers a little less than speed * dt * horizon metres along x)."""
-    start_lateral_range: float = 1.0
-    """The start's lateral offset y (m) is uniform in [-range, range]: anywhere across the lane."""
-    expert_holds_start_offset: bool = True
+    start_lateral_range: float = 0.2
+    """The start's lateral offset y (m) is uniform in [-range, range]: close to the centre line (both
+    worlds)."""
+    expert_holds_start_offset: bool = False
     """True: the expert's path runs at its own start offset (a driver who keeps where it is in
-    the lane); False: it runs along the centre line y = 0."""
+    the lane); False (both worlds): it runs along the centre line y = 0, the tree expert's away from the
+    tree, the side-road experts back to the main road's (lane keeping)."""
     expert_lookahead: float = 5.0
     """Distance ahead (m, along x) of the point on its path that the expert aims at."""
     expert_noise_std: float = 0.05
     """Standard deviation of the Gaussian noise added to the expert's steering (then clipped)."""
     obs_distance_scale: float = 10.0
     """Observations divide the distance along x (m) by this, so that they are of order 1."""
-    obs_lateral: bool = True
-    """Whether the observation includes the lateral offset (else it is the distance alone)."""
+    obs_lateral: bool = False
+    """Whether the observation includes the lateral offset; False (both worlds): the distance to the landmark
+    alone (the tree world's module docstring says why)."""
     obs_lateral_scale: float = 2.0
     """Observations divide the lateral offset (m, to the right of the centre line: -y) by this."""
     obs_prev_action: bool = False
