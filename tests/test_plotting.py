@@ -404,6 +404,10 @@ def test_stem_figures():
     )
     assert_labelled(fig)
     assert len(fig.axes[0].patches) == 3
+    assert fig.axes[0].get_legend().get_texts()[0].get_text() == "0.5: both exits alike"
+    plt.close(fig)
+    fig = agents.plot_stem_exit_shares({"ibc": (0.2, 0.1, 0.3)}, reference=0.3, reference_label="the target")
+    assert fig.axes[0].get_legend().get_texts()[0].get_text() == "0.3: the target"
     plt.close(fig)
     pos = np.arange(-5, 6)
     fig = agents.plot_left_mass_by_position(

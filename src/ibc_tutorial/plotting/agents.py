@@ -6,6 +6,7 @@ from __future__ import annotations
 import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.patches import FancyBboxPatch
+from matplotlib.ticker import MaxNLocator
 
 from ibc_tutorial.plotting.common import ACCEL_LABEL, STEER_LABEL, as_array, check_panels, finish, label_axes
 from ibc_tutorial.plotting.town import draw_bev, plot_town
@@ -119,6 +120,7 @@ def plot_training_curves(
     if reference is not None:
         ax.axhline(reference[0], color=METHOD_COLORS["expert"], ls="--", lw=1.2, label=reference[1])
     label_axes(ax, "epoch", ylabel, title)
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))  # epochs are whole numbers
     ax.legend()
     ax.grid(alpha=0.3)
     return ax.figure
@@ -345,12 +347,14 @@ def plot_stem_exit_shares(
     reference: float | None = 0.5,
     ylabel: str = "share of left turns",
     title: str = "Left turns of the completed crossings from the stem of a T (95 % intervals)",
+    reference_label: str = "both exits alike",
 ):
     """One bar per group with its interval: the share of left turns at the stems of the Ts.
 
     ``shares``: ``{label: (estimate, low, high)}`` (a ``stats.Interval``'s numbers), e.g. one entry per
     method and replication; a label starting with a method's name takes that method's colour.
-    ``reference``: a dashed line (None: none), the expert's even choice at 0.5."""
+    ``reference``: a dashed line (None: none), the expert's even choice at 0.5; ``reference_label``: what it
+    marks, after its value in the legend."""
     n = check_panels("shares", shares)
     fig, ax = plt.subplots(figsize=(max(5.5, 1.1 * n + 2.0), 3.6))
     for k, (label, (est, low, high)) in enumerate(shares.items()):
@@ -360,7 +364,7 @@ def plot_stem_exit_shares(
         ax.errorbar(k, est, yerr=[[est - low], [high - est]], color="k", capsize=4, lw=1.2)
         ax.text(k, high + 0.02, f"{est:.2f}", ha="center", va="bottom", fontsize=8)
     if reference is not None:
-        ax.axhline(reference, color="0.3", ls="--", lw=1, label=f"{reference:g}: both exits alike")
+        ax.axhline(reference, color="0.3", ls="--", lw=1, label=f"{reference:g}: {reference_label}")
     ax.set_xticks(range(n), list(shares), rotation=20, ha="right", fontsize=8)
     ax.set_ylim(0, 1.05)
     label_axes(ax, "agents", ylabel, "", legend=reference is not None, loc="upper right", fontsize=8)
