@@ -411,3 +411,50 @@ def test_the_shipped_stem_ablations_are_the_previous_laptop_preset_with_their_ov
     assert prov["complete"] and "uncommitted" not in prov["commit"] and len(prov["invocations"]) == 1
     analysed = sorted(p.stem for p in (folder / "stems" / "analysis").glob("*-seed*.json"))
     assert analysed == sorted(f"{m}-seed{s}" for m in METHODS for s in seeds)
+
+
+def _is_clean_ancestor(commit: str) -> None:
+    root = SHIPPED.parents[2]
+    assert "uncommitted" not in commit and re.fullmatch(r"[0-9a-f]{40}", commit), commit
+    if (root / ".git").exists():
+        ancestor = subprocess.run(["git", "-C", str(root), "merge-base", "--is-ancestor", commit, "HEAD"])
+        assert ancestor.returncode == 0, f"commit {commit} is not an ancestor of HEAD"
+
+
+def test_the_shipped_older_cpu_stem_drives_repeat_the_table_protocol():
+    """``laptop/stems-emulated``: every agent and the expert driven again on the table's starts with the table's
+    DFO seeds, under the older CPU's environment, from clean ancestor commits; analysed for every driver."""
+    folder = SHIPPED / "stems-emulated"
+    if not (folder / "summary.json").exists():
+        pytest.skip("no shipped older-CPU stem drives")
+    names = sorted([f"{m}-seed{s}" for m in METHODS for s in LAPTOP.seeds] + ["expert"])
+    driven = []
+    for part in sorted(folder.glob("provenance_drive_*.json")):
+        prov = json.loads(part.read_text())
+        assert prov["protocol"] == {
+            "episodes": LAPTOP.final_episodes,
+            "steps": LAPTOP.final_steps,
+            "town": "town02",
+            "seed": 1000,
+            "policy_seed": "training seed",
+        }
+        for inv in prov["invocations"]:
+            assert inv["machine"]["cpu_capability"] == "DEFAULT"
+            assert inv["machine"]["cpu_environment"]["ATEN_CPU_CAPABILITY"] == "default"
+            _is_clean_ancestor(inv["commit"])
+            driven += list(inv["cpu_seconds"])
+    assert sorted(driven) == names
+    analysed = sorted(p.stem for p in (folder / "analysis").glob("*.json") if p.stem != "provenance")
+    assert analysed == names
+
+
+def test_the_shipped_reevaluations_are_the_seed0_agents_here_and_on_the_older_cpu():
+    files = sorted((SHIPPED / "reevaluated").glob("*.json"))
+    if not files:
+        pytest.skip("no shipped re-evaluations")
+    assert [f.stem for f in files] == sorted(f"{m}_{w}" for m in METHODS for w in ("native", "emulated_cpu"))
+    for f in files:
+        ev = json.loads(f.read_text())
+        assert ev["checkpoint"].endswith(f"runs/{f.stem.split('_')[0]}/seed0/final.pt")
+        assert (ev["machine"]["cpu_capability"] == "DEFAULT") == f.stem.endswith("emulated_cpu")
+        _is_clean_ancestor(ev["commit"])
