@@ -423,7 +423,7 @@ def _is_clean_ancestor(commit: str) -> None:
 
 def test_the_shipped_older_cpu_stem_drives_repeat_the_table_protocol():
     """``laptop/stems-emulated``: every agent and the expert driven again on the table's starts with the
-    table's DFO seeds, under the older CPU's environment, from clean ancestor commits; every driver analysed."""
+    table's DFO seeds, under the older CPU's environment, from clean ancestor commits; each one analysed."""
     folder = SHIPPED / "stems-emulated"
     if not (folder / "summary.json").exists():
         pytest.skip("no shipped older-CPU stem drives")
