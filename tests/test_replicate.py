@@ -341,6 +341,9 @@ def test_stem_drives_with_the_table_seeds_repeat_the_recorded_table_episodes(rep
     from ibc_tutorial.experiments.agents.stems import run_drives, table_policy_seed
 
     assert table_policy_seed("da-ibc-seed3") == 3 and table_policy_seed("expert") == 0
+    for bad in ("da-ibc", "ibc-seedx", "dqn-seed1"):
+        with pytest.raises(ValueError, match="name must be 'expert' or '<method>-seed<k>'"):
+            table_policy_seed(bad)
     out = tmp_path / "again"
     done = run_drives(replicated, out, episodes=TINY.final_episodes, steps=TINY.final_steps,
                       only=["da-ibc-seed0"], log=None, table_seeds=True)  # fmt: skip

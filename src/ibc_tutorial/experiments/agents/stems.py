@@ -162,7 +162,14 @@ def drive(
 def table_policy_seed(name: str) -> int:
     """The policy seed ``replicate`` drives driver ``name``'s table episodes with: an agent's training seed
     (``<method>-seed<k>``: k), the expert's ``POLICY_SEED``."""
-    return POLICY_SEED if name == "expert" else int(name.rsplit("-seed", 1)[1])
+    if name == "expert":
+        return POLICY_SEED
+    method, _, seed = name.rpartition("-seed")
+    if method not in METHODS or not seed.isdigit():
+        raise ValueError(
+            f"name must be 'expert' or '<method>-seed<k>' with a method of {METHODS}, got {name!r}"
+        )
+    return int(seed)
 
 
 def run_drives(
