@@ -569,7 +569,8 @@ def proto_rollout(p, ds, probs, steps: int = 60, rounds: int = 2) -> dict:
     and a DA-IBC agent with the renderer's pooling as today and as ``pool_packed``, alternately; the time per
     episode-step, the policy's share of it, and whether the episodes end identically."""
     from ibc_tutorial.driving import bev
-    from ibc_tutorial.driving.rollout import rollout
+    from ibc_tutorial.driving.env import EnvConfig
+    from ibc_tutorial.driving.rollout import RolloutRecording, rollout
 
     today = bev.BEVRenderer._pool
 
@@ -593,16 +594,9 @@ def proto_rollout(p, ds, probs, steps: int = 60, rounds: int = 2) -> dict:
                     return a
 
                 t = time.perf_counter()
+                env = EnvConfig("town02", p.bev_size, True, steps, light_encoding=p.light_encoding)
                 res = rollout(
-                    timed,
-                    "town02",
-                    p.final_episodes,
-                    steps,
-                    p.bev_size,
-                    seed=1000,
-                    record_xy=False,
-                    light_encoding=p.light_encoding,
-                    show_progress=False,
+                    timed, env, p.final_episodes, 1000, record=RolloutRecording(xy=False), show_progress=False
                 )
                 total = time.perf_counter() - t
                 n = sum(r.steps for r in res)

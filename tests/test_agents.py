@@ -158,6 +158,7 @@ def test_the_network_is_built_from_its_architecture():
 
 
 def test_ended_crossing_energies_replay_the_episode_and_refuse_what_they_cannot_reproduce():
+    from ibc_tutorial.driving.rollout import RolloutRecording
     from ibc_tutorial.experiments.agents.crossings import ended_crossing_energies
     from ibc_tutorial.experiments.agents.evaluate import episode_rows, evaluate_agent
 
@@ -171,9 +172,7 @@ def test_ended_crossing_energies_replay_the_episode_and_refuse_what_they_cannot_
         steps=60,
         seed=1000,
         policy_seed=0,
-        record_steps=True,
-        keep_obs=True,
-        show_progress=False,
+        record=RolloutRecording(xy=False, steps=True, obs=True),
     )
     assert all(r.terminated for r in results)
     rows = episode_rows(results)

@@ -315,16 +315,16 @@ def test_the_replication_records_its_table_episodes_for_the_stem_analysis(replic
 def test_stem_drives_with_a_changed_dfo(replicated, tmp_path):
     """``stems drive --dfo-select sample``: the IBC agent draws its action instead of taking the lowest
     energy; the change is part of the folder's protocol, and BC and the expert are not changed."""
-    from ibc_tutorial.experiments.agents.stems import run_drives, with_dfo
+    from ibc_tutorial.experiments.agents.stems import DriveProtocol, run_drives, with_dfo
 
     out = tmp_path / "sampled"
-    done = run_drives(replicated, out, episodes=1, steps=5, only=["ibc-seed0", "bc-seed0"], log=None,
-                      dfo={"select": "sample", "samples": 16})  # fmt: skip
+    sampled = DriveProtocol(episodes=1, steps=5, dfo={"select": "sample", "samples": 16})
+    done = run_drives(replicated, out, sampled, only=["ibc-seed0", "bc-seed0"], log=None)
     assert done == ["bc-seed0", "ibc-seed0"]
     prov = json.loads((out / "provenance.json").read_text())
     assert prov["protocol"]["dfo"] == {"samples": 16, "select": "sample"}
     with pytest.raises(ValueError, match="another protocol"):
-        run_drives(replicated, out, episodes=1, steps=5, only=["ibc-seed0"], log=None)
+        run_drives(replicated, out, DriveProtocol(episodes=1, steps=5), only=["ibc-seed0"], log=None)
     agent = load_agent(run_dir(replicated, "ibc", 0) / "final.pt")[0]
     assert agent.dfo_config.select == "argmax"
     assert with_dfo(agent, {"select": "sample"}).dfo_config.select == "sample"
@@ -332,21 +332,29 @@ def test_stem_drives_with_a_changed_dfo(replicated, tmp_path):
     assert with_dfo(bc, {"select": "sample"}) is bc and bc.dfo_config is None
     with pytest.raises(ValueError, match="dfo must hold"):
         with_dfo(agent, {"temperature": 2})
+    with pytest.raises(ValueError, match="dfo must hold"):
+        DriveProtocol(dfo={"temperature": 2})
+    with pytest.raises(ValueError, match="episodes must be"):
+        DriveProtocol(episodes=0)
+    with pytest.raises(ValueError, match="table_seeds must be True or False"):
+        DriveProtocol(table_seeds="yes")
+    with pytest.raises(ValueError, match="protocol must be a DriveProtocol"):
+        run_drives(replicated, out, {"episodes": 1})
 
 
 def test_stem_drives_with_the_table_seeds_repeat_the_recorded_table_episodes(replicated, tmp_path):
     """``stems drive --table-seeds``: each agent's DFO draws seeded with its training seed, so that a second
     drive of the table's starts repeats, on the same machine, the episodes ``replicate`` recorded."""
     from ibc_tutorial.experiments.agents.layout import STEM_DRIVE
-    from ibc_tutorial.experiments.agents.stems import run_drives, table_policy_seed
+    from ibc_tutorial.experiments.agents.stems import DriveProtocol, run_drives, table_policy_seed
 
     assert table_policy_seed("da-ibc-seed3") == 3 and table_policy_seed("expert") == 0
     for bad in ("da-ibc", "ibc-seedx", "dqn-seed1"):
         with pytest.raises(ValueError, match="name must be 'expert' or '<method>-seed<k>'"):
             table_policy_seed(bad)
     out = tmp_path / "again"
-    done = run_drives(replicated, out, episodes=TINY.final_episodes, steps=TINY.final_steps,
-                      only=["da-ibc-seed0"], log=None, table_seeds=True)  # fmt: skip
+    table = DriveProtocol(episodes=TINY.final_episodes, steps=TINY.final_steps, table_seeds=True)
+    done = run_drives(replicated, out, table, only=["da-ibc-seed0"], log=None)
     assert done == ["da-ibc-seed0"]
     assert json.loads((out / "provenance.json").read_text())["protocol"]["policy_seed"] == "training seed"
     with (

@@ -92,6 +92,7 @@ def train(args: argparse.Namespace) -> int:
 def evaluate(args: argparse.Namespace) -> int:
     """``ibc-tutorial evaluate``: drive a checkpoint's agent, print each episode, write ``--out``."""
     from ibc_tutorial import __version__
+    from ibc_tutorial.driving.rollout import RolloutRecording
     from ibc_tutorial.experiments.agents.checkpoints import load_agent, training_seed
     from ibc_tutorial.experiments.agents.crossings import crossing_rows, ended_crossing_energies
     from ibc_tutorial.experiments.agents.evaluate import episode_rows, evaluate_agent, summarize_episodes
@@ -117,7 +118,8 @@ def evaluate(args: argparse.Namespace) -> int:
     if threads:
         torch.set_num_threads(threads)
     protocol = {"seed": seed, "policy_seed": policy_seed, "routeless": routeless}
-    results = evaluate_agent(agent, args.town, episodes, steps, **protocol, record_steps=crossings)
+    recording = RolloutRecording(xy=False, steps=crossings)
+    results = evaluate_agent(agent, args.town, episodes, steps, **protocol, record=recording)
     rows = episode_rows(results)
     energy_steer = None
     if crossings:
@@ -218,16 +220,10 @@ def stems(args: argparse.Namespace) -> int:
     if args.step == "drive":
         dfo = {k: getattr(args, f"dfo_{k}") for k in ("select", "samples", "iters")}
         dfo = {k: v for k, v in dfo.items() if v is not None}
-        stem_drives.run_drives(
-            args.folder,
-            args.out,
-            args.episodes,
-            args.steps,
-            args.only,
-            command=command,
-            dfo=dfo or None,
-            table_seeds=args.table_seeds,
+        protocol = stem_drives.DriveProtocol(
+            args.episodes, args.steps, dfo=dfo or None, table_seeds=args.table_seeds
         )
+        stem_drives.run_drives(args.folder, args.out, protocol, only=args.only, command=command)
         return 0
     if not args.summary_only:
         stem_analysis.run_analysis(args.folder, args.out, command=command)

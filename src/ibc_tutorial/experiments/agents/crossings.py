@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ibc_tutorial.driving.analysis import junction_crossings
-from ibc_tutorial.driving.rollout import EpisodeResult
+from ibc_tutorial.driving.rollout import EpisodeResult, RolloutRecording
 from ibc_tutorial.experiments.agents.agent import Agent
 from ibc_tutorial.experiments.agents.evaluate import evaluate_agent
 from ibc_tutorial.utils import check_int
@@ -85,9 +85,7 @@ def ended_crossing_energies(
         seed=seed,
         policy_seed=policy_seed,
         routeless=routeless,
-        record_xy=False,
-        show_progress=False,
-        on_step=keep,
+        record=RolloutRecording(xy=False, on_step=keep),
     )
     for i in wanted:
         if (

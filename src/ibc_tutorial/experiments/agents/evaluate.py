@@ -35,6 +35,9 @@ HELDOUT_SEED = 30000
 """Seed of the first episode of the second, held-out evaluation (``Preset.heldout_episodes``): starts that no
 setting of the book was chosen on, to check that the table's numbers are not a property of its ten starts."""
 
+SCORES_ONLY = RolloutRecording(xy=False)
+"""``evaluate_agent``'s default recording: the scores alone (no positions unless asked)."""
+
 EXPERT_BEV_SIZE = 64
 """BEV size of the environments when the PID expert drives (it does not look at the BEV)."""
 
@@ -48,15 +51,17 @@ def evaluate_agent(
     seed: int = EVAL_SEED,
     policy_seed: int = 0,
     routeless: bool = True,
-    **record,
+    record: RolloutRecording = SCORES_ONLY,
+    show_progress: bool | None = False,
 ) -> list[EpisodeResult]:
     """Drive ``agent`` (an ``Agent``, or "expert") for ``episodes`` batched episodes; one result each.
 
-    ``policy_seed`` seeds the agent's DFO draws; ``record`` (``record_xy``, ``record_steps``, ``keep_obs``,
-    ``show_progress``, ``on_step``) is what ``driving.rollout`` records and shows, passed on as given
-    (``record_xy`` off unless asked).
+    ``policy_seed`` seeds the agent's DFO draws; ``record`` is what ``driving.rollout`` keeps of each
+    episode besides its score (``RolloutRecording``; by default nothing, not even the positions);
+    ``show_progress``: a progress bar over the steps.
     """
-    record.setdefault("record_xy", False)
+    if not isinstance(record, RolloutRecording):
+        raise ValueError(f"record must be a RolloutRecording, got {type(record).__name__}")
     check_int("episodes", episodes, minimum=1)
     check_int("steps", steps, minimum=1)
     if agent == "expert":
@@ -68,15 +73,7 @@ def evaluate_agent(
             agent.preset.light_encoding,
         )
     env = EnvConfig(town, bev_size, routeless, steps, light_encoding=encoding)
-    show_progress = record.pop("show_progress", False)
-    options = {"record_xy": "xy", "record_steps": "steps", "keep_obs": "obs", "on_step": "on_step"}
-    unknown = sorted(set(record) - set(options))
-    if unknown:
-        raise ValueError(
-            f"unknown recording options {unknown}: expected some of {sorted(options)} or show_progress"
-        )
-    recording = RolloutRecording(**{options[k]: v for k, v in record.items()})
-    return rollout(policy, env, episodes, seed, record=recording, show_progress=show_progress)
+    return rollout(policy, env, episodes, seed, record=record, show_progress=show_progress)
 
 
 def episode_rows(results: list[EpisodeResult]) -> list[dict]:

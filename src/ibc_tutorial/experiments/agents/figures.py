@@ -18,6 +18,7 @@ import numpy as np
 import torch
 
 from ibc_tutorial.driving.analysis import exits_per_approach, junction_visits, road_coverage
+from ibc_tutorial.driving.rollout import RolloutRecording
 from ibc_tutorial.experiments.agents.agent import Agent
 from ibc_tutorial.experiments.agents.evaluate import EVAL_SEED, episode_rows, evaluate_agent
 from ibc_tutorial.experiments.agents.layout import FREE_DRIVING, LANDSCAPES
@@ -49,9 +50,7 @@ def record_drive(agent: Agent, steps: int, seed: int, policy_seed: int = 0) -> d
         steps,
         seed=seed,
         policy_seed=policy_seed,
-        record_steps=True,
-        keep_obs=True,
-        show_progress=False,
+        record=RolloutRecording(xy=False, steps=True, obs=True),
     )
     return dict(r.trace, result=episode_rows([r])[0])
 

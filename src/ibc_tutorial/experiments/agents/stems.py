@@ -28,11 +28,12 @@ needs no second drive; ``drive_file`` finds either.
 from __future__ import annotations
 
 import json
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
+from ibc_tutorial.driving.rollout import RolloutRecording
 from ibc_tutorial.driving.stems import kept_states
 from ibc_tutorial.experiments.agents.checkpoints import load_agent
 from ibc_tutorial.experiments.agents.evaluate import EVAL_SEED, episode_rows, evaluate_agent
@@ -100,9 +101,7 @@ def recorded_drive(
         steps,
         seed=seed,
         policy_seed=policy_seed,
-        record_steps=True,
-        show_progress=False,
-        on_step=keep if is_agent else None,
+        record=RolloutRecording(xy=False, steps=True, on_step=keep if is_agent else None),
     )
     arrays: dict[str, np.ndarray] = {}
     obs_ep, obs_t, obs_bev, obs_state = [], [], [], []
@@ -172,33 +171,66 @@ def table_policy_seed(name: str) -> int:
     return int(seed)
 
 
+@dataclass(frozen=True)
+class DriveProtocol:
+    """What every drive of one ``stems drive`` folder shares: recorded in its ``provenance.json`` as the
+    folder's ``protocol``, which a later invocation must repeat (so that a folder never mixes two)."""
+
+    episodes: int = EPISODES
+    """Episodes per driver, from ``reset(seed=EVAL_SEED + i)``."""
+    steps: int = STEPS
+    """Steps per episode (10 Hz)."""
+    dfo: dict | None = None
+    """The energy agents' DFO changed (``with_dfo``: keys of ``DFO_OVERRIDES``), or None: as trained."""
+    table_seeds: bool = False
+    """True: each agent's DFO draws seeded with its training seed (``table_policy_seed``), as the table's
+    episodes that ``replicate`` records, so that the drives repeat those episodes (e.g. on another CPU);
+    False: ``POLICY_SEED`` for every agent."""
+
+    def __post_init__(self) -> None:
+        check_int("episodes", self.episodes, minimum=1)
+        check_int("steps", self.steps, minimum=1)
+        if self.dfo is not None:
+            if not isinstance(self.dfo, dict):
+                raise ValueError(f"dfo must be a dict or None, got {type(self.dfo).__name__}")
+            unknown = sorted(set(self.dfo) - set(DFO_OVERRIDES))
+            if unknown:
+                raise ValueError(f"dfo must hold some of {sorted(DFO_OVERRIDES)}, got {unknown}")
+        if not isinstance(self.table_seeds, bool):
+            raise ValueError(f"table_seeds must be True or False, got {self.table_seeds!r}")
+
+    def policy_seed(self, name: str) -> int:
+        """The seed of driver ``name``'s DFO draws."""
+        return table_policy_seed(name) if self.table_seeds else POLICY_SEED
+
+    def record(self) -> dict:
+        """The protocol as ``provenance.json`` records it."""
+        out = {
+            "episodes": self.episodes,
+            "steps": self.steps,
+            "town": TOWN,
+            "seed": EVAL_SEED,
+            "policy_seed": "training seed" if self.table_seeds else POLICY_SEED,
+        }
+        if self.dfo:
+            out["dfo"] = dict(sorted(self.dfo.items()))
+        return out
+
+
 def run_drives(
-    folder,
-    out,
-    episodes: int = EPISODES,
-    steps: int = STEPS,
-    only=None,
-    log=print,
-    command: str = "",
-    dfo: dict | None = None,
-    table_seeds: bool = False,
+    folder, out, protocol: DriveProtocol = DriveProtocol(), *, only=None, log=print, command: str = ""
 ) -> list[str]:
     """Drive each agent of ``folder``, and the expert, without a file in ``out/drives``; the names driven.
 
-    ``command``: the command line, recorded in ``out/provenance.json`` (``ibc-tutorial stems drive``);
-    ``dfo``: the energy agents' DFO changed (``with_dfo``), part of the folder's protocol; ``table_seeds``:
-    each agent's DFO draws seeded with its training seed (``table_policy_seed``), as the table's episodes
-    that ``replicate`` records, instead of ``POLICY_SEED`` (so that the drives repeat those episodes, e.g.
-    on another CPU)."""
-    episodes = check_int("episodes", episodes, minimum=1)
-    steps = check_int("steps", steps, minimum=1)
+    ``protocol``: the episodes, an energy agent's DFO and the policy seeds (``DriveProtocol``), the same for
+    every invocation on one ``out``; ``only``: these driver names alone; ``command``: the command line,
+    recorded in ``out/provenance.json`` (``ibc-tutorial stems drive``)."""
+    if not isinstance(protocol, DriveProtocol):
+        raise ValueError(f"protocol must be a DriveProtocol, got {type(protocol).__name__}")
     out = Path(out)
     prov_path = out / "provenance.json"
     prov = json.loads(prov_path.read_text()) if prov_path.exists() else {"invocations": []}
-    policy_seed = "training seed" if table_seeds else POLICY_SEED
-    same = {"episodes": episodes, "steps": steps, "town": TOWN, "seed": EVAL_SEED, "policy_seed": policy_seed}
-    if dfo:
-        same["dfo"] = dict(sorted(dfo.items()))
+    same = protocol.record()
     if prov.get("protocol", same) != same:
         raise ValueError(f"{out} holds drives of another protocol {prov['protocol']}: use another --out")
     prov["protocol"] = same
@@ -207,8 +239,10 @@ def run_drives(
     write_json(prov_path, prov)
 
     def drive_one(name, ck, path):
-        ps = table_policy_seed(name) if table_seeds else POLICY_SEED
-        write_npz(path, drive(ck, episodes, steps, dfo=dfo, policy_seed=ps))
+        drive_arrays = drive(
+            ck, protocol.episodes, protocol.steps, dfo=protocol.dfo, policy_seed=protocol.policy_seed(name)
+        )
+        write_npz(path, drive_arrays)
 
     def record(name, cpu):
         inv.setdefault("cpu_seconds", {})[name] = round(cpu, 1)
