@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from ibc_tutorial import stats
+from ibc_tutorial.driving.analysis import exit_counts
 from ibc_tutorial.experiments.agents.results import episode_table
 
 SHIPPED = Path(__file__).resolve().parents[1] / "book" / "results" / "laptop"
@@ -98,7 +99,7 @@ def test_exit_test_runs_on_the_shipped_free_driving():
     a, b = ([v for e in fd[m]["episodes"] for v in e["visits"]] for m in ("da-ibc", "bc"))
     t = stats.exit_spread_test(a, b, n_permutations=2_000)
     assert t.verdict in (stats.HOLDS, stats.DOES_NOT_HOLD, stats.CANNOT_TELL)
-    assert 0 < t.p_greater <= 1 and 0 < t.p_less <= 1 and t.approaches <= len(stats.exit_counts(a))
+    assert 0 < t.p_greater <= 1 and 0 < t.p_less <= 1 and t.approaches <= len(exit_counts(a))
 
 
 # --------------------------------------------------------------------------- bad arguments
@@ -117,8 +118,8 @@ def test_exit_test_runs_on_the_shipped_free_driving():
         (lambda: stats.ratio_interval([[1.0, 2.0]], [1.0, 0.0]), "expert"),
         (lambda: stats.verdict((0.0, 1.0)), "interval"),
         (lambda: stats.verdict(stats.Interval(0.5, 0.0, 1.0), float("nan")), "threshold"),
-        (lambda: stats.exit_counts([{"approach": 1, "turn": "u-turn"}]), "turn"),
-        (lambda: stats.exit_counts([{"turn": "left"}]), "visits"),
+        (lambda: exit_counts([{"approach": 1, "turn": "u-turn"}]), "turn"),
+        (lambda: exit_counts([{"turn": "left"}]), "visits"),
         (lambda: stats.exit_spread([], min_visits=0), "min_visits"),
         (lambda: stats.exit_spread_test([], [], n_permutations=0), "n_permutations"),
     ],

@@ -71,7 +71,7 @@ def test_stem_ends_only_inside_a_junction_entered_from_a_stem():
     assert [r["route"] for r in ends] == ["r1"]
     assert rr.stem_ends(DRIVERS["bc-seed0"]) == []
     assert [r["route"] for r in rr.stem_ends(DRIVERS["bc-seed2"])] == ["r1"]
-    assert rr.stem_crossings(DRIVERS["bc-seed0"]) == 1
+    assert rr.count_stem_crossings(DRIVERS["bc-seed0"]) == 1
 
 
 def test_command_drivers_reads_a_replication_folder(tmp_path):

@@ -6,6 +6,7 @@ import pytest
 import scipy.stats
 
 from ibc_tutorial import stats
+from ibc_tutorial.driving.analysis import exit_counts
 
 
 # --------------------------------------------------------------------------- the bootstrap, hand-computed
@@ -166,7 +167,7 @@ def visits(*pairs):
 
 def test_exit_counts_and_spread_by_hand():
     v = visits((3, "left"), (3, "left"), (3, "right"), (5, "straight"), (7, "left"), (7, "straight"))
-    assert stats.exit_counts(v) == {
+    assert exit_counts(v) == {
         3: {"left": 2, "straight": 0, "right": 1},
         5: {"left": 0, "straight": 1, "right": 0},
         7: {"left": 1, "straight": 1, "right": 0},

@@ -82,7 +82,7 @@ def test_measures_are_recomputed_from_the_traces(swept):
 
 
 def test_sessions_start_further_on_with_their_own_lights(swept):
-    refs = S.read_references(swept, TINY, 2)
+    refs, _ = ev.read_references(swept / ev.REFERENCES, TINY.eval_routes, sessions=2)
     (r0,), (r1,) = refs
     assert (r0.name, r0.session, r1.session) == ("y82-west", 0, 1)
     a, b = ev.build_route("y82-west", 0), ev.build_route("y82-west", 1)

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ibc_tutorial.driving.analysis import exit_counts  # noqa: F401 (the one count of exits, stats.exit_counts too)
+from ibc_tutorial.driving.analysis import exit_counts
 from ibc_tutorial.driving.lanes import TURNS  # the exits of a junction approach
 from ibc_tutorial.utils import check_int, check_positive, check_probability
 

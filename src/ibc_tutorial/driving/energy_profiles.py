@@ -8,6 +8,7 @@ paper's Fig. 6 shows the low-energy region spread along the steering axis at the
 concentrated at the red light. These pure functions read one profile e(s) (nats, over a steering
 grid s, increasing, left < 0 < right):
 
+- ``steering_profile``: the profile itself, from energies on a (steering, acceleration) grid;
 - ``valleys``: the valleys within ``depth`` (3) nats of the minimum that a barrier of at least
   ``barrier`` (1) nat separates from every lower one (topographic prominence);
 - ``boltzmann_sides``: the mass of p(s) ∝ exp(-e(s)) left and right of straight;
@@ -27,6 +28,18 @@ DEPTH = 3.0
 """Nats above the minimum within which a valley (or a steering value) counts as low."""
 BARRIER = 1.0
 """Nats a barrier must rise above the higher of two valleys for them to count as two."""
+
+
+def steering_profile(energy) -> np.ndarray:
+    """The energy over steering of energies on a (steering, acceleration) grid: at each steering value the
+    lowest energy over the accelerations, minus the lowest of all (nats, >= 0, 0 at the minimum).
+
+    energy: (..., G accel, G steer), e.g. ``Agent.energy_grid``'s; returns (..., G steer)."""
+    e = np.asarray(energy)
+    if e.ndim < 2:
+        raise ValueError(f"energy must have an acceleration and a steering axis, got shape {e.shape}")
+    low = e.min(axis=-2)  # (..., G) the lowest over acceleration
+    return low - low.min(axis=-1, keepdims=True)
 
 
 def _profile(steer, energy) -> tuple[np.ndarray, np.ndarray]:

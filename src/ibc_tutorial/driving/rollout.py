@@ -35,7 +35,8 @@ DrivingPolicy = Callable[[dict[str, np.ndarray]], np.ndarray]
 """A closed-loop policy in the town, the one form every driving policy of the book takes:
 ``policy({"bev": float32 (B, 5, S, S), "state": float32 (B, 3)}) -> actions (B, 2)`` on numpy
 batches (B = the episodes still running), actions (steer, acceleration) in [-1, 1]
-(``experiments.agents.Agent.policy(seed)`` makes one from a trained agent)."""
+(``experiments.agents.Agent.policy(seed)`` makes one from a trained agent). On routes with commands
+(``route_following.drive_routes``) the batch also holds ``"command"``, (B,) int64."""
 
 StepHook = Callable[[int, list[int], dict[str, np.ndarray]], None]
 """``on_step(t, episodes, batch)``: see ``RolloutRecording.on_step``."""

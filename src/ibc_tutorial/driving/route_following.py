@@ -30,7 +30,6 @@ crossings with that command whose commanded exit was taken (``junction_success``
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -38,6 +37,7 @@ import numpy as np
 from ibc_tutorial.driving.commands import COMMANDS, FOLLOW, command_at, distance_to_entry
 from ibc_tutorial.driving.env import EnvConfig, make_env
 from ibc_tutorial.driving.expert import Expert
+from ibc_tutorial.driving.rollout import DrivingPolicy
 from ibc_tutorial.driving.routes import Route
 from ibc_tutorial.driving.sim import SCORE_PENALTY, score
 from ibc_tutorial.driving.towns import Town, get_town
@@ -259,12 +259,8 @@ class RouteResult:
         }
 
 
-RoutePolicy = Callable[[dict[str, np.ndarray]], np.ndarray]
-"""``policy({"bev": (B, 5, S, S), "state": (B, 3)[, "command": (B,) int64]}) -> (B, 2)`` actions."""
-
-
 def drive_routes(
-    policy: RoutePolicy | str,
+    policy: DrivingPolicy | str,
     routes,
     *,
     bev: tuple[int, str] = (64, "intensity"),
@@ -277,7 +273,8 @@ def drive_routes(
     """Drive every route of ``routes`` (names of ``ROUTES``, or ``(name, Route)`` pairs) side by side.
 
     Args:
-        policy: a ``RoutePolicy`` or "expert" (the PID expert follows the route itself).
+        policy: a ``DrivingPolicy`` (its batches hold a ``"command"`` when ``commands`` is on) or
+            "expert" (the PID expert follows the route itself).
         routes: the routes.
         bev: the observation's BEV, ``(bev_size, light_encoding)`` (the agent's preset's).
         seed: the light phases of route ``k`` are drawn from ``[seed, k]``.

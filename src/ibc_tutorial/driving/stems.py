@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ibc_tutorial.driving.analysis import _town, junction_crossings, road_coverage
+from ibc_tutorial.driving.analysis import _town, exit_counts, junction_crossings, road_coverage
 from ibc_tutorial.utils import check_int, check_positive
 
 EXITS = ("left", "right")
@@ -60,11 +60,8 @@ def stem_crossings(town, lanes: np.ndarray, steer: np.ndarray | None = None) -> 
 
 def stem_exit_counts(crossings: list[dict]) -> dict[int, dict[str, int]]:
     """Per stem approach, ``{"left": n, "right": n}`` over the finished crossings (``stem_crossings``)."""
-    out: dict[int, dict[str, int]] = {}
-    for c in crossings:
-        if c.get("finished", True) and c["turn"] in EXITS:
-            out.setdefault(int(c["approach"]), dict.fromkeys(EXITS, 0))[c["turn"]] += 1
-    return out
+    taken = [c for c in crossings if c.get("finished", True) and c["turn"] in EXITS]
+    return {ap: {t: n[t] for t in EXITS} for ap, n in exit_counts(taken).items()}  # a stem has no straight
 
 
 def circling(approaches, max_period: int = MAX_BLOCK, min_laps: int = MIN_LAPS) -> int:

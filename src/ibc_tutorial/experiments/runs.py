@@ -41,6 +41,8 @@ PROVENANCE = "provenance.json"
 """How, where and when a folder's results were made (``PROVENANCE.md`` says the same for readers)."""
 PROVENANCE_MD = "PROVENANCE.md"
 """The readers' copy of ``provenance.json``."""
+RESULTS = "results.json"
+"""A finished folder's tables and numbers: the file its chapter reads (every study's folder holds one)."""
 HEARTBEAT_S = 30.0
 """How often a running command records in ``provenance.json`` that it is still running."""
 CPU_ENVIRONMENT = ("ATEN_CPU_CAPABILITY", "MKL_ENABLE_INSTRUCTIONS", "ONEDNN_MAX_CPU_ISA", "OMP_NUM_THREADS")

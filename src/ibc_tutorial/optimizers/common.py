@@ -28,8 +28,7 @@ from collections.abc import Sequence
 import torch
 
 from ibc_tutorial.kde import inverse_density_weights, kde_density
-from ibc_tutorial.utils import check_box as check_action_box
-from ibc_tutorial.utils import check_choice, check_int, check_positive, check_tensor, draw_device
+from ibc_tutorial.utils import check_box, check_choice, check_int, check_positive, check_tensor, draw_device
 
 SELECTIONS = ("sample", "argmax")
 """Final choice: "sample" ŷ ~ Categorical({ỹ_i}, {p̃_i}) (Algorithm 1 line 14 of the DA-IBC paper)
@@ -41,13 +40,13 @@ w_i ∝ KDE(y_i)), "inverse-kde" (the DA-IBC paper's text, sec. 2.4.1: w_i = 1 /
 "expert" (every expert action equally likely, w_i = 1 / M: initial samples distributed like ĝ)."""
 
 
-def check_box(low, high) -> tuple[float | tuple[float, ...], float | tuple[float, ...]]:
+def config_box(low, high) -> tuple[float | tuple[float, ...], float | tuple[float, ...]]:
     """Validate the action box [low, high] of a config (``utils.check_box``): numbers, or one per dimension.
 
     Returns ``(low, high)`` as floats or tuples of floats, as given. Whether a tuple's length
     matches the actions' D is checked when the actions are known (``bounds``).
     """
-    lo, hi = check_action_box(low, high, dtype=torch.float64)  # (D,), (D,)
+    lo, hi = check_box(low, high, dtype=torch.float64)  # (D,), (D,)
 
     def as_given(v, t: torch.Tensor):
         v = v.tolist() if hasattr(v, "tolist") else v  # a tensor or an array: a number (0-d) or a list
@@ -60,14 +59,14 @@ def check_search_settings(config) -> None:
     """Validate and normalise, in place, the fields every search's frozen config shares (``DFOConfig``,
     ``LangevinConfig``): the population ``n_samples`` and the iterations ``n_iters`` (integers >= 1), the
     KDE ``bandwidth`` (> 0), ``init`` (``INITS``), ``select`` (``SELECTIONS``) and the box ``low``,
-    ``high`` (``check_box``)."""
+    ``high`` (``config_box``)."""
     set_ = object.__setattr__  # frozen: the fields are normalised once, when the config is built
     set_(config, "n_samples", check_int("n_samples", config.n_samples, minimum=1))
     set_(config, "n_iters", check_int("n_iters", config.n_iters, minimum=1))
     set_(config, "bandwidth", check_positive("bandwidth", config.bandwidth))
     check_choice("init", config.init, INITS)
     check_choice("select", config.select, SELECTIONS)
-    low, high = check_box(config.low, config.high)
+    low, high = config_box(config.low, config.high)
     set_(config, "low", low)
     set_(config, "high", high)
 
@@ -78,7 +77,7 @@ def bounds(low, high, d: int) -> tuple[torch.Tensor, torch.Tensor]:
 
     In torch's default dtype (float32 unless a chapter sets float64), like the populations.
     """
-    return check_action_box(low, high, d)
+    return check_box(low, high, d)
 
 
 def check_expert_actions(expert_actions: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor) -> torch.Tensor:

@@ -252,6 +252,26 @@ class DFOOptimizer:
         return DFOPolicy(model, self, generator)(obs)  # (B, D)
 
 
+@torch.no_grad()
+def act_with_dfo(
+    model,
+    obs,
+    expert_actions: torch.Tensor,
+    config: DFOConfig,
+    *,
+    init_weights: torch.Tensor | None = None,
+    generator: torch.Generator | None = None,
+) -> torch.Tensor:
+    """Algorithm 1's decisions (B, D) for a batch of B observations of an embedding energy model: each
+    observation embedded once (``model.embed``), only the action part of the head run per candidate.
+
+    The decision of a ``DFOPolicy`` and of the driving ``Agent``; the model's mode is the caller's."""
+    energy_fn, n_obs = embedded_energy(model, obs)  # (B, N, D) -> (B, N)
+    return dfo(  # Algorithm 1 of the DA-IBC paper
+        energy_fn, expert_actions, config, n_obs=n_obs, init_weights=init_weights, generator=generator
+    )  # (B, D)
+
+
 class DFOPolicy(EnergyPolicy):
     """``dfo_policy``'s closed-loop policy: ``policy(obs) -> dfo(...)``, (B, D), on a ``DFOOptimizer``'s
     expert actions, settings and initial weights, with the model in eval mode for each decision."""
@@ -262,12 +282,11 @@ class DFOPolicy(EnergyPolicy):
     def __call__(self, obs) -> torch.Tensor:
         opt = self.optimizer
         with eval_mode(self.model):
-            energy_fn, n_obs = embedded_energy(self.model, obs)  # (B, N, D) -> (B, N)
-            return dfo(  # Algorithm 1 of the DA-IBC paper
-                energy_fn,
+            return act_with_dfo(
+                self.model,
+                obs,
                 opt.expert_actions,
                 opt.config,
-                n_obs=n_obs,
                 init_weights=opt.init_weights,
                 generator=self.generator,
             )  # (B, D)

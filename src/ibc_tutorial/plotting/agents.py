@@ -199,7 +199,8 @@ def plot_energy_landscapes(panels: list, steer, accel, *, suptitle: str = "Energ
 def plot_exit_counts(counts: dict, *, title: str = "Exits taken at each junction approach"):
     """Per method, one stacked bar per junction approach: how many visits left it by each exit.
 
-    ``counts``: ``{method: {approach: {"left": n, "straight": n, "right": n}}}`` (``stats.exit_counts``).
+    ``counts``: ``{method: {approach: {"left": n, "straight": n, "right": n}}}``
+    (``driving.analysis.exit_counts``).
     Only approaches that some method visited are drawn, in the same order in every panel."""
     n = check_panels("counts", counts)
     approaches = sorted({int(a) for c in counts.values() for a in c})

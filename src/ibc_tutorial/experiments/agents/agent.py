@@ -31,9 +31,8 @@ from ibc_tutorial.driving.commands import COMMANDS, N_COMMANDS
 from ibc_tutorial.driving.rollout import DrivingPolicy
 from ibc_tutorial.experiments.agents.presets import METHODS, Preset
 from ibc_tutorial.kde import inverse_density_weights
-from ibc_tutorial.optimizers import embedded_energy
-from ibc_tutorial.optimizers.dfo import DFOConfig, dfo
-from ibc_tutorial.optimizers.grid import symmetric_axis
+from ibc_tutorial.optimizers.dfo import DFOConfig, act_with_dfo
+from ibc_tutorial.optimizers.grid import steer_accel_grid
 from ibc_tutorial.policies.encoders import BEVStateEncoder, to_tensor_obs
 from ibc_tutorial.policies.energy import EnergyModel
 from ibc_tutorial.policies.explicit import BetaPolicy
@@ -184,14 +183,8 @@ class Agent:
         if self.method == "bc":
             return self.network.act(obs, mode="mean").cpu()  # (B, 2)
         weights = self.init_weights if self.method == "da-ibc" else None
-        energy_fn, n_obs = embedded_energy(self.network, obs)  # (B, N, 2) -> (B, N)
-        actions = dfo(  # Algorithm 1 of the DA-IBC paper
-            energy_fn,
-            self.expert_actions,
-            self.dfo_config,
-            n_obs=n_obs,
-            init_weights=weights,
-            generator=generator,
+        actions = act_with_dfo(  # Algorithm 1 of the DA-IBC paper
+            self.network, obs, self.expert_actions, self.dfo_config, init_weights=weights, generator=generator
         )
         return actions.cpu()  # (B, 2)
 
@@ -215,8 +208,7 @@ class Agent:
             raise ValueError("energy_grid needs an energy agent (ibc or da-ibc), got bc")
         self.check_command(obs)
         obs = to_tensor_obs(obs, self.device)
-        v = symmetric_axis(n_per_dim)  # (G,) straight is exactly 0 on every CPU
-        acc, steer = torch.meshgrid(v, v, indexing="ij")
-        grid = torch.stack([steer.reshape(-1), acc.reshape(-1)], dim=1).to(self.device)  # (G², 2)
+        v, grid = steer_accel_grid(n_per_dim)  # (G,) straight exactly 0 on every CPU, (G², 2)
+        grid = grid.to(self.device)
         e = self.network.energy_from_embedding(self.network.embed(obs), grid)[0].cpu()  # (G²,)
         return v.numpy(), v.numpy(), e.reshape(n_per_dim, n_per_dim).numpy()

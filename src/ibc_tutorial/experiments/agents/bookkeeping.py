@@ -28,6 +28,7 @@ from ibc_tutorial.experiments.agents.agent import Agent
 from ibc_tutorial.experiments.agents.checkpoints import load_agent, load_checkpoint, save_checkpoint
 from ibc_tutorial.experiments.agents.evaluate import (
     EVAL_SEED,
+    EVAL_TOWN,
     episode_rows,
     evaluate_agent,
     summarize_episodes,
@@ -37,9 +38,6 @@ from ibc_tutorial.experiments.agents.route_eval import periodic_route_rows
 from ibc_tutorial.experiments.agents.run_folder import inspect_run, write_metrics, write_run_info
 from ibc_tutorial.kde import inverse_density_weights
 from ibc_tutorial.training import Trainer
-
-EVAL_TOWN = "town02"
-"""Where the periodic evaluations drive (unseen in training, as the paper's Fig. 4)."""
 
 
 @dataclass

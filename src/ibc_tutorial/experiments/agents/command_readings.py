@@ -16,7 +16,7 @@ import numpy as np
 import torch
 
 from ibc_tutorial.driving.commands import command_index
-from ibc_tutorial.driving.energy_profiles import beta_shape, boltzmann_sides, valleys
+from ibc_tutorial.driving.energy_profiles import beta_shape, boltzmann_sides, steering_profile, valleys
 from ibc_tutorial.optimizers.grid import symmetric_axis
 from ibc_tutorial.policies.encoders import to_tensor_obs
 
@@ -55,8 +55,7 @@ def reading(agent, obs: dict, command: str | None, n_grid: int = GRID) -> dict:
         }
     steer, _, e = agent.energy_grid(batch, n_per_dim=n_grid)  # (G,), (G,), (G accel, G steer)
     steer = symmetric_axis(n_grid, torch.float64).numpy()  # (G,) the grid's values, exactly (straight is 0)
-    low = e.min(axis=0)  # (G,) the lowest over acceleration
-    low = low - low.min()
+    low = steering_profile(e)  # (G,) the lowest over acceleration, minus its minimum
     marg = -np.logaddexp.reduce(-e, axis=0)  # (G,) -log sum over acceleration of exp(-E)
     vs = valleys(steer, low)
     return {

@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ibc_tutorial.driving.analysis import junction_crossings
+from ibc_tutorial.driving.energy_profiles import steering_profile
 from ibc_tutorial.driving.rollout import EpisodeResult, RolloutRecording
 from ibc_tutorial.experiments.agents.agent import Agent
 from ibc_tutorial.experiments.agents.evaluate import evaluate_agent
@@ -102,7 +103,6 @@ def ended_crossing_energies(
         profiles = []
         for obs in captured[i]:
             steer, _accel, e = agent.energy_grid(obs, n_grid)  # e: (G accel, G steer)
-            profile = e.min(axis=0)  # (G,) lowest energy over the accelerations at each steering value
-            profiles.append([round(float(v), 3) for v in profile - profile.min()])
+            profiles.append([round(float(v), 3) for v in steering_profile(e)])  # (G,)
         c["energy_by_steer"] = profiles  # (states, G)
     return steer

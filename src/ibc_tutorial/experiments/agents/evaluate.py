@@ -29,6 +29,8 @@ from ibc_tutorial.driving.rollout import EpisodeResult, RolloutRecording, rollou
 from ibc_tutorial.experiments.agents.agent import Agent
 from ibc_tutorial.utils import check_int
 
+EVAL_TOWN = "town02"
+"""The town of every evaluation, unseen in training (the DA-IBC paper trains in Town01, tests in Town02)."""
 EVAL_SEED = 1000
 """Seed of the first evaluation episode (the training routes use seeds from 0: kept apart)."""
 HELDOUT_SEED = 30000
@@ -44,7 +46,7 @@ EXPERT_BEV_SIZE = 64
 
 def evaluate_agent(
     agent: Agent | str,
-    town: str = "town02",
+    town: str = EVAL_TOWN,
     episodes: int = 10,
     steps: int = 3000,
     *,

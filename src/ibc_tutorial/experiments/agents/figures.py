@@ -20,13 +20,11 @@ import torch
 from ibc_tutorial.driving.analysis import exits_per_approach, junction_visits, road_coverage
 from ibc_tutorial.driving.rollout import RolloutRecording
 from ibc_tutorial.experiments.agents.agent import Agent
-from ibc_tutorial.experiments.agents.evaluate import EVAL_SEED, episode_rows, evaluate_agent
+from ibc_tutorial.experiments.agents.evaluate import EVAL_SEED, EVAL_TOWN, episode_rows, evaluate_agent
 from ibc_tutorial.experiments.agents.layout import FREE_DRIVING, LANDSCAPES
 from ibc_tutorial.experiments.agents.presets import Preset
 from ibc_tutorial.experiments.runs import write_npz
 
-TOWN = "town02"
-"""Where the free driving happens (unseen in training)."""
 JUNCTION_DISTANCE = 8.0
 """The junction observation is taken where the car is closest to this distance (m) before the entry."""
 JUNCTION_RANGE = (4.0, 15.0)
@@ -45,7 +43,7 @@ def record_drive(agent: Agent, steps: int, seed: int, policy_seed: int = 0) -> d
     """
     (r,) = evaluate_agent(
         agent,
-        TOWN,
+        EVAL_TOWN,
         1,
         steps,
         seed=seed,
@@ -66,11 +64,11 @@ def free_driving(out, preset: Preset, agents: dict[str, Agent], log=print) -> tu
         eps = []
         for i in range(preset.routeless_episodes):
             rec = record_drive(agent, preset.routeless_steps, seed=EVAL_SEED + i)
-            visits = junction_visits(TOWN, rec["lane"])
+            visits = junction_visits(EVAL_TOWN, rec["lane"])
             eps.append(
                 {
                     "result": rec["result"],
-                    "coverage": round(road_coverage(TOWN, rec["pose"]), 4),
+                    "coverage": round(road_coverage(EVAL_TOWN, rec["pose"]), 4),
                     "visits": visits,
                     "exits": {str(k): v for k, v in exits_per_approach(visits).items()},
                 }
@@ -83,7 +81,7 @@ def free_driving(out, preset: Preset, agents: dict[str, Agent], log=print) -> tu
         all_visits = [v for e in eps for v in e["visits"]]
         summary[method] = {
             "episodes": eps,
-            "coverage_all": round(road_coverage(TOWN, all_poses), 4),
+            "coverage_all": round(road_coverage(EVAL_TOWN, all_poses), 4),
             "exits_all": {str(k): v for k, v in exits_per_approach(all_visits).items()},
         }
         if log:
@@ -103,7 +101,7 @@ def pick_junction(recordings: list[dict]) -> tuple | None:
     most visited one; the moment is the one 4-15 m before the entry closest to 8 m, with a green
     light if there is one.
     """
-    all_visits = [(rec, v) for rec in recordings for v in junction_visits(TOWN, rec["lane"])]
+    all_visits = [(rec, v) for rec in recordings for v in junction_visits(EVAL_TOWN, rec["lane"])]
     if not all_visits:
         return None
     summary = exits_per_approach([v for _, v in all_visits])

@@ -18,12 +18,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ibc_tutorial.experiments.runs import PROVENANCE, PROVENANCE_MD
+from ibc_tutorial.experiments.runs import PROVENANCE, PROVENANCE_MD, RESULTS
 
 DATA = "data/town01.npz"
 """The demonstrations, relative to the folder."""
-RESULTS = "results.json"
-"""The file the chapters read."""
 FREE_DRIVING = "free_driving.npz"
 """Trajectories of the free-driving episodes (Fig. 5 analogue)."""
 LANDSCAPES = "landscapes.npz"

@@ -48,6 +48,7 @@ from ibc_tutorial.experiments.agents.bookkeeping import TrainingData
 from ibc_tutorial.experiments.agents.checkpoints import load_agent
 from ibc_tutorial.experiments.agents.evaluate import (
     EVAL_SEED,
+    EVAL_TOWN,
     HELDOUT_SEED,
     episode_rows,
     evaluate_agent,
@@ -198,7 +199,7 @@ def final_evaluations(
         else:
             results = evaluate_agent(
                 agent,
-                "town02",
+                EVAL_TOWN,
                 episodes,
                 preset.final_steps,
                 seed=seed,
@@ -208,7 +209,7 @@ def final_evaluations(
         rows = episode_rows(results)
         evals[name] = dict(
             extra or {},
-            town="town02",
+            town=EVAL_TOWN,
             steps=preset.final_steps,
             start_seed=seed,
             summary=summarize_episodes(rows),
@@ -235,7 +236,7 @@ def route_evaluation(
     )
     ev = dict(
         extra or {},
-        town="town02",
+        town=EVAL_TOWN,
         routes=list(ROUTES),
         start_seed=ROUTE_SEED,
         summary=summarize_route_rows(rows),

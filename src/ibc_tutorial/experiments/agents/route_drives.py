@@ -19,11 +19,8 @@ from pathlib import Path
 from ibc_tutorial.experiments.agents.checkpoints import load_agent, training_seed
 from ibc_tutorial.experiments.agents.route_eval import ROUTE_SEED, evaluate_on_routes, summarize_route_rows
 from ibc_tutorial.experiments.agents.stems import drivers
-from ibc_tutorial.experiments.runs import git_commit, machine, now, run_missing, write_json
+from ibc_tutorial.experiments.runs import PROVENANCE, git_commit, machine, now, run_missing, write_json
 from ibc_tutorial.utils import check_int
-
-PROVENANCE = "provenance.json"
-"""The folder's record of its protocol and invocations."""
 
 
 def run_route_drives(

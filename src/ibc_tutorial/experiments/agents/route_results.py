@@ -24,13 +24,14 @@ from pathlib import Path
 import numpy as np
 
 from ibc_tutorial.driving.commands import COMMANDS
+from ibc_tutorial.driving.route_following import ROUTE_TOWN
 from ibc_tutorial.driving.stems import stem_approaches
 from ibc_tutorial.experiments.agents.layout import FINAL_EVAL, expert_dir
 from ibc_tutorial.experiments.agents.presets import METHODS
 from ibc_tutorial.experiments.agents.route_drives import load_route_drives
 from ibc_tutorial.utils import check_choice
 
-ROUTE_TOWN_STEMS = frozenset(stem_approaches("town02"))
+ROUTE_TOWN_STEMS = frozenset(stem_approaches(ROUTE_TOWN))
 """The town02 junction approaches that are stems of a T (left and right only)."""
 
 
@@ -135,8 +136,8 @@ def stem_ends(rows: list[dict]) -> list[dict]:
     ]
 
 
-def stem_crossings(rows: list[dict]) -> int:
-    """The junction crossings of ``rows`` entered from a stem."""
+def count_stem_crossings(rows: list[dict]) -> int:
+    """How many junction crossings of ``rows`` were entered from a stem."""
     return sum(c["approach"] in ROUTE_TOWN_STEMS for r in rows for c in r["crossings"])
 
 

@@ -33,7 +33,13 @@ import torch
 
 from ibc_tutorial import stats
 from ibc_tutorial.driving.analysis import junction_crossings
-from ibc_tutorial.driving.energy_profiles import beta_shape, boltzmann_sides, low_range, valleys
+from ibc_tutorial.driving.energy_profiles import (
+    beta_shape,
+    boltzmann_sides,
+    low_range,
+    steering_profile,
+    valleys,
+)
 from ibc_tutorial.driving.stems import (
     LEAD,
     decision_window,
@@ -44,10 +50,11 @@ from ibc_tutorial.driving.stems import (
     stem_exit_counts,
 )
 from ibc_tutorial.experiments.agents.checkpoints import load_agent
-from ibc_tutorial.experiments.agents.stems import METHODS, TOWN, drive_file, drivers, load_drive, unpack_bev
+from ibc_tutorial.experiments.agents.evaluate import EVAL_TOWN
+from ibc_tutorial.experiments.agents.stems import METHODS, drive_file, drivers, load_drive, unpack_bev
 from ibc_tutorial.experiments.runs import git_commit, machine, now, write_json
 from ibc_tutorial.optimizers.dfo import dfo_trace
-from ibc_tutorial.optimizers.grid import symmetric_axis
+from ibc_tutorial.optimizers.grid import steer_accel_grid
 
 GRID = 41
 """Values per action dimension of the energy grid (as ``crossings.ENERGY_GRID``)."""
@@ -59,27 +66,20 @@ CHUNK = 32
 """Observations per batch of the energy grids."""
 
 
-def _grid(n: int) -> tuple[np.ndarray, torch.Tensor]:
-    v = symmetric_axis(n)  # (G,) straight is exactly 0 on every CPU
-    acc, steer = torch.meshgrid(v, v, indexing="ij")
-    return v.numpy(), torch.stack([steer.reshape(-1), acc.reshape(-1)], dim=1)  # (G,), (G², 2)
-
-
 @torch.no_grad()
 def energy_profiles(agent, bev: np.ndarray, state: np.ndarray, n_grid: int = GRID):
     """Per observation, the energy over steering: the lowest over accelerations (N, G) and the marginal
     -log Σ_a exp(-E) (N, G), both minus their minimum; and the steering grid (G,)."""
-    steer, grid = _grid(n_grid)
+    steer, grid = steer_accel_grid(n_grid)  # (G,), (G², 2)
     lows, margs = [], []
     for a in range(0, len(state), CHUNK):
         obs = {"bev": torch.from_numpy(bev[a : a + CHUNK]), "state": torch.from_numpy(state[a : a + CHUNK])}
         z = agent.network.embed(obs)  # (B, E)
         e = agent.network.energy_from_embedding(z, grid).reshape(len(z), n_grid, n_grid)  # (B, accel, steer)
-        low = e.min(dim=1).values  # (B, G)
         marg = -torch.logsumexp(-e, dim=1)  # (B, G)
-        lows.append((low - low.min(dim=1, keepdim=True).values).numpy())
+        lows.append(steering_profile(e.numpy()))  # (B, G)
         margs.append((marg - marg.min(dim=1, keepdim=True).values).numpy())
-    return steer, np.concatenate(lows), np.concatenate(margs)
+    return steer.numpy(), np.concatenate(lows), np.concatenate(margs)
 
 
 def read_profile(steer: np.ndarray, low: np.ndarray, marg: np.ndarray) -> dict:
@@ -139,9 +139,9 @@ def analyse_agent(name: str, checkpoint: Path | None, drive_path: Path) -> dict:
     episodes, states = [], []
     for i, (row, tr) in enumerate(zip(d["rows"], d["episodes"], strict=True)):
         steer = tr["actions"][:, 0]
-        m = episode_measures(TOWN, tr["lane"], tr["pose"], steer, terminated=bool(row["termination"]))
+        m = episode_measures(EVAL_TOWN, tr["lane"], tr["pose"], steer, terminated=bool(row["termination"]))
         m["stem_exits"] = {str(k): v for k, v in m["stem_exits"].items()}
-        crossings = stem_crossings(TOWN, tr["lane"], steer)
+        crossings = stem_crossings(EVAL_TOWN, tr["lane"], steer)
         m["onsets"] = [
             {"turn": c["turn"], "onset_m": round(steering_onset(c, tr["pose"], steer), 2)}
             for c in crossings
@@ -408,9 +408,7 @@ def landscape_at(agent, bev: np.ndarray, state: np.ndarray, n_grid: int = GRID, 
     """The agent's energy over the (steering, acceleration) grid at one observation, minus its minimum, and
     ``draws`` DFO decisions there: {"steer" (G,), "accel" (G,), "energy" (G accel, G steer), "points"
     (draws, 2)} (the Fig. 6 analogue's panel)."""
-    steer, grid = _grid(n_grid)
-    z = agent.network.embed({"bev": torch.from_numpy(bev[None]), "state": torch.from_numpy(state[None])})
-    e = agent.network.energy_from_embedding(z, grid).reshape(n_grid, n_grid).numpy()  # (accel, steer)
+    steer, _, e = agent.energy_grid({"bev": bev[None], "state": state[None]}, n_grid)  # e: (accel, steer)
     obs = {"bev": np.repeat(bev[None], draws, 0), "state": np.repeat(state[None], draws, 0)}
     points = agent.act(obs, torch.Generator().manual_seed(seed)).numpy()  # (draws, 2)
     return {"steer": steer, "accel": steer.copy(), "energy": e - e.min(), "points": points}

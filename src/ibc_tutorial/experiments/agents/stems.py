@@ -36,21 +36,18 @@ import numpy as np
 from ibc_tutorial.driving.rollout import RolloutRecording
 from ibc_tutorial.driving.stems import kept_states
 from ibc_tutorial.experiments.agents.checkpoints import load_agent
-from ibc_tutorial.experiments.agents.evaluate import EVAL_SEED, episode_rows, evaluate_agent
+from ibc_tutorial.experiments.agents.evaluate import EVAL_SEED, EVAL_TOWN, episode_rows, evaluate_agent
 from ibc_tutorial.experiments.agents.layout import STEM_DRIVE, expert_dir, run_dir
+from ibc_tutorial.experiments.agents.presets import METHODS
 from ibc_tutorial.experiments.runs import git_commit, machine, now, run_missing, write_json, write_npz
 from ibc_tutorial.utils import check_int
 
-TOWN = "town02"
-"""Where the free driving happens (unseen in training), as in chapter 09."""
 STEPS = 3000
 """Steps per episode: 300 s at 10 Hz, chapter 09's ``routeless_steps``."""
 EPISODES = 5
 """Episodes per agent (the first of chapter 09's ten starts): what 25 minutes of one core allow 16 drivers."""
 POLICY_SEED = 0
 """Seed of the agents' DFO draws, as in chapter 09's free driving."""
-METHODS = ("bc", "ibc", "da-ibc")
-"""The methods whose every shipped agent drives."""
 TRACE = ("lane", "pose", "speed", "red_ahead", "entry_dist", "actions")
 """The per-state record kept of each episode."""
 
@@ -96,7 +93,7 @@ def recorded_drive(
 
     results = evaluate_agent(
         agent,
-        TOWN,
+        EVAL_TOWN,
         episodes,
         steps,
         seed=seed,
@@ -110,7 +107,7 @@ def recorded_drive(
         for k in TRACE:
             arrays[f"e{i}_{k}"] = np.asarray(tr[k])
         if is_agent:
-            for t in kept_states(TOWN, tr["lane"], tr["speed"], tr["red_ahead"], tr["entry_dist"]):
+            for t in kept_states(EVAL_TOWN, tr["lane"], tr["speed"], tr["red_ahead"], tr["entry_dist"]):
                 if (i, t) in packed:  # the last state of an episode was never shown to the policy
                     obs_ep.append(i)
                     obs_t.append(t)
@@ -208,7 +205,7 @@ class DriveProtocol:
         out = {
             "episodes": self.episodes,
             "steps": self.steps,
-            "town": TOWN,
+            "town": EVAL_TOWN,
             "seed": EVAL_SEED,
             "policy_seed": "training seed" if self.table_seeds else POLICY_SEED,
         }

@@ -104,9 +104,8 @@ def counter_examples(method: str, preset: Preset) -> NegativeSampler | None:
 
 
 def objective_for(method: str, network: torch.nn.Module, preset: Preset) -> Objective:
-    """The training objective of a method (see the module docstring), as ``train_agent`` builds it.
-
-    For code that trains outside ``train_agent`` (tests, benchmarks)."""
+    """The training objective of a method (see the module docstring): ``train_agent``'s, and that of code
+    that trains outside it (tests, benchmarks)."""
     sampler = counter_examples(method, preset)
     if sampler is None:
         return likelihood_objective(network)  # eq. 1
@@ -181,11 +180,7 @@ def train_agent(
     n_steps = steps_per_epoch(len(run.data.dataset), preset.batch_size)
     config = preset.train_config(n_steps, seed, progress=show_progress, desc=f"{method} seed {seed}")
     batches = DemoBatches(run.data.dataset, device)  # minibatch indices drawn on the CPU, with probs (M,)
-    sampler = counter_examples(method, preset)  # None for BC: no counter-examples
-    if sampler is None:
-        objective = likelihood_objective(network)  # eq. 1 of the DA-IBC paper
-    else:
-        objective = info_nce_objective(network, sampler, preset.n_neg)  # eq. 2
+    objective = objective_for(method, network, preset)  # eq. 1 of the DA-IBC paper (BC) or eq. 2
     trainer = Trainer(network, objective, batches, config, sample_probs=probs)
     book = RunBook(out, agent, seed, run.data_sha256, log)
     if run.status == "resume":

@@ -52,10 +52,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ibc_tutorial.driving import route_following
 from ibc_tutorial.driving.env import DrivingEnv, EnvConfig
 from ibc_tutorial.driving.expert import Expert
 from ibc_tutorial.driving.routes import Route
 from ibc_tutorial.driving.towns import get_town
+from ibc_tutorial.experiments.runs import read_npz
 from ibc_tutorial.experiments.steering.junctions import (
     MASS_THRESHOLD,
     pooled_whiteness,
@@ -67,8 +69,9 @@ from ibc_tutorial.experiments.steering.task import longitudinal_config, steering
 from ibc_tutorial.metrics import crashes_per_km, swerve_rate, whiteness
 from ibc_tutorial.utils import check_choice, check_int
 
-END_MARGIN_M = 12.0
-"""A route ends this far before the end of its last lane (before the next junction's stop line)."""
+REFERENCES = "references.npz"
+"""The file of a study's (or a sweep's) folder that holds the expert's drives of the evaluation routes
+(``Reference``, every session's), with the study's Fig. 5 window."""
 PATH_SPACING_M = 0.5
 """Spacing of the resampled reference path."""
 CRASH_DISTANCE_M = 2.0
@@ -115,10 +118,9 @@ def build_route(name: str, session: int = 0) -> Route:
 
 
 def route_length(route: Route, cap_m: float = 0.0) -> float:
-    """Metres the reference drives: the route's lanes up to ``END_MARGIN_M`` before the last one's end
-    (or ``cap_m``)."""
-    town = get_town(EVAL_TOWN)
-    total = sum(town.lanes[k].length for k in route.lanes(town)) - route.start_s - END_MARGIN_M
+    """Metres the reference drives: ``driving.route_following.route_length`` in the evaluation town (the
+    route's lanes up to ``END_MARGIN_M`` before the last one's end), or ``cap_m`` if shorter (0: no cap)."""
+    total = route_following.route_length(route, EVAL_TOWN)
     return min(total, cap_m) if cap_m > 0 else total
 
 
@@ -179,6 +181,17 @@ class Reference:
         keys = ("poses", "lanes", "speeds", "steer", "turns_done", "offsets", "path", "path_step", "sections")
         key = reference_key(name, session)
         return cls(name, **{k: np.asarray(arrays[f"{key}/{k}"]) for k in keys}, session=session)
+
+
+def read_references(path, routes, sessions: int = 1) -> tuple[list[list[Reference]], dict]:
+    """The references of ``routes`` in sessions 0 to ``sessions`` - 1 from a ``REFERENCES`` file, as
+    [session][route], and all the file's arrays; ValueError naming the file if it is damaged or lacks one."""
+    arrays = read_npz(path, "delete it and re-run the same command")
+    try:
+        refs = [[Reference.from_arrays(n, arrays, session=k) for n in routes] for k in range(sessions)]
+    except KeyError:
+        raise ValueError(f"{path} lacks a route or session: delete it and re-run the same command") from None
+    return refs, arrays
 
 
 def reference_key(name: str, session: int = 0) -> str:
@@ -438,15 +451,14 @@ def expert_whiteness(ref: Reference) -> float:
     return whiteness(ref.steer, DT)
 
 
-def summarize_routes(routes: list[dict]) -> dict:
+def summarize_run_routes(routes: list[dict]) -> dict:
     """One run's routes pooled: crashes, distance, crashes per km, W_cmd (pooled over the commands'
     changes), the swerve rate over every side-road section driven, and the number of passes; where the
     routes have them, the sweep's measures: ``section_w_cmd`` (pooled over the sections' changes),
     ``peak_m`` and ``side_mass`` (means over the passes)."""
     crashes = sum(r["crashes"] for r in routes)
     dist = sum(r["distance_m"] for r in routes)
-    n = sum(r["steps"] - 1 for r in routes)
-    w = float(np.sqrt(sum((r["steps"] - 1) * r["w_cmd"] ** 2 for r in routes) / n)) if n else float("nan")
+    w = pooled_whiteness([(r["w_cmd"], r["steps"] - 1) for r in routes])  # over the commands' changes
     scores = [s for r in routes for s in r["swerve_score"] if s is not None]
     extra = {}
     if all("section_w_cmd" in r for r in routes):  # the sweep's measures (evaluations made since they exist)

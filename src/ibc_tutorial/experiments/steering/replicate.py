@@ -32,6 +32,7 @@ from ibc_tutorial.driving.dataset import DemoDataset, DemoLog
 from ibc_tutorial.experiments.runs import (
     PROVENANCE,
     PROVENANCE_MD,
+    RESULTS,
     Provenance,
     check_folder_entries,
     clear_entries,
@@ -42,6 +43,7 @@ from ibc_tutorial.experiments.runs import (
     write_npz,
 )
 from ibc_tutorial.experiments.steering import evaluate as ev
+from ibc_tutorial.experiments.steering.evaluate import REFERENCES
 from ibc_tutorial.experiments.steering.models import LABELS, MODELS
 from ibc_tutorial.experiments.steering.presets import LAPTOP, SteeringPreset, differences
 from ibc_tutorial.experiments.steering.task import preset_demonstrations, side_road_counts
@@ -51,10 +53,6 @@ from ibc_tutorial.utils import check_int
 
 DATA = "data/town01.npz"
 """The demonstrations, relative to the folder."""
-REFERENCES = "references.npz"
-"""The expert's drives of the evaluation routes and the Fig. 5 window's observations."""
-RESULTS = "results.json"
-"""The file chapter 10 reads."""
 TRACES = "traces.npz"
 """The Fig. 5 analogue's arrays."""
 ENTRIES = ("data", "runs", REFERENCES, RESULTS, TRACES, PROVENANCE, PROVENANCE_MD)
@@ -158,17 +156,9 @@ def make_references(out: Path, preset: SteeringPreset) -> None:
     write_npz(out / REFERENCES, arrays)
 
 
-def read_references(out: Path, preset: SteeringPreset) -> tuple[list[ev.Reference], dict]:
-    """The references of ``preset.eval_routes`` and the Fig. 5 window's observations."""
-    try:
-        with np.load(Path(out) / REFERENCES, allow_pickle=False) as z:
-            arrays = {k: z[k] for k in z.files}
-        refs = [ev.Reference.from_arrays(name, arrays) for name in preset.eval_routes]
-    except Exception as exc:
-        raise ValueError(
-            f"{Path(out) / REFERENCES} is damaged ({type(exc).__name__}): delete it and re-run"
-        ) from None
-    return refs, {"bev": arrays["fig5/bev"], "state": arrays["fig5/state"]}
+def fig5_window(arrays: dict) -> dict:
+    """The Fig. 5 window's observations in a ``REFERENCES`` file's arrays: {"bev" (W, 5, S, S), "state"}."""
+    return {"bev": arrays["fig5/bev"], "state": arrays["fig5/state"]}
 
 
 _WORKER: dict = {}
@@ -181,7 +171,8 @@ def _work_one(model: str, seed: int, out: str, preset_d: dict) -> dict:
     if key not in _WORKER:
         log = DemoLog.load(Path(out) / DATA)
         ds = DemoDataset(log, bev_size=preset.bev_size, cache=True)
-        refs, window = read_references(Path(out), preset)
+        (refs,), arrays = ev.read_references(Path(out) / REFERENCES, preset.eval_routes)
+        window = fig5_window(arrays)
         _WORKER.clear()
         _WORKER[key] = (ds, log.checksum(), refs, window)
     ds, sha, refs, window = _WORKER[key]
@@ -309,7 +300,7 @@ def _work(out: Path, preset: SteeringPreset, results: dict, save, workers: int, 
         )
     if not (out / REFERENCES).exists():
         make_references(out, preset)
-    refs, _ = read_references(out, preset)
+    (refs,), arrays = ev.read_references(out / REFERENCES, preset.eval_routes)
     results["references"] = {
         r.name: {
             "steps": int(len(r.poses)),
@@ -319,8 +310,7 @@ def _work(out: Path, preset: SteeringPreset, results: dict, save, workers: int, 
         }
         for r in refs
     }
-    with np.load(out / REFERENCES, allow_pickle=False) as z:
-        results["fig5"] = {"route": str(z["fig5/route"]), "steps": z["fig5/steps"].tolist()}
+    results["fig5"] = {"route": str(arrays["fig5/route"]), "steps": arrays["fig5/steps"].tolist()}
     save(False)
     todo = [(m, s) for s in preset.seeds for m in MODELS if not (run_dir(out, m, s) / EVAL).exists()]
 

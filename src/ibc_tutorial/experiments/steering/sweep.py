@@ -41,7 +41,6 @@ from ibc_tutorial.experiments.runs import (
     clear_entries,
     read_folder,
     read_json_dict,
-    read_npz,
     read_run_file,
     write_json,
     write_npz,
@@ -136,18 +135,6 @@ def make_references(out: Path, base: SteeringPreset, sessions: int) -> None:
     write_npz(out / REFERENCES, arrays)
 
 
-def read_references(out: Path, base: SteeringPreset, sessions: int) -> list[list[ev.Reference]]:
-    """[session][route] references."""
-    arrays = read_npz(Path(out) / REFERENCES, "delete it and re-run the same command")
-    try:
-        return [
-            [ev.Reference.from_arrays(n, arrays, session=k) for n in base.eval_routes]
-            for k in range(sessions)
-        ]
-    except KeyError:
-        raise ValueError(f"{Path(out) / REFERENCES} lacks a route or session: delete it and re-run") from None
-
-
 def _collect_one(out: str, share: float, base_d: dict) -> dict:
     """Collect one share's demonstrations (a worker's call); returns the side-road counts."""
     p = share_preset(SteeringPreset.from_dict(base_d), share)
@@ -168,7 +155,11 @@ def _run_one(out: str, share: float, model: str, seed: int, base_d: dict, settin
         _WORKER.clear()
         log = DemoLog.load(Path(out) / share_name(share) / "data" / "town01.npz")
         ds = DemoDataset(log, bev_size=preset.bev_size, cache=True)
-        _WORKER[key] = (ds, log.checksum(), read_references(Path(out), base, settings.sessions))
+        _WORKER[key] = (
+            ds,
+            log.checksum(),
+            ev.read_references(Path(out) / REFERENCES, base.eval_routes, settings.sessions)[0],
+        )
     ds, sha, refs = _WORKER[key]
     d = run_dir(out, share, model, seed)
     c0 = time.process_time()
@@ -222,8 +213,8 @@ def evaluate_sessions(
                     arrays[f"s{k}/{ref.name}/p{p}/mass"] = np.asarray(masses[p], dtype=np.float32)
             routes.append(r)
         every += routes
-        sessions.append({"session": k, "routes": routes, "summary": ev.summarize_routes(routes)})
-    return {"sessions": sessions, "summary": ev.summarize_routes(every), "arrays": arrays}
+        sessions.append({"session": k, "routes": routes, "summary": ev.summarize_run_routes(routes)})
+    return {"sessions": sessions, "summary": ev.summarize_run_routes(every), "arrays": arrays}
 
 
 # ---------------------------------------------------------------------- results
@@ -381,7 +372,6 @@ __all__ = [
     "finished_runs",
     "load_results",
     "read_sweep_eval",
-    "read_references",
     "run_dir",
     "sweep",
 ]

@@ -9,27 +9,23 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from ibc_tutorial.experiments.runs import PROVENANCE, PROVENANCE_MD
+from ibc_tutorial.experiments.runs import PROVENANCE, PROVENANCE_MD, RESULTS
 from ibc_tutorial.experiments.settings import StoredSettings
+from ibc_tutorial.experiments.steering.evaluate import REFERENCES
 from ibc_tutorial.experiments.steering.junctions import MASS_THRESHOLD
 from ibc_tutorial.experiments.steering.models import MODELS
 from ibc_tutorial.experiments.steering.presets import SteeringPreset
+from ibc_tutorial.experiments.steering.train import EVAL
 from ibc_tutorial.utils import check_choice, check_int, check_positive
 
 SETTINGS = "sweep.json"
 """The sweep's settings (``SweepSettings`` and the base preset)."""
-REFERENCES = "references.npz"
-"""The expert's drives of every evaluation route in every session."""
-RESULTS = "results.json"
-"""The tables the chapter reads."""
-EVAL = "eval.json"
-"""A finished run's results (written last)."""
 PASSES = "passes.npz"
 """A finished run's per-pass traces: offsets towards the side road and the probability on it, per state."""
 ENTRIES = (SETTINGS, REFERENCES, RESULTS, PROVENANCE, PROVENANCE_MD)
 """The files of a sweep folder beside its ``share<p>`` folders."""
 MEASURES = ("peak_m", "side_mass", "section_w_cmd", "w_cmd", "crashes_per_km", "swerve_rate")
-"""What the table reports per share and model (``evaluate.summarize_routes``'s names)."""
+"""What the table reports per share and model (``evaluate.summarize_run_routes``'s names)."""
 
 
 @dataclass(frozen=True)

@@ -25,7 +25,7 @@ from ibc_tutorial.experiments.steering.evaluate import (
     Reference,
     drive_route,
     expert_whiteness,
-    summarize_routes,
+    summarize_run_routes,
 )
 from ibc_tutorial.experiments.steering.models import (
     MODELS,
@@ -185,7 +185,7 @@ def evaluate_model(steering: SteeringModel, references: list[Reference], preset:
         r.pop("pass_offsets")  # the sweep keeps these traces (``sweep``); this study its peaks
         r["expert_w_cmd"] = round(expert_whiteness(ref), 5)
         routes.append(r)
-    return {"routes": routes, "summary": summarize_routes(routes)}
+    return {"routes": routes, "summary": summarize_run_routes(routes)}
 
 
 @dataclass
