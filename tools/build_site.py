@@ -259,8 +259,18 @@ def library_page(modules: list[str], srcdir: Path) -> str:
         "members, in the order of its source.\n",
     ]
     for name in modules:
-        parts.append(f"### `{name}`\n\n```{{eval-rst}}\n.. automodule:: {name}\n```\n")
+        shadowed = _shadowed(name, modules)
+        options = f"   :exclude-members: {', '.join(shadowed)}\n" if shadowed else ""
+        parts.append(f"### `{name}`\n\n```{{eval-rst}}\n.. automodule:: {name}\n{options}```\n")
     return "\n".join(parts)
+
+
+def _shadowed(name: str, modules: list[str]) -> list[str]:
+    """The documented submodules of package ``name``, by their last name: a member of the package named like
+    one (``driving`` re-exports the function ``rollout`` of its module ``driving.rollout``) would be described
+    as ``name.x`` twice, so it is left to its own module's section."""
+    prefix = name + "."
+    return sorted(m[len(prefix) :] for m in modules if m.startswith(prefix) and "." not in m[len(prefix) :])
 
 
 def generate(srcdir: Path) -> dict[str, int]:
