@@ -201,3 +201,24 @@ def test_ended_crossing_energies_replay_the_episode_and_refuse_what_they_cannot_
         ended_crossing_energies(agent, "town02", rows, steps=60, seed=1000, policy_seed=0, n_grid=1)
     rows[0]["termination"] = ""
     assert ended_crossing_energies(agent, "town02", rows, steps=60, seed=1000, policy_seed=0) is None
+
+
+def test_evaluate_agent_refuses_a_recording_that_is_not_a_rollout_recording():
+    from ibc_tutorial.experiments.agents.evaluate import evaluate_agent
+
+    with pytest.raises(ValueError, match="record must be a RolloutRecording, got dict"):
+        evaluate_agent("expert", episodes=1, steps=5, record={"xy": True})
+
+
+def test_steering_profile_is_the_lowest_energy_over_acceleration_from_zero():
+    from ibc_tutorial.driving.energy_profiles import steering_profile
+    from ibc_tutorial.optimizers.grid import steer_accel_grid
+
+    e = np.array([[3.0, 1.0, 4.0], [2.0, 5.0, 0.5]])  # (accel, steer)
+    assert np.array_equal(steering_profile(e), np.array([1.5, 0.5, 0.0]))
+    assert steering_profile(np.stack([e, e + 7.0])).shape == (2, 3)  # (B, accel, steer) -> (B, steer)
+    with pytest.raises(ValueError, match="energy must have an acceleration and a steering axis"):
+        steering_profile(np.zeros(3))
+    v, grid = steer_accel_grid(3)
+    assert v.tolist() == [-1.0, 0.0, 1.0] and grid.shape == (9, 2)
+    assert grid[:3, 1].tolist() == [-1.0] * 3 and grid[:3, 0].tolist() == [-1.0, 0.0, 1.0]  # accel slowest

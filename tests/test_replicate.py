@@ -469,3 +469,16 @@ def test_the_shipped_reevaluations_are_the_seed0_agents_here_and_on_the_older_cp
         assert ev["checkpoint"].endswith(f"runs/{f.stem.split('_')[0]}/seed0/final.pt")
         assert (ev["machine"]["cpu_capability"] == "DEFAULT") == f.stem.endswith("emulated_cpu")
         _is_clean_ancestor(ev["commit"])
+
+
+def test_a_drive_protocol_checks_its_dfo_values_before_any_drive():
+    """``DriveProtocol(dfo=...)``: a bad value is refused when the protocol is built, by ``DFOConfig``'s own
+    check, not when the first energy agent drives."""
+    from ibc_tutorial.experiments.agents.stems import DriveProtocol
+
+    dfo = {"samples": 64, "select": "sample"}
+    assert DriveProtocol(dfo=dfo).record()["dfo"] == dfo
+    with pytest.raises(ValueError, match="n_samples"):
+        DriveProtocol(dfo={"samples": 0})
+    with pytest.raises(ValueError, match="select"):
+        DriveProtocol(dfo={"select": "best"})

@@ -40,6 +40,7 @@ from ibc_tutorial.experiments.agents.evaluate import EVAL_SEED, EVAL_TOWN, episo
 from ibc_tutorial.experiments.agents.layout import STEM_DRIVE, expert_dir, run_dir
 from ibc_tutorial.experiments.agents.presets import METHODS
 from ibc_tutorial.experiments.runs import git_commit, machine, now, run_missing, write_json, write_npz
+from ibc_tutorial.optimizers.dfo import DFOConfig
 from ibc_tutorial.utils import check_int
 
 STEPS = 3000
@@ -193,6 +194,8 @@ class DriveProtocol:
             unknown = sorted(set(self.dfo) - set(DFO_OVERRIDES))
             if unknown:
                 raise ValueError(f"dfo must hold some of {sorted(DFO_OVERRIDES)}, got {unknown}")
+            # the values: checked now, by the config they set, not when the first agent drives
+            replace(DFOConfig(), **{DFO_OVERRIDES[k]: v for k, v in self.dfo.items()})
         if not isinstance(self.table_seeds, bool):
             raise ValueError(f"table_seeds must be True or False, got {self.table_seeds!r}")
 
