@@ -17,16 +17,25 @@ seen; the label is always the expert's own action (``driving.expert``). Routeles
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+from typing import NamedTuple
 
 import numpy as np
 
 from ibc_tutorial.driving.dataset import DemoLog
 from ibc_tutorial.driving.env import MAX_SPEED
 from ibc_tutorial.driving.expert import Expert, ExpertConfig
-from ibc_tutorial.driving.routes import random_route
+from ibc_tutorial.driving.routes import Route, random_route
 from ibc_tutorial.driving.sim import DrivingSim
-from ibc_tutorial.driving.towns import TOWNS
+from ibc_tutorial.driving.stems import EXITS, stem_approaches
+from ibc_tutorial.driving.towns import TOWNS, get_town
 from ibc_tutorial.utils import check_choice, check_fraction, check_int, check_positive, progress
+
+TWIN_STREAM = 1_000_003
+"""Mixed into the seed of the stem twins' generators, so that they never share a stream with a route."""
+MAX_TWIN_STEPS = 300
+"""Most steps of one stem twin episode (30 s)."""
+TWIN_GREEN_STEPS = 80
+"""Steps for which a twin's stem light stays green from its start (8 s: the approach and the turn)."""
 
 
 @dataclass(frozen=True)
@@ -53,6 +62,14 @@ class CollectConfig:
     turn_hold_m: float = 0.0
     """The expert's ``ExpertConfig.turn_hold_m``: > 0 makes every turn begin this far before the junction
     entry, left and right alike (0: turns anticipated along the path, the right turns earlier)."""
+    stem_twins: int = 0
+    """Twin pairs per stem of the town, after the routes (``episode_plan``): each pair crosses one stem left
+    and right from the identical state, so that the stem is a state with two answers (0 = none)."""
+    twin_start_m: tuple[float, float] = (10.0, 18.0)
+    """Range of the distance before the stem's junction entry at which a twin pair starts (metres, drawn
+    uniformly per pair)."""
+    twin_after_steps: int = 10
+    """Steps a twin episode goes on after the car has left the stem's junction."""
 
     def __post_init__(self):
         check_choice("town", self.town, TOWNS)
@@ -67,6 +84,15 @@ class CollectConfig:
         check_positive("steer_noise", self.steer_noise, allow_zero=True)
         check_fraction("CollectConfig.brake_noise", self.brake_noise)
         check_positive("turn_hold_m", self.turn_hold_m, allow_zero=True)
+        check_int("stem_twins", self.stem_twins, minimum=0)
+        check_int("twin_after_steps", self.twin_after_steps, minimum=1)
+        lo, hi = (check_positive("twin_start_m", v) for v in self.twin_start_m)
+        if not 5.0 <= lo <= hi:
+            raise ValueError(
+                f"twin_start_m must be (low, high) with 5 <= low <= high metres, got {self.twin_start_m}"
+            )
+        if self.stem_twins and self.routeless:
+            raise ValueError("stem_twins needs routes (routeless=False): a twin's turn is set by its route")
 
 
 class Recorder:
@@ -121,54 +147,166 @@ class Recorder:
         return DemoLog(self.sim.town.name, meta=meta or {}, **arrays)
 
 
+class EpisodePlan(NamedTuple):
+    """How one episode of a collection starts."""
+
+    rng: np.random.Generator
+    """The episode's generator, after its route was drawn from it: ``DrivingSim.reset`` draws from it next."""
+    route: Route | None
+    """The route the expert follows (None when routeless)."""
+    offsets: np.ndarray | None
+    """(J,) the junctions' light phases (None: drawn by ``reset`` from ``rng``)."""
+    record: dict
+    """What the log's meta records of it besides its start: ``turns``, and a twin's ``stem`` and ``pair``."""
+
+
+def episode_plan(sim: DrivingSim, config: CollectConfig, k: int) -> EpisodePlan:
+    """Episode ``k`` of the collection ``config``, driven on ``sim``.
+
+    Episodes ``0 .. routes - 1`` are the routes (``routes.random_route`` from a random start). The stem
+    twins follow (``stem_twins`` > 0): for each stem of the town in turn and each pair ``p``, two episodes
+    that start ``twin_start_m`` before the stem's junction entry at cruising speed, the stem's light green
+    for ``TWIN_GREEN_STEPS`` (a wait at a red light would add nothing to the question and triple a twin's
+    length; the routes hold the waits), and that differ only in the turn taken at the stem: left in the
+    first, right in the second. A twin's generator is seeded by the stem and the pair, not by the side, so
+    both twins draw the same start, light phases, later turns and steering noise: their states are
+    identical until the expert's labels first differ (the fork, ``driving.forks``)."""
+    town = sim.town
+    if k < config.routes:
+        rng = np.random.default_rng([config.seed, k])
+        if config.routeless:
+            return EpisodePlan(rng, None, None, {"turns": None})
+        route = random_route(town, rng)
+        return EpisodePlan(rng, route, None, {"turns": list(route.turns)})
+    i = k - config.routes
+    stems = stem_approaches(town)
+    if not 0 <= i < 2 * config.stem_twins * len(stems):
+        raise ValueError(f"k must be an episode of this collection (< {n_episodes(config)}), got {k}")
+    stem, pair, side = stems[i // (2 * config.stem_twins)], (i // 2) % config.stem_twins, EXITS[i % 2]
+    rng = np.random.default_rng([config.seed, TWIN_STREAM, stem, pair])
+    ap = town.approaches[stem]
+    lane = town.lanes[ap.lane]
+    lo, hi = config.twin_start_m
+    s = max(lane.length - (lo + (hi - lo) * float(rng.random())), 0.0)
+    # the turns after the stem, for either exit, drawn by both twins alike (so both generators end equal)
+    later = {
+        e: random_route(town, rng, n_turns=7, start=(town.next_lane(ap.lane, e), 0.0)).turns for e in EXITS
+    }
+    offsets = sim.schedule.offsets_green_from_start(town.light_of_approach[stem], TWIN_GREEN_STEPS, rng)
+    route = Route(ap.lane, s, (side, *later[side]))
+    return EpisodePlan(
+        rng, route, offsets, {"turns": list(route.turns), "stem": int(stem), "pair": int(pair)}
+    )
+
+
+def n_episodes(config: CollectConfig) -> int:
+    """How many episodes the collection ``config`` drives: its routes, then two per stem twin pair."""
+    return config.routes + 2 * config.stem_twins * len(stem_approaches(get_town(config.town)))
+
+
+def episode_steps(config: CollectConfig) -> np.ndarray:
+    """(routes,) the step budget of each route: durations spread evenly over [min, max] minutes
+    (stratified: one draw per 1/routes of the range, shuffled), so that the total stays close to routes x the
+    mean duration, 600 steps per minute at 10 Hz."""
+    rng = np.random.default_rng(config.seed)
+    lo, hi = config.min_minutes * 600, config.max_minutes * 600
+    n = config.routes
+    return np.round(lo + (hi - lo) * (rng.permutation(n) + rng.random(n)) / n).astype(int)
+
+
+def drive_episode(
+    sim: DrivingSim,
+    expert: Expert,
+    rng: np.random.Generator,
+    route: Route | None,
+    steps: int,
+    *,
+    offsets: np.ndarray | None = None,
+    speed: float = 0.0,
+    after_stem: int | None = None,
+    on_step=None,
+) -> dict:
+    """One expert episode: ``sim.reset(rng, route=route, offsets=offsets, speed=speed)``, then up to
+    ``steps`` steps of the expert's action (``on_step(action, executed)`` is called before each ``sim.step``, with the sim in the
+    state the action was chosen in). With ``after_stem``, the episode ends that many steps after the car
+    has left the first stem it crossed (the stem twins). Returns how it ended: ``steps``, ``distance_m``,
+    ``red_light_infractions`` and ``end`` ("completed", or the sim's termination reason)."""
+    sim.reset(rng, route=route, offsets=offsets, speed=speed)
+    stems = set(stem_approaches(sim.town))
+    stage, left_at = 0, None  # 0 before the stem, 1 on it, 2 in its junction, 3 left it
+    reason = "completed"
+    for t in range(int(steps)):
+        action = expert.act()
+        executed = expert.perturb(action)
+        if on_step is not None:
+            on_step(action, executed)
+        sim.step(float(executed[0]), float(executed[1]))
+        if sim.terminated:
+            reason = sim.termination_reason
+            break
+        if after_stem is not None:
+            tw, lane = sim.town, expert.current_lane
+            on_road = tw.lanes[lane].kind == "road"
+            if stage == 0 and tw.approach_of_lane.get(lane) in stems:
+                stage = 1
+            elif stage == 1 and not on_road:
+                stage = 2
+            elif stage == 2 and on_road:
+                stage, left_at = 3, t
+            if left_at is not None and t - left_at >= after_stem:
+                break
+    return {
+        "steps": int(sim.t),
+        "distance_m": round(sim.distance, 1),
+        "red_light_infractions": sim.infractions,
+        "end": reason,
+    }
+
+
+def make_expert(sim: DrivingSim, config: CollectConfig) -> Expert:
+    """The expert of the collection ``config`` (its perturbations and turn timing), on ``sim``."""
+    return Expert(
+        sim,
+        ExpertConfig(
+            steer_noise=config.steer_noise, brake_noise=config.brake_noise, turn_hold_m=config.turn_hold_m
+        ),
+        seed=config.seed,
+    )
+
+
 def collect(config: CollectConfig = CollectConfig(), show_progress: bool | None = None) -> DemoLog:
-    """Drive the expert over ``config.routes`` episodes and return the log."""
+    """Drive the expert over the episodes of ``config`` (``episode_plan``) and return the log."""
     c = config
     sim = DrivingSim(c.town)
-    expert = Expert(
-        sim,
-        ExpertConfig(steer_noise=c.steer_noise, brake_noise=c.brake_noise, turn_hold_m=c.turn_hold_m),
-        seed=c.seed,
-    )
-    rng = np.random.default_rng(c.seed)
-    # durations spread evenly over [min, max] (stratified: one draw per 1/routes of the range, shuffled),
-    # so the total stays close to routes x the mean duration: 600 steps per minute at 10 Hz
-    lo, hi = c.min_minutes * 600, c.max_minutes * 600
-    steps = np.round(lo + (hi - lo) * (rng.permutation(c.routes) + rng.random(c.routes)) / c.routes).astype(
-        int
-    )
+    expert = make_expert(sim, c)
+    steps = episode_steps(c)
+    n = n_episodes(c)
     rec = Recorder(sim)
     routes, ended = [], []
-    bar = progress(total=int(steps.sum()), desc=f"collecting {c.town}", enabled=show_progress)
-    for k in range(c.routes):
-        ep_rng = np.random.default_rng([c.seed, k])
-        route = None if c.routeless else random_route(sim.town, ep_rng)
-        sim.reset(ep_rng, route=route)
-        if route is None:
-            lane, s = sim.start
-            routes.append({"start_lane": int(lane), "start_s": float(s), "turns": None})
-        else:
-            routes.append(
-                {"start_lane": route.start_lane, "start_s": route.start_s, "turns": list(route.turns)}
-            )
-        reason = "completed"
-        for _ in range(int(steps[k])):
-            action = expert.act()
-            executed = expert.perturb(action)
+    bar = progress(total=n, desc=f"collecting {c.town}", enabled=show_progress)
+    for k in range(n):
+        plan = episode_plan(sim, c, k)
+        twin = k >= c.routes
+
+        def record(action, executed, k=k):
             rec.record(k, action, executed, expert.current_lane)
-            sim.step(float(executed[0]), float(executed[1]))
-            bar.update(1)
-            if sim.terminated:
-                reason = sim.termination_reason
-                break
+
         ended.append(
-            {
-                "steps": int(sim.t),
-                "distance_m": round(sim.distance, 1),
-                "red_light_infractions": sim.infractions,
-                "end": reason,
-            }
+            drive_episode(
+                sim,
+                expert,
+                plan.rng,
+                plan.route,
+                MAX_TWIN_STEPS if twin else int(steps[k]),
+                offsets=plan.offsets,
+                speed=expert.config.cruise_speed if twin else 0.0,
+                after_stem=c.twin_after_steps if twin else None,
+                on_step=record,
+            )
         )
+        lane, s = sim.start
+        routes.append({"start_lane": int(lane), "start_s": float(s), **plan.record})
+        bar.update(1)
     bar.close()
     # what was collected and how; no wall time (the command prints it): identical collections, identical logs
     meta = {"config": asdict(c), "expert": asdict(expert.config), "routes": routes, "episodes": ended}

@@ -148,6 +148,17 @@ class LightSchedule:
         ) % self.cycle[j]
         return offsets
 
+    def offsets_green_from_start(self, light: int, steps: int, rng: np.random.Generator) -> np.ndarray:
+        """(J,) random offsets (``random_offsets``), except that ``light``'s junction starts at a phase, drawn
+        uniformly among those that keep ``light`` green for the first ``steps`` steps."""
+        check_int("light", light, minimum=0, maximum=self.n_lights - 1)
+        check_int("steps", steps, minimum=1, maximum=self.timing.green_steps)
+        offsets = self.random_offsets(rng)
+        j = self.junction[light]
+        late = int(rng.integers(self.timing.green_steps - steps + 1))  # steps of green already gone
+        offsets[j] = (self.slot[light] * self.timing.slot_steps + late) % self.cycle[j]
+        return offsets
+
     def states(self, t, offsets: np.ndarray) -> np.ndarray:
         """Light states (L,) uint8 at step ``t`` (or (T, L) for an array of T steps)."""
         t = np.asarray(t, dtype=np.int64)

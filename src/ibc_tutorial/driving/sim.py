@@ -18,6 +18,7 @@ from ibc_tutorial.driving.car import BUILDING_COLLISION_TYPE, CAR_COLLISION_TYPE
 from ibc_tutorial.driving.lights import LightSchedule, LightTiming, RedLightMonitor
 from ibc_tutorial.driving.routes import random_start
 from ibc_tutorial.driving.towns import get_town
+from ibc_tutorial.utils import check_positive
 
 SCORE_PENALTY = 0.7
 """Factor applied to the distance per red-light infraction (CARLA leaderboard; the DA-IBC paper's score)."""
@@ -69,9 +70,12 @@ class DrivingSim:
         s: float | None = None,
         offsets: np.ndarray | None = None,
         route=None,
+        speed: float = 0.0,
     ) -> None:
-        """Start an episode: random light phases, the car at rest on ``lane`` at arc length ``s``
-        (both random when None), or at the start of ``route`` (a ``routes.Route``) if given."""
+        """Start an episode: random light phases, the car on ``lane`` at arc length ``s`` (both random when
+        None), or at the start of ``route`` (a ``routes.Route``) if given, at rest or moving forward at
+        ``speed`` (m/s; the stem twins of ``driving.collect`` start at cruising speed)."""
+        check_positive("speed", speed, allow_zero=True)
         if route is not None:
             lane, s = route.start_lane, route.start_s
         self.route = route
@@ -85,7 +89,7 @@ class DrivingSim:
         ln = self.town.lanes[lane]
         s = float(np.clip(0.0 if s is None else s, 0.0, ln.length))
         (p,), (h,) = ln.sample(np.array([s]))
-        self.car.reset(float(p[0]), float(p[1]), float(h))
+        self.car.reset(float(p[0]), float(p[1]), float(h), speed=float(speed))
         self.start = (lane, s)
         self.t = 0
         self.distance = 0.0

@@ -69,6 +69,7 @@ CONFIG_FIELDS = {
     "collect.max_minutes": "max_minutes",
     "collect.brake_noise": "brake_noise",
     "collect.turn_hold_m": "turn_hold_m",
+    "collect.stem_twins": "stem_twins",
     "bev.size": "bev_size",
     "bev.light_encoding": "light_encoding",
     "train.lr": "lr",
@@ -111,6 +112,10 @@ class Preset(StoredSettings):
     """The expert begins every turn this far before the junction entry, left and right alike (0: as its
     steering target enters the turn's arc, so right turns begin earlier; ``driving.expert``; the paper does
     not say how its expert times its turns)."""
+    stem_twins: int = 0
+    """Twin pairs per town01 stem added to the routes: each pair crosses one stem left and right from the
+    identical state (``driving.collect``), so that the stem is a state with two answers, as the tree is (0:
+    none, the paper's data)."""
     # ---- network (the paper's Fig. 2)
     bev_size: int = 192
     """Side of the bird's-eye view in pixels (the paper: 192)."""
@@ -303,6 +308,20 @@ LAPTOP = Preset(
 )
 """What a 2-core CPU can replicate in under an hour (``ibc-tutorial replicate --preset laptop``)."""
 
+TWO_ANSWERS = replace(
+    LAPTOP,
+    name="two-answers",
+    routes=6,  # the laptop preset's driving, on 6 routes ...
+    stem_twins=20,  # ... and 20 twin pairs per town01 stem: each stem crossed 20 times each way, at one state
+    turn_hold_m=2.0,  # a driver who turns the wheel at one point: a label gap of about 0.4 at the fork
+    epochs=3,  # about 54,000 samples: 3 epochs are the laptop preset's number of gradient steps
+    eval_every=3,  # one evaluation during training, at its end
+    seeds=(0, 1, 2, 3, 4),  # five agents per method
+)
+"""Demonstrations designed so that the stem of a T is a state with two answers (``ibc-tutorial replicate
+--preset two-answers``, chapter 12): the laptop preset's settings, fewer routes, and stem twins recorded
+with an expert that begins each turn 2 m before the junction entry."""
+
 PREVIOUS_LAPTOP = replace(
     LAPTOP,
     name="previous-laptop",
@@ -346,12 +365,12 @@ TINY = Preset(
 )
 """A seconds-long preset for the tests and the chapters' live demonstrations."""
 
-PRESETS = {p.name: p for p in (PAPER, LAPTOP, PREVIOUS_LAPTOP, TINY)}
+PRESETS = {p.name: p for p in (PAPER, LAPTOP, PREVIOUS_LAPTOP, TWO_ANSWERS, TINY)}
 """All named presets."""
 
 
 def get_preset(name: str) -> Preset:
-    """The preset called ``name`` ("paper", "laptop", "previous-laptop" or "tiny")."""
+    """The preset called ``name`` (one of ``PRESETS``)."""
     return PRESETS[check_choice("preset", name, tuple(PRESETS))]
 
 
