@@ -227,8 +227,8 @@ def drive_episode(
     on_step=None,
 ) -> dict:
     """One expert episode: ``sim.reset(rng, route=route, offsets=offsets, speed=speed)``, then up to
-    ``steps`` steps of the expert's action (``on_step(action, executed)`` is called before each ``sim.step``, with the sim in the
-    state the action was chosen in). With ``after_stem``, the episode ends that many steps after the car
+    ``steps`` steps of the expert's action (``on_step(action, executed)`` is called before each
+    ``sim.step``, with the sim in the state the action was chosen in). With ``after_stem``, the episode ends that many steps after the car
     has left the first stem it crossed (the stem twins). Returns how it ended: ``steps``, ``distance_m``,
     ``red_light_infractions`` and ``end`` ("completed", or the sim's termination reason)."""
     sim.reset(rng, route=route, offsets=offsets, speed=speed)
