@@ -228,9 +228,9 @@ def drive_episode(
 ) -> dict:
     """One expert episode: ``sim.reset(rng, route=route, offsets=offsets, speed=speed)``, then up to
     ``steps`` steps of the expert's action (``on_step(action, executed)`` is called before each
-    ``sim.step``, with the sim in the state the action was chosen in). With ``after_stem``, the episode ends that many steps after the car
-    has left the first stem it crossed (the stem twins). Returns how it ended: ``steps``, ``distance_m``,
-    ``red_light_infractions`` and ``end`` ("completed", or the sim's termination reason)."""
+    ``sim.step``, with the sim in the state the action was chosen in). With ``after_stem``, the episode
+    ends that many steps after the car has left the first stem it crossed (the stem twins). Returns how it
+    ended: ``steps``, ``distance_m``, ``red_light_infractions`` and ``end`` ("completed", or the sim's termination reason)."""
     sim.reset(rng, route=route, offsets=offsets, speed=speed)
     stems = set(stem_approaches(sim.town))
     stage, left_at = 0, None  # 0 before the stem, 1 on it, 2 in its junction, 3 left it
