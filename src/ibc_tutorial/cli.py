@@ -148,6 +148,10 @@ def check_paths(command: str, args: argparse.Namespace) -> None:
         if not Path(args.folder, "runs").is_dir():
             raise UserError(f"--folder must be a replication folder with runs/, got {args.folder}")
         check_output_dir("--out", args.out)
+    elif command == "two-answers":
+        check_output_dir("--out", args.out)
+        if args.baseline is not None and not Path(args.baseline, "runs").is_dir():
+            raise UserError(f"--baseline must be a replication folder with runs/, got {args.baseline}")
     elif command == "routes":
         if args.drives < 1:
             raise UserError(f"--drives must be a positive integer, got {args.drives}")
@@ -365,6 +369,27 @@ def _stems_arguments(p: argparse.ArgumentParser) -> None:
     )
 
 
+def _two_answers_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--out",
+        required=True,
+        help="folder of the study: the replication of the two-answers preset (resumed if interrupted), then "
+        "its readings in <out>/analysis",
+    )
+    p.add_argument(
+        "--threads", type=int, default=0, help=THREADS_HELP.replace("threads", "threads per process", 1)
+    )
+    p.add_argument(
+        "--workers", type=int, default=1, help="training runs in parallel processes (default: %(default)s)"
+    )
+    p.add_argument(
+        "--baseline",
+        default=None,
+        help="a replication folder whose agents are read at the same states too "
+        "(chapter 12: book/results/laptop)",
+    )
+
+
 def _routes_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--folder", default="book/results/laptop", help="replication folder with runs/")
     p.add_argument(
@@ -438,6 +463,12 @@ SUBCOMMANDS: dict[str, tuple[str, object, str]] = {
         _stems_arguments,
         "the stems of the T-junctions: every shipped agent driven freely, the energy where it chooses",
     ),
+    "two-answers": (
+        "two_answers",
+        _two_answers_arguments,
+        "chapter 12's study: agents trained where a stem is a state with two answers, and read there "
+        "(about an hour on 2 cores with --workers 2 --threads 1)",
+    ),
     "routes": (
         "routes",
         _routes_arguments,
@@ -492,7 +523,13 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         if debug:
             raise
-        resumable = args.command in ("train", "replicate", "replicate-steering", "sweep-steering")
+        resumable = args.command in (
+            "train",
+            "replicate",
+            "replicate-steering",
+            "sweep-steering",
+            "two-answers",
+        )
         print(
             f"{prog}: interrupted; "
             + ("re-run the same command to resume" if resumable else "nothing was written"),

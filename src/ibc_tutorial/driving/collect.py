@@ -73,7 +73,7 @@ class CollectConfig:
 
     def __post_init__(self):
         check_choice("town", self.town, TOWNS)
-        check_int("routes", self.routes, minimum=1)
+        check_int("routes", self.routes, minimum=0 if self.stem_twins else 1)
         check_int("seed", self.seed, minimum=0)
         check_positive("min_minutes", self.min_minutes)
         check_positive("max_minutes", self.max_minutes)
@@ -230,7 +230,8 @@ def drive_episode(
     ``steps`` steps of the expert's action (``on_step(action, executed)`` is called before each
     ``sim.step``, with the sim in the state the action was chosen in). With ``after_stem``, the episode
     ends that many steps after the car has left the first stem it crossed (the stem twins). Returns how it
-    ended: ``steps``, ``distance_m``, ``red_light_infractions`` and ``end`` ("completed", or the sim's termination reason)."""
+    ended: ``steps``, ``distance_m``, ``red_light_infractions`` and ``end`` ("completed", or the sim's
+    termination reason)."""
     sim.reset(rng, route=route, offsets=offsets, speed=speed)
     stems = set(stem_approaches(sim.town))
     stage, left_at = 0, None  # 0 before the stem, 1 on it, 2 in its junction, 3 left it

@@ -36,7 +36,7 @@ import numpy as np
 
 from ibc_tutorial.driving.commands import COMMANDS, FOLLOW, command_at, distance_to_entry
 from ibc_tutorial.driving.env import EnvConfig, make_env
-from ibc_tutorial.driving.expert import Expert
+from ibc_tutorial.driving.expert import Expert, ExpertConfig
 from ibc_tutorial.driving.rollout import DrivingPolicy
 from ibc_tutorial.driving.routes import Route
 from ibc_tutorial.driving.sim import SCORE_PENALTY, score
@@ -405,48 +405,74 @@ def observations_before_crossing(
 ) -> list[tuple[dict[str, np.ndarray], dict]]:
     """``observation_before_crossing`` at each distance of ``distances_m`` (metres before the entry, each
     >= 0), from one drive of the expert; in the order given."""
+    return observations_before_crossings(
+        name, [crossing], distances_m, bev_size=bev_size, light_encoding=light_encoding, seed=seed
+    )[check_int("crossing", crossing, minimum=0)]
+
+
+def observations_before_crossings(
+    name: str,
+    crossings,
+    distances_m,
+    *,
+    bev_size: int = 64,
+    light_encoding: str = "intensity",
+    seed: int = 0,
+    expert: ExpertConfig | None = None,
+) -> dict[int, list[tuple[dict[str, np.ndarray], dict]]]:
+    """For each of the route's ``crossings`` (0-based indices of ``route_crossings``), the observations at
+    each distance of ``distances_m`` (``observation_before_crossing``), from one drive of the expert
+    (``expert``: its settings, default ``ExpertConfig()``; chapter 12 reads the stems with the expert that
+    begins its turns 2 m before the entry). Returns ``{crossing: [(obs, where), ...]}`` in the order of
+    ``distances_m``."""
     route = build_route(name)
     town = get_town(ROUTE_TOWN)
-    crossings = route_crossings(route, town)
-    crossing = check_int("crossing", crossing, minimum=0)
-    if crossing >= len(crossings):
-        raise ValueError(
-            f"crossing must be below {len(crossings)} (route {name}'s crossings), got {crossing}"
-        )
+    n_cross = len(route_crossings(route, town))
+    crossings = [check_int("crossing", c, minimum=0) for c in np.atleast_1d(crossings).tolist()]
+    for c in crossings:
+        if c >= n_cross:
+            raise ValueError(f"crossing must be below {n_cross} (route {name}'s crossings), got {c}")
     wanted = [check_positive("distances_m", float(d), allow_zero=True) for d in np.atleast_1d(distances_m)]
     if not wanted:
         raise ValueError("distances_m must hold at least one distance")
+    expert = ExpertConfig() if expert is None else expert
+    if not isinstance(expert, ExpertConfig):
+        raise ValueError(f"expert must be an ExpertConfig, got {type(expert).__name__}")
     tracker = RouteTracker(route, town)
-    pos = sorted(tracker.turns)[crossing]  # position in the route's lanes of that junction's approach lane
+    order = sorted(tracker.turns)  # positions in the route's lanes of its junctions' approach lanes
+    at = {order[c]: c for c in crossings}
     budget = math.ceil(tracker.length / MIN_MEAN_SPEED * 10)
     env = make_env(config=EnvConfig(ROUTE_TOWN, bev_size, True, budget, light_encoding=light_encoding))
     offsets = env.sim.schedule.random_offsets(np.random.default_rng([seed, 0]))
     obs, info = env.reset(seed=seed, options={"route": route, "light_offsets": offsets})
-    expert = Expert(env)
-    found: dict[int, tuple[dict, dict]] = {}
+    driver = Expert(env, expert)
+    found: dict[int, dict[int, tuple[dict, dict]]] = {c: {} for c in crossings}
+    last = max(at)
     for step in range(budget):
         command = tracker.update(info["x"], info["y"], info["yaw"])
-        if tracker.p > pos:
+        if tracker.p > last:
             break
-        if tracker.p == pos:
-            d = distance_to_entry(town, tracker.lanes[pos], (info["x"], info["y"]))
-            ap = town.approach_of_lane[tracker.lanes[pos]]
+        c = at.get(tracker.p)
+        if c is not None:
+            d = distance_to_entry(town, tracker.lanes[tracker.p], (info["x"], info["y"]))
+            ap = town.approach_of_lane[tracker.lanes[tracker.p]]
             for k, want in enumerate(wanted):
-                if k not in found and d <= want:
+                if k not in found[c] and d <= want:
                     where = {
                         "approach": int(ap),
-                        "turn": tracker.turns[pos],
+                        "turn": tracker.turns[tracker.p],
                         "distance_m": round(d, 3),
                         "step": step,
                     }
-                    found[k] = ({**obs, "command": np.int64(command)}, where)
-            if len(found) == len(wanted):
-                return [found[k] for k in range(len(wanted))]
-        obs, _, terminated, _, info = env.step(expert.act())
+                    found[c][k] = ({**obs, "command": np.int64(command)}, where)
+        obs, _, terminated, _, info = env.step(driver.act())
         if terminated:
             break
-    missing = [wanted[k] for k in range(len(wanted)) if k not in found]
-    raise ValueError(f"the expert never came within {missing} m of crossing {crossing} of route {name}")
+    for c in crossings:
+        missing = [wanted[k] for k in range(len(wanted)) if k not in found[c]]
+        if missing:
+            raise ValueError(f"the expert never came within {missing} m of crossing {c} of route {name}")
+    return {c: [found[c][k] for k in range(len(wanted))] for c in crossings}
 
 
 def junction_success(rows) -> dict[str, dict]:

@@ -231,6 +231,26 @@ def stems(args: argparse.Namespace) -> int:
     return 0
 
 
+def two_answers(args: argparse.Namespace) -> int:
+    """``ibc-tutorial two-answers``: the two-answers replication (resumed, or nothing left to do), then its
+    readings (``experiments.agents.two_answers.analyse``) into ``<out>/analysis``."""
+    from pathlib import Path
+
+    from ibc_tutorial.experiments.agents import replicate as replication
+    from ibc_tutorial.experiments.agents import two_answers
+    from ibc_tutorial.experiments.agents.presets import get_preset
+
+    _run_study(args, replication, get_preset("two-answers"), [])
+    torch.set_num_threads(1)
+    two_answers.analyse(
+        args.out,
+        Path(args.out) / "analysis",
+        baseline=args.baseline,
+        command=getattr(args, "command_line", ""),
+    )
+    return 0
+
+
 def routes(args: argparse.Namespace) -> int:
     """``ibc-tutorial routes``: every agent of ``--folder`` and the expert on the routes (resumable)."""
     from ibc_tutorial.experiments.agents.route_drives import run_route_drives

@@ -49,13 +49,15 @@ def symmetric_axis(n: int, dtype: torch.dtype = torch.float32) -> torch.Tensor:
     return ((2 * i - (n - 1)) / (n - 1)).to(dtype)  # (n,)
 
 
-def steer_accel_grid(n: int) -> tuple[torch.Tensor, torch.Tensor]:
-    """The driving agents' (steering, acceleration) grid: its axis (n,) (``symmetric_axis``: straight is
-    exactly 0) and its n² actions (n², 2), rows (steer, accel) with the acceleration varying slowest, so that
-    energies of the grid reshape to (n accel, n steer)."""
+def steer_accel_grid(n: int, n_accel: int | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+    """The driving agents' (steering, acceleration) grid: its steering axis (n,) (``symmetric_axis``:
+    straight is exactly 0) and its n x m actions (n m, 2) with m = ``n_accel`` (default n) acceleration
+    values, rows (steer, accel) with the acceleration varying slowest, so that energies of the grid reshape
+    to (m accel, n steer)."""
     v = symmetric_axis(n)  # (n,)
-    acc, steer = torch.meshgrid(v, v, indexing="ij")  # (n, n) each
-    return v, torch.stack([steer.reshape(-1), acc.reshape(-1)], dim=1)  # (n,), (n², 2)
+    a = v if n_accel is None else symmetric_axis(n_accel)  # (m,)
+    acc, steer = torch.meshgrid(a, v, indexing="ij")  # (m, n) each
+    return v, torch.stack([steer.reshape(-1), acc.reshape(-1)], dim=1)  # (n,), (m n, 2)
 
 
 def grid_energies(
