@@ -62,7 +62,7 @@ from ibc_tutorial.experiments.runs import (
 )
 from ibc_tutorial.optimizers.grid import steer_accel_grid
 from ibc_tutorial.policies.encoders import to_tensor_obs
-from ibc_tutorial.stats import minority, ratio_of_sums_interval
+from ibc_tutorial.stats import minority, ratio_of_sums_difference, ratio_of_sums_interval, verdict
 
 STEER_GRID = 161
 """Steering values of the reading grid over [-1, 1] (0.0125 apart; straight exactly 0)."""
@@ -221,12 +221,28 @@ def stem_exits(drive: dict) -> dict:
     }
 
 
+def _exit_tables(exits_by_agent: list[dict]) -> tuple[np.ndarray, np.ndarray]:
+    """(A, E) left exits and (A, E) stem crossings of each agent's episodes."""
+    left = np.array([[e["left"] for e in a["episodes"]] for a in exits_by_agent], dtype=float)
+    total = np.array([[e["left"] + e["right"] for e in a["episodes"]] for a in exits_by_agent], dtype=float)
+    return left, total
+
+
 def minority_interval(exits_by_agent: list[dict]):
     """The pooled minority exit share (min(left, right) / crossings) of a method's agents, with its
     two-level interval (agents, then episodes: ``stats.ratio_of_sums_interval``)."""
-    left = np.array([[e["left"] for e in a["episodes"]] for a in exits_by_agent], dtype=float)  # (A, E)
-    total = np.array([[e["left"] + e["right"] for e in a["episodes"]] for a in exits_by_agent], dtype=float)
-    return ratio_of_sums_interval(left, total, transform=minority)
+    return ratio_of_sums_interval(*_exit_tables(exits_by_agent), transform=minority)
+
+
+def minority_difference(exits_a: list[dict], exits_b: list[dict]) -> dict:
+    """The DA-IBC paper's claim 4 as chapter 09 judges it: method A's pooled minority exit share minus
+    method B's, with its two-level interval (``stats.ratio_of_sums_difference``) and the verdict of "A takes
+    the minority exit more often than B" (``stats.verdict`` against 0)."""
+    iv = ratio_of_sums_difference(*_exit_tables(exits_a), *_exit_tables(exits_b), transform=minority)
+    return {
+        "difference": [round(iv.estimate, 4), round(iv.low, 4), round(iv.high, 4)],
+        "verdict": verdict(iv),
+    }
 
 
 def per_agent_minority(exits: dict) -> float | None:
@@ -380,7 +396,12 @@ def read_folder(folder, forks: dict, approach: dict, log=print) -> tuple[dict, d
     methods = {
         m: method_summary([rows[n] for n in rows if n.startswith(f"{m}-seed")], exits[m]) for m in exits
     }
-    return {"agents": rows, "methods": methods}, arrays
+    claim4 = {
+        f"{a} - bc": minority_difference(exits[a], exits["bc"])
+        for a in ("ibc", "da-ibc")
+        if a in exits and "bc" in exits
+    }
+    return {"agents": rows, "methods": methods, "claim4": claim4}, arrays
 
 
 def fig6_fork(forks: dict) -> int:
