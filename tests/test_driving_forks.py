@@ -89,3 +89,15 @@ def test_bad_input(route_log):
     routeless = collect(CollectConfig(routes=1, min_minutes=0.05, max_minutes=0.05, routeless=True))
     with pytest.raises(ValueError, match="routeless"):
         stem_forks(routeless)
+
+
+def test_fork_traces_agree_before_the_fork_and_differ_at_it(twin_log):
+    fork = next(f for f in stem_forks(twin_log, show_progress=False) if f["twin"])
+    from ibc_tutorial.driving.forks import fork_traces
+
+    t = fork_traces(twin_log, fork, before=5, after=3)
+    k = t["fork"]
+    assert k == 5 and len(t["recorded"]) == len(t["twin"]) == len(t["entry_m"]) == 9
+    assert np.array_equal(t["recorded"][:k], t["twin"][:k])
+    assert abs(t["recorded"][k] - t["twin"][k]) == pytest.approx(fork["gap"])
+    assert (np.diff(t["entry_m"]) <= 0).all()  # the car approaches the entry

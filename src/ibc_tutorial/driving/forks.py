@@ -31,7 +31,7 @@ from ibc_tutorial.driving.sim import DrivingSim
 from ibc_tutorial.driving.stems import EXITS, stem_approaches
 from ibc_tutorial.utils import check_int, progress
 
-__all__ = ["collection_config", "forks_per_stem", "replay", "stem_forks"]
+__all__ = ["collection_config", "fork_traces", "forks_per_stem", "replay", "stem_forks"]
 
 
 def collection_config(log) -> CollectConfig:
@@ -143,6 +143,7 @@ def stem_forks(log, show_progress: bool | None = None) -> list[dict]:
                 "episode": int(ep),
                 "approach": int(v["approach"]),
                 "turn": v["turn"],
+                "turn_index": j,
                 "twin": bool(ep >= config.routes),
                 "fork": f,
                 "fork_row": int(rows[f]),
@@ -160,3 +161,25 @@ def forks_per_stem(forks: list[dict], town) -> dict[int, dict[str, int]]:
     for f in forks:
         counts[f["approach"]][f["turn"]] += 1
     return counts
+
+
+def fork_traces(log, fork: dict, before: int = 20, after: int = 8) -> dict:
+    """The steering of a stem crossing and of its twin around the fork (``fork``: one of ``stem_forks``),
+    from ``before`` states before it to ``after`` states after: ``entry_m`` (how far before the junction
+    entry the recorded car is at each state), ``recorded`` and ``twin`` (their steering labels) and
+    ``fork`` (the position of the fork in these arrays)."""
+    before = check_int("before", before, minimum=0)
+    after = check_int("after", after, minimum=0)
+    rows = np.flatnonzero(log.episode == fork["episode"])
+    f = int(fork["fork"])
+    lo, hi = max(f - before, 0), min(f + after + 1, len(rows))
+    twin = replay(log, fork["episode"], flip=(fork["turn_index"],), steps=hi)
+    town = DrivingSim(collection_config(log).town).town
+    ap = town.approaches[fork["approach"]]
+    xy = log.pose[rows[lo:hi], :2]
+    return {
+        "entry_m": (ap.entry[None, :] - xy) @ ap.direction,
+        "recorded": log.action[rows[lo:hi], 0],
+        "twin": twin["action"][lo:hi, 0],
+        "fork": f - lo,
+    }
