@@ -120,3 +120,17 @@ def test_heldout_forks_are_two_answer_states():
     assert len(f["gap"]) >= 20 and (f["gap"] >= 0.3).all()
     assert (f["labels"][:, 0, 0] < f["labels"][:, 1, 0]).all()  # left label steers left of the right one
     assert f["bev"].shape[1:] == (5, TWO_ANSWERS.bev_size, TWO_ANSWERS.bev_size)
+
+
+def test_read_profile_is_the_one_reading_of_a_profile():
+    from ibc_tutorial.driving.energy_profiles import read_profile
+    from ibc_tutorial.optimizers.grid import symmetric_axis
+
+    s = symmetric_axis(161, torch.float64).numpy()
+    double = 40 * np.minimum((s - 0.4) ** 2, (s + 0.4) ** 2)  # valleys at ±0.4, 6.4 nats between
+    single = 5 * s**2
+    r2, r1 = read_profile(s, double, double), read_profile(s, single, single)
+    assert r2["two_sided"] and r2["valleys"] == 2 and r2["left_mass"] == pytest.approx(0.5)
+    assert not r1["two_sided"] and r1["valleys"] == 1 and r1["argmin_steer"] == 0.0
+    shallow = np.minimum(40 * (s - 0.4) ** 2, 40 * (s + 0.4) ** 2 + 3.5)  # the left valley 3.5 nats up
+    assert not read_profile(s, shallow, shallow)["two_sided"]

@@ -98,6 +98,37 @@ def valleys(steer, energy, depth: float = DEPTH, barrier: float = BARRIER) -> li
     return out
 
 
+def read_profile(steer, low, marg) -> dict:
+    """The one reading of an energy over steering at a state, used by every chapter that reads one (the stem
+    analysis of chapters 08-09, the command readings of chapter 11, the forks and stem approaches of chapter
+    12).
+
+    ``steer`` (G,) the grid's steering values (straight exactly 0: ``optimizers.grid.symmetric_axis``),
+    ``low`` (G,) the lowest energy over acceleration at each (``steering_profile``) and ``marg`` (G,) the
+    marginal over acceleration, -log sum_a exp(-E) (nats; each minus anything constant). Returns
+    ``valleys`` (how many, by ``valleys``: within ``DEPTH`` nats of the minimum, a barrier of at least
+    ``BARRIER``), ``valley_steer`` (where), ``two_sided`` (two valleys, one left and one right of straight),
+    ``argmin_steer``, ``left_mass`` (the Boltzmann mass left of straight of the marginal, ``boltzmann_sides``)
+    and ``left_mass_low`` (of the lowest), and the 3-nat range of ``low`` (``range_extent``,
+    ``range_measure``: ``low_range``)."""
+    s = np.asarray(steer, dtype=float)
+    low = np.asarray(low, dtype=float)
+    low = low - low.min()
+    marg = np.asarray(marg, dtype=float)
+    vs = valleys(s, low)
+    r = low_range(s, low)
+    return {
+        "valleys": len(vs),
+        "valley_steer": [v["steer"] for v in vs],
+        "two_sided": any(v["steer"] < 0 for v in vs) and any(v["steer"] > 0 for v in vs),
+        "argmin_steer": float(s[np.argmin(low)]),
+        "left_mass_low": boltzmann_sides(s, low)["left"],
+        "left_mass": boltzmann_sides(s, marg - marg.min())["left"],
+        "range_extent": r["extent"],
+        "range_measure": r["measure"],
+    }
+
+
 def boltzmann_sides(steer, energy, temperature: float = 1.0) -> dict[str, float]:
     """Mass of p(s) ∝ exp(-e(s) / temperature) over the grid: ``{"left", "right"}`` (sum 1).
 

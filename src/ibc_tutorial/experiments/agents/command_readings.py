@@ -16,7 +16,7 @@ import numpy as np
 import torch
 
 from ibc_tutorial.driving.commands import command_index
-from ibc_tutorial.driving.energy_profiles import beta_shape, boltzmann_sides, steering_profile, valleys
+from ibc_tutorial.driving.energy_profiles import beta_shape, read_profile, steering_profile
 from ibc_tutorial.optimizers.grid import symmetric_axis
 from ibc_tutorial.policies.encoders import to_tensor_obs
 
@@ -57,12 +57,12 @@ def reading(agent, obs: dict, command: str | None, n_grid: int = GRID) -> dict:
     steer = symmetric_axis(n_grid, torch.float64).numpy()  # (G,) the grid's values, exactly (straight is 0)
     low = steering_profile(e)  # (G,) the lowest over acceleration, minus its minimum
     marg = -np.logaddexp.reduce(-e, axis=0)  # (G,) -log sum over acceleration of exp(-E)
-    vs = valleys(steer, low)
+    r = read_profile(steer, low, marg)  # the one reading of a profile (driving.energy_profiles)
     return {
         "steer": steer,
         "profile": low,
-        "valleys": len(vs),
-        "valley_steer": [round(v["steer"], 3) for v in vs],
-        "argmin_steer": float(steer[np.argmin(low)]),
-        "left_mass": boltzmann_sides(steer, marg - marg.min())["left"],
+        "valleys": r["valleys"],
+        "valley_steer": [round(v, 3) for v in r["valley_steer"]],
+        "argmin_steer": r["argmin_steer"],
+        "left_mass": r["left_mass"],
     }

@@ -36,10 +36,9 @@ from ibc_tutorial.driving.analysis import junction_crossings
 from ibc_tutorial.driving.energy_profiles import (
     beta_shape,
     boltzmann_sides,
-    low_range,
     steering_profile,
-    valleys,
 )
+from ibc_tutorial.driving.energy_profiles import read_profile as profile_reading
 from ibc_tutorial.driving.stems import (
     LEAD,
     decision_window,
@@ -83,17 +82,16 @@ def energy_profiles(agent, bev: np.ndarray, state: np.ndarray, n_grid: int = GRI
 
 
 def read_profile(steer: np.ndarray, low: np.ndarray, marg: np.ndarray) -> dict:
-    """The readings of one state's profile (``driving.energy_profiles``)."""
-    vs = valleys(steer, low)
-    r = low_range(steer, low)
+    """The readings of one state's profile (``driving.energy_profiles.read_profile``), rounded as stored."""
+    r = profile_reading(steer, low, marg)
     return {
-        "valleys": len(vs),
-        "valley_steer": [round(v["steer"], 3) for v in vs],
-        "argmin_steer": round(float(steer[np.argmin(low)]), 3),
-        "left_mass_low": round(boltzmann_sides(steer, low)["left"], 4),
-        "left_mass": round(boltzmann_sides(steer, marg)["left"], 4),
-        "range_extent": round(r["extent"], 3),
-        "range_measure": round(r["measure"], 3),
+        "valleys": r["valleys"],
+        "valley_steer": [round(v, 3) for v in r["valley_steer"]],
+        "argmin_steer": round(r["argmin_steer"], 3),
+        "left_mass_low": round(r["left_mass_low"], 4),
+        "left_mass": round(r["left_mass"], 4),
+        "range_extent": round(r["range_extent"], 3),
+        "range_measure": round(r["range_measure"], 3),
     }
 
 

@@ -36,7 +36,7 @@ import torch
 
 from ibc_tutorial.driving.collect import CollectConfig, collect
 from ibc_tutorial.driving.dataset import DemoDataset, DemoLog
-from ibc_tutorial.driving.energy_profiles import BARRIER, DEPTH, beta_shape, boltzmann_sides, valleys
+from ibc_tutorial.driving.energy_profiles import BARRIER, DEPTH, beta_shape, read_profile
 from ibc_tutorial.driving.expert import ExpertConfig
 from ibc_tutorial.driving.forks import forks_per_stem, stem_forks
 from ibc_tutorial.driving.route_following import (
@@ -188,11 +188,9 @@ def read_states(agent, bev: np.ndarray, state: np.ndarray, labels: np.ndarray | 
             el = agent.network.energy_from_embedding(z, lab).double().cpu()  # (B, 2)
             out["label_energy"].append((el - floor[:, None]).numpy())
         for p, m in zip((low - low.min(dim=1, keepdim=True).values).numpy(), marg.numpy(), strict=True):
-            vs = valleys(steer_np, p, DEPTH, BARRIER)
-            out["valleys"].append(len(vs))
-            out["two_sided"].append(any(v["steer"] < 0 for v in vs) and any(v["steer"] > 0 for v in vs))
-            out["left_mass"].append(boltzmann_sides(steer_np, m - m.min())["left"])
-            out["argmin_steer"].append(float(steer_np[np.argmin(p)]))
+            r = read_profile(steer_np, p, m)  # the one reading of a profile (driving.energy_profiles)
+            for k in ("valleys", "two_sided", "left_mass", "argmin_steer"):
+                out[k].append(r[k])
             out["profile"].append(p.astype(np.float32))
     res = {k: np.array(v) for k, v in out.items() if k not in ("label_energy",)}
     if labels is not None:
