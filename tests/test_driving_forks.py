@@ -101,3 +101,10 @@ def test_fork_traces_agree_before_the_fork_and_differ_at_it(twin_log):
     assert np.array_equal(t["recorded"][:k], t["twin"][:k])
     assert abs(t["recorded"][k] - t["twin"][k]) == pytest.approx(fork["gap"])
     assert (np.diff(t["entry_m"]) <= 0).all()  # the car approaches the entry
+
+
+def test_stem_forks_of_chosen_episodes(twin_log):
+    forks = stem_forks(twin_log, show_progress=False, episodes=[1, 2])
+    assert {f["episode"] for f in forks} == {1, 2} and len(forks) == 2
+    with pytest.raises(ValueError, match="episodes"):
+        stem_forks(twin_log, episodes=[999])

@@ -105,11 +105,11 @@ def replay(log, episode: int, flip: tuple[int, ...] = (), steps: int | None = No
     }
 
 
-def stem_forks(log, show_progress: bool | None = None) -> list[dict]:
+def stem_forks(log, show_progress: bool | None = None, episodes=None) -> list[dict]:
     """Every stem crossing of ``log`` (a route collection of ``driving.collect``) and its fork.
 
     Each crossing is replayed with its stem's turn flipped (``replay``) up to the state after it entered the
-    junction. Returns one dict per crossing: ``episode``, ``approach`` (the stem), ``turn`` (the exit taken),
+    junction (of the log's ``episodes`` only, if given: a list of episode indices). Returns one dict per crossing: ``episode``, ``approach`` (the stem), ``turn`` (the exit taken),
     ``twin`` (True for the collection's stem twins), ``fork`` (the step of the episode at which the labels
     first differ), ``fork_row`` (its row in the log), ``entry_m`` (how far the car's centre is before the
     junction entry at the fork, along the approach), ``labels`` ((2, 2): the action recorded and the twin's
@@ -119,7 +119,14 @@ def stem_forks(log, show_progress: bool | None = None) -> list[dict]:
     town = DrivingSim(config.town).town
     stems = set(stem_approaches(town))
     jobs = []
-    for ep in np.unique(log.episode).tolist():
+    known = np.unique(log.episode).tolist()
+    if episodes is not None:
+        wanted = [int(e) for e in episodes]
+        unknown = sorted(set(wanted) - set(known))
+        if unknown:
+            raise ValueError(f"episodes must be episodes of the log, got {unknown}")
+        known = [e for e in known if e in set(wanted)]
+    for ep in known:
         rows = np.flatnonzero(log.episode == ep)
         visits = junction_visits(town, log.lane[rows], ended_inside=True)
         for j, v in enumerate(visits):  # the route's turn j is taken at the episode's j-th junction
