@@ -109,11 +109,12 @@ def stem_forks(log, show_progress: bool | None = None, episodes=None) -> list[di
     """Every stem crossing of ``log`` (a route collection of ``driving.collect``) and its fork.
 
     Each crossing is replayed with its stem's turn flipped (``replay``) up to the state after it entered the
-    junction (of the log's ``episodes`` only, if given: a list of episode indices). Returns one dict per crossing: ``episode``, ``approach`` (the stem), ``turn`` (the exit taken),
-    ``twin`` (True for the collection's stem twins), ``fork`` (the step of the episode at which the labels
-    first differ), ``fork_row`` (its row in the log), ``entry_m`` (how far the car's centre is before the
-    junction entry at the fork, along the approach), ``labels`` ((2, 2): the action recorded and the twin's
-    at the fork) and ``gap`` (their difference in steering, ``|recorded - twin|``).
+    junction (of the log's ``episodes`` only, if given: a list of episode indices). Returns one dict per
+    crossing: ``episode``, ``approach`` (the stem), ``turn`` (the exit taken), ``turn_index`` (which of the
+    route's turns it is), ``twin`` (True for the collection's stem twins), ``fork`` (the step of the episode
+    at which the labels first differ), ``fork_row`` (its row in the log), ``entry_m`` (how far the car's
+    centre is before the junction entry at the fork, along the approach), ``labels`` ((2, 2): the action
+    recorded and the twin's at the fork) and ``gap`` (their difference in steering, ``|recorded - twin|``).
     """
     config = collection_config(log)
     town = DrivingSim(config.town).town
