@@ -8,6 +8,7 @@ import math
 import numpy as np
 import torch
 
+from ibc_tutorial.driving.energy_profiles import valleys
 from ibc_tutorial.kde import inverse_density_weights, kde_density
 
 
@@ -329,3 +330,29 @@ def ch11_chance_crossings(exits):
         p /= e
         total += p
     return total
+
+
+# =========================================================================== chapter 12: the tree in the town
+def ch12_fork(recorded, twin):
+    """The first state at which the labels differ (either component, compared exactly) and
+    |recorded steer - twin steer| there; a ValueError when they never differ."""
+    differ = np.flatnonzero(np.any(recorded != twin, axis=1))  # (K,) the states whose labels differ
+    if not len(differ):
+        raise ValueError("the labels never differ: there is no fork")
+    i = int(differ[0])
+    return i, float(abs(recorded[i, 0] - twin[i, 0]))
+
+
+def ch12_two_sided(steer, profile):
+    """The book's valleys (within 3 nats of the minimum, a barrier of at least 1 nat): one left of straight
+    (s < 0) and one right of it (s > 0)."""
+    at = [v["steer"] for v in valleys(steer, profile)]
+    return any(s < 0 for s in at) and any(s > 0 for s in at)
+
+
+def ch12_exit_summary(counts):
+    """The less taken exit's share of all the agents' stem crossings, and the agents that took both exits."""
+    left = sum(c[0] for c in counts)
+    right = sum(c[1] for c in counts)
+    both = sum(c[0] > 0 and c[1] > 0 for c in counts)
+    return {"minority": min(left, right) / (left + right), "both": both}
