@@ -20,6 +20,7 @@ from ibc_tutorial.optimizers.dfo import INITS, DFOConfig, DFOTrace, dfo_trace
 from ibc_tutorial.optimizers.grid import grid_argmin
 from ibc_tutorial.plotting import DPI
 from ibc_tutorial.plotting.ingredients import draw_dfo_iteration
+from ibc_tutorial.plotting.two_answers import plot_fork_profiles
 
 
 def _png(fig) -> bytes:
@@ -176,3 +177,24 @@ def figure_explorer(draw, controls: dict):
         control.observe(redraw, names="value")
     redraw()
     return w.VBox([w.HBox(list(controls.values())), image])
+
+
+# ========================================================================== chapter 12: the held-out forks
+def fork_explorer(readings, names):
+    """A slider over the held-out forks and a dropdown over the agents ``names`` ("all agents" or one):
+    the chosen agents' energy over steering at the chosen fork, its two labels and the 3-nat depth marked
+    (``plotting.two_answers.plot_fork_profiles``; the static companion is ``plot_profiles_at_forks``).
+
+    ``readings``: ``experiments.agents.two_answers.analyse``'s ``readings.npz`` (or any mapping of its keys);
+    ``names``: energy agents whose ``<name>/forks/profile`` it holds (``baseline/...`` included)."""
+    names = [n for n in names if f"{n}/forks/profile" in readings]
+    if not names:
+        raise ValueError("names must hold at least one energy agent with forks/profile readings")
+    forks = len(readings["states/forks/labels"])
+    fork = w.IntSlider(value=0, min=0, max=forks - 1, description="fork", continuous_update=False)
+    agent = w.Dropdown(options=["all agents", *names], value="all agents", description="agent")
+
+    def draw(fork, agent):
+        return plot_fork_profiles(readings, names if agent == "all agents" else [agent], int(fork))
+
+    return figure_explorer(draw, {"fork": fork, "agent": agent})
