@@ -211,3 +211,20 @@ def test_fork_explorer_redraws_on_the_slider_and_the_dropdown():
     assert first != second != image.value
     with pytest.raises(ValueError, match="energy agent"):
         fork_explorer(r, ["bc-seed0"])
+
+
+def test_plot_twin_steering_marks_the_fork():
+    from ibc_tutorial.plotting.two_answers import plot_twin_steering
+
+    t = {
+        "entry_m": np.linspace(8, 1, 20),
+        "recorded": np.r_[np.zeros(12), -0.2 * np.ones(8)],
+        "twin": np.r_[np.zeros(12), 0.25 * np.ones(8)],
+        "fork": 12,
+    }
+    fig = plot_twin_steering({"a crossing": t})
+    ax = fig.axes[0]
+    assert ax.get_title() == "a crossing" and "entry" in ax.get_xlabel()
+    assert any("label gap 0.45" in txt.get_text() for txt in ax.texts)
+    with pytest.raises(ValueError, match="traces"):
+        plot_twin_steering({})

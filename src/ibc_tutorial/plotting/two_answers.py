@@ -453,3 +453,36 @@ def plot_approach_two_valleys(
     fig.legend(handles=handles, loc="outside lower center", ncol=3, fontsize=9)
     fig.suptitle(title + " (counts above the bars)")
     return fig
+
+
+def plot_twin_steering(traces: dict, *, title: str = "A stem crossing and its twin: the steering labels"):
+    """One panel per entry of ``traces`` (``{name: driving.forks.fork_traces(...)}``): the steering label of
+    the recorded crossing and of its twin (its turn flipped) against the distance before the junction entry,
+    the fork marked, and the label gap there written in the panel."""
+    if not traces:
+        raise ValueError("traces must hold at least one crossing")
+    fig, axes = plt.subplots(1, len(traces), figsize=(4.6 * len(traces), 3.4), sharey=True, squeeze=False)
+    for ax, (name, t) in zip(axes[0], traces.items(), strict=True):
+        x = np.asarray(t["entry_m"])
+        ax.plot(x, t["recorded"], "-o", ms=3, color="C0", label="recorded crossing")
+        ax.plot(x, t["twin"], "--o", ms=3, color="C3", label="its twin (other turn)")
+        k = int(t["fork"])
+        gap = abs(float(t["recorded"][k]) - float(t["twin"][k]))
+        ax.axvline(x[k], color="0.4", ls=":", lw=1)
+        ax.text(
+            0.03,
+            0.95,
+            f"fork: {x[k]:.1f} m before the entry\nlabel gap {gap:.2f}",
+            transform=ax.transAxes,
+            va="top",
+            fontsize=8,
+        )
+        ax.set_xlim(max(x.max(), 6.0), min(x.min(), 0.0))  # the car drives towards the entry: left to right
+        ax.axhline(0, color="0.8", lw=0.8)
+        ax.set_title(name)
+        ax.set_xlabel("distance before the junction entry (m)")
+    axes[0, 0].set_ylabel(STEER_LABEL)
+    axes[0, -1].legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8)
+    fig.suptitle(title)
+    fig.tight_layout()
+    return fig
