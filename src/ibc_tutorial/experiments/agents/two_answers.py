@@ -394,10 +394,11 @@ def read_folder(folder, forks: dict, approach: dict, log=print) -> tuple[dict, d
     methods = {
         m: method_summary([rows[n] for n in rows if n.startswith(f"{m}-seed")], exits[m]) for m in exits
     }
+    crossed = {m for m, ex in exits.items() if sum(e["crossings"] for e in ex)}  # a share needs crossings
     claim4 = {
         f"{a} - bc": minority_difference(exits[a], exits["bc"])
         for a in ("ibc", "da-ibc")
-        if a in exits and "bc" in exits
+        if {a, "bc"} <= crossed
     }
     return {"agents": rows, "methods": methods, "claim4": claim4}, arrays
 
