@@ -427,6 +427,15 @@ def analyse(folder, out, *, baseline=None, log=print, command: str = "") -> dict
     folder, out = Path(folder), Path(out)
     started = now()
     preset = Preset.from_dict(read_json_dict(folder / RESULTS, "run the replication first")["preset"])
+    if baseline is not None:  # the baseline's agents read the same rendered states: the same view
+        other = Preset.from_dict(
+            read_json_dict(Path(baseline) / RESULTS, "give a finished replication")["preset"]
+        )
+        if (other.bev_size, other.light_encoding) != (preset.bev_size, preset.light_encoding):
+            raise ValueError(
+                f"baseline must see the study's view (bev_size {preset.bev_size}, light_encoding "
+                f"{preset.light_encoding!r}), got {other.bev_size} and {other.light_encoding!r}"
+            )
     forks = heldout_forks(preset)
     approach = stem_approach_states(preset)
     if log:
