@@ -215,6 +215,10 @@ class ExpertSampler:
         the log of the mass the clip moves there, log Φ((low − a)/σ) or log Φ((a − high)/σ) (see the module
         docstring: exact for the sampler, an approximation for ranking NCE on the faces); −inf outside the
         box. Needs σ > 0. Computed without gradients (q does not depend on the model).
+
+        q is the law *given the minibatch*: the same for every sample of it (DA-IBC's counter-examples do
+        not depend on x), and the expert action y_i is itself one of its M centres, so ranking NCE sees
+        q(y_i) ≥ N(0; 0, σ² I) / M at the expert's action.
         """
         if self.sigma == 0:
             raise ValueError("sigma must be > 0 for log_prob: with sigma = 0 the proposal has no density")
