@@ -41,6 +41,21 @@ RUNS = {
         + ["--experts", "50", "--threads", "1"],
         ("decisions/s", "goal of 10 decisions/s"),
     ),
+    "bench_inference": (
+        ["bench_inference.py", "--preset", "tiny", "--dfo-samples", "64", "--dfo-iters", "2"]
+        + [
+            "--langevin-samples",
+            "16",
+            "--langevin-iters",
+            "2",
+            "--flow-steps",
+            "1,2",
+            "--flow-samples",
+            "1,4",
+        ]
+        + ["--decisions", "2", "--warmup", "1", "--experts", "50", "--threads", "1"],
+        ("decisions/s", "flow, K = 2, N = 4", "Langevin (16 chains x 2 steps)"),
+    ),
     "bench_sim": (["bench_sim.py", "--steps", "50"], ("steps/s", "Dataset rendering, 192x192")),
 }
 

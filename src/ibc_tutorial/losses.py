@@ -3,7 +3,9 @@
 Explicit policies (chapter 02): Beta negative log-likelihood (eq. 1 of the DA-IBC paper),
 mixture-density NLL, classification over bins. Energy models (chapters 03-04): InfoNCE
 (eqs. 2-3 of the DA-IBC paper, weighted: its eq. 5), cross-entropy over a fixed grid with
-soft targets (eq. 5 of the steering-EBM paper) and temporal smoothing (its eq. 4).
+soft targets (eq. 5 of the steering-EBM paper) and temporal smoothing (its eq. 4); ranking NCE
+(InfoNCE with the proposal's log-density subtracted: Ma & Collins 2018; Singh, Tu, Sindhwani 2023).
+Flow matching: the conditional flow-matching loss on straight paths (Lipman et al. 2023, eq. 23).
 
 Every loss is a mean over the batch, so each refuses an empty batch (B = 0) with a ValueError
 rather than returning NaN.
@@ -228,6 +230,51 @@ def info_nce(
     return (weights * nll).mean()  # eq. 5 (divided by B)
 
 
+def ranking_nce(
+    pos_energy: torch.Tensor,
+    neg_energy: torch.Tensor,
+    pos_log_q: torch.Tensor,
+    neg_log_q: torch.Tensor,
+    weights: torch.Tensor | None = None,
+) -> torch.Tensor:
+    """Ranking noise-contrastive estimation (R-NCE): InfoNCE whose logits subtract log q of the proposal.
+
+    The ranking objective of Ma & Collins 2018 ("Noise Contrastive Estimation and Negative Sampling for
+    Conditional Models"), as Singh, Tu, Sindhwani 2023 ("Revisiting Energy Based Models as Policies")
+    train energy-based policies with it. With the
+    expert action y_i^0 = y_i and counter-examples y_i^j ~ q(· | x_i), the logits are
+
+        l_ij = −E(x_i, y_i^j) − log q(y_i^j | x_i),   j = 0..N (the expert first)
+
+    and the loss is the mean over the batch of −log softmax(l_i)_0 (weighted by w_i if given, as
+    ``info_nce``). It is the log-posterior that the expert's action is the one drawn from p among
+    N + 1 candidates of which the others come from q: p(y^0) Π_{j≠0} q(y^j) / Σ_k p(y^k) Π_{j≠k} q(y^j),
+    with p ∝ exp(−E). Its optimum is exp(−E) ∝ p(y | x) whatever the proposal, where InfoNCE's
+    (``info_nce``, the same with log q = 0) is exp(−E) ∝ p / q: InfoNCE learns the expert's density
+    *tilted* by the counter-examples' density. For a uniform q, log q is a constant, and R-NCE equals
+    InfoNCE exactly (a constant shift of every logit changes no softmax).
+
+    Args:
+        pos_energy: (B,) E(x_i, y_i).
+        neg_energy: (B, N) E(x_i, ỹ_i^j).
+        pos_log_q: (B,) log q(y_i | x_i), the proposal's log-density at the expert's action.
+        neg_log_q: (B, N) log q(ỹ_i^j | x_i).
+        weights: optional (B,) non-negative sample weights.
+    Returns:
+        a scalar tensor.
+    """
+    _check_energies(pos_energy, neg_energy, weights)
+    check_tensor("pos_log_q", pos_log_q, shape=tuple(pos_energy.shape))
+    check_tensor("neg_log_q", neg_log_q, shape=tuple(neg_energy.shape))
+    logits = torch.cat([-pos_energy[:, None], -neg_energy], dim=1) - torch.cat(
+        [pos_log_q[:, None], neg_log_q], dim=1
+    )  # (B, 1 + N): −E − log q, expert first
+    nll = torch.logsumexp(logits, dim=1) - logits[:, 0]  # (B,)
+    if weights is None:
+        return nll.mean()
+    return (weights * nll).mean()
+
+
 def soft_targets(candidates: torch.Tensor, actions: torch.Tensor, temperature: float) -> torch.Tensor:
     """Target probabilities over candidate actions that fall with distance from the ground truth.
 
@@ -328,3 +375,28 @@ def temporal_smoothing(
             )
         diff = diff * mask
     return alpha * torch.linalg.vector_norm(diff, dim=1).mean()
+
+
+# =========================================================================== flow matching
+def flow_matching_loss(velocity: torch.Tensor, y0: torch.Tensor, y1: torch.Tensor) -> torch.Tensor:
+    """The conditional flow-matching loss on straight paths: eq. 23 of Lipman et al. 2023 with σ_min = 0.
+
+        L = mean over samples of ‖v_θ(x, y_t, t) − (y_1 − y_0)‖²,   y_t = (1 − t) y_0 + t y_1
+
+    the squared error between the predicted velocity and the velocity of the straight
+    (optimal-transport) path from the noise y_0 to the expert action y_1 (also rectified flow's
+    objective, eq. 1 of Liu et al. 2023), summed over the D action dimensions and averaged over
+    the samples. The path itself is drawn by ``policies.flow.FlowPolicy.loss``.
+
+    Args:
+        velocity: (B, M, D) v_θ at the M points y_t of each of B samples.
+        y0: (B, M, D) the noise ends of the paths.
+        y1: (B, M, D) the expert ends (an expert action repeated M times).
+    Returns:
+        a scalar tensor.
+    """
+    check_tensor("velocity", velocity, ndim=3)
+    _check_batch("velocity", velocity)
+    check_tensor("y0", y0, shape=tuple(velocity.shape))
+    check_tensor("y1", y1, shape=tuple(velocity.shape))
+    return (velocity - (y1 - y0)).square().sum(dim=-1).mean()

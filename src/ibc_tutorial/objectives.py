@@ -6,8 +6,11 @@ chosen), so one loop trains every variant of the book:
 
 - ``likelihood_objective(policy)``: an explicit policy's own negative log-likelihood (or
   regression loss): Beta NLL (eq. 1 of the DA-IBC paper), MDN, classifier, regression;
-- ``info_nce_objective(model, sampler, n_neg, weight_key=None)``: InfoNCE (eqs. 2-3, eq. 5 with
-  weights) with counter-examples from any sampler of ``ibc_tutorial.negatives``;
+- ``info_nce_objective(model, sampler, n_neg, weight_key=None, ranking=False)``: InfoNCE (eqs. 2-3,
+  eq. 5 with weights) with counter-examples from any sampler of ``ibc_tutorial.negatives``, or with
+  ``ranking=True`` ranking NCE (``losses.ranking_nce``: the sampler's log q subtracted from the logits);
+- ``flow_matching_objective(policy)``: a ``policies.flow.FlowPolicy``'s conditional flow-matching loss
+  (Lipman et al. 2023, eq. 23), its noise and times drawn from the loop's generator;
 - ``grid_objective(model, grid, temperature=None, smoothing=0.0)``: the steering-EBM paper's
   cross-entropy over a fixed grid (its eq. 3), with soft targets (eq. 5) and temporal
   smoothing (eq. 4) on pairs of consecutive frames from ``consecutive_pairs``.
@@ -22,7 +25,13 @@ from collections.abc import Mapping
 
 import torch
 
-from ibc_tutorial.losses import grid_cross_entropy, info_nce, soft_targets, temporal_smoothing
+from ibc_tutorial.losses import (
+    grid_cross_entropy,
+    info_nce,
+    ranking_nce,
+    soft_targets,
+    temporal_smoothing,
+)
 from ibc_tutorial.negatives import NegativeSampler
 from ibc_tutorial.training import Objective
 from ibc_tutorial.utils import check_int, check_positive, check_tensor
@@ -53,6 +62,7 @@ def info_nce_objective(
     obs_key: str = "obs",
     action_key: str = "actions",
     weight_key: str | None = None,
+    ranking: bool = False,
 ) -> Objective:
     """InfoNCE with counter-examples from ``sampler``: eqs. 2-3 of the DA-IBC paper (eq. 5 with weights).
 
@@ -69,10 +79,21 @@ def info_nce_objective(
         weight_key: key of per-sample weights (B,) for eq. 5, or None for eq. 2. (The DA-IBC
             paper applies its KDE weights by weighted minibatch sampling instead: pass
             ``sample_probs`` to ``train`` for that.)
+        ranking: False for InfoNCE, True for ranking NCE (``losses.ranking_nce``: Ma & Collins 2018; Singh,
+            Tu, Sindhwani 2023): each logit −E(x, y) − log q(y | x), with log q from ``sampler.log_prob(
+            candidates (B, 1 + N, D), actions (B, D))`` at the expert's action and each counter-example.
+            InfoNCE learns exp(−E) ∝ p / q, ranking NCE exp(−E) ∝ p; with ``UniformSampler`` both are equal.
     """
     n_neg = check_int("n_neg", n_neg, minimum=1)
     if not isinstance(sampler, NegativeSampler):
         raise ValueError(f"sampler must be a NegativeSampler (a callable), got {type(sampler).__name__}")
+    if not isinstance(ranking, bool):
+        raise ValueError(f"ranking must be True or False, got {ranking!r}")
+    if ranking and not callable(getattr(sampler, "log_prob", None)):
+        raise ValueError(
+            f"sampler must have a log_prob(candidates, actions) method for ranking=True, got "
+            f"{type(sampler).__name__}"
+        )
 
     def objective(batch: dict[str, torch.Tensor], generator: torch.Generator) -> torch.Tensor:
         actions = batch[action_key]  # (B, D)
@@ -80,7 +101,31 @@ def info_nce_objective(
         candidates = torch.cat([actions[:, None, :], negatives], dim=1)  # (B, 1 + N, D), expert first
         energies = model.energy(batch[obs_key], candidates)  # (B, 1 + N)
         weights = batch[weight_key] if weight_key is not None else None
-        return info_nce(energies[:, 0], energies[:, 1:], weights)
+        if not ranking:
+            return info_nce(energies[:, 0], energies[:, 1:], weights)
+        log_q = sampler.log_prob(candidates, actions)  # (B, 1 + N): log q of the proposal, expert first
+        return ranking_nce(energies[:, 0], energies[:, 1:], log_q[:, 0], log_q[:, 1:], weights)
+
+    return objective
+
+
+def flow_matching_objective(
+    policy: torch.nn.Module, *, obs_key: str = "obs", action_key: str = "actions"
+) -> Objective:
+    """A ``FlowPolicy``'s conditional flow-matching loss (Lipman et al. 2023, eq. 23, with σ_min = 0).
+
+    Returns ``objective(batch, generator) = policy.loss(batch[obs_key], batch[action_key], generator)``:
+    the noise y_0 and the times t of the straight paths are drawn from the loop's generator, so a run is
+    reproducible and resumes bit for bit like the others.
+    """
+    if not callable(getattr(policy, "loss", None)) or not callable(getattr(policy, "sample", None)):
+        raise ValueError(
+            "policy must be a FlowPolicy (loss(obs, actions, generator) and sample), got "
+            f"{type(policy).__name__}"
+        )
+
+    def objective(batch: dict[str, torch.Tensor], generator: torch.Generator) -> torch.Tensor:
+        return policy.loss(batch[obs_key], batch[action_key], generator)
 
     return objective
 

@@ -1,4 +1,5 @@
-"""Policies: observation encoders, explicit policies (chapter 02) and the energy model."""
+"""Policies: observation encoders, explicit policies (chapter 02), the energy model and the flow-matching
+policy."""
 
 from ibc_tutorial.policies.encoders import BEVStateEncoder, MLPEncoder, ObservationEncoder
 
@@ -14,6 +15,9 @@ from ibc_tutorial.policies.explicit import (
     RegressionPolicy,
 )
 
+# the flow-matching policy (issue 37)
+from ibc_tutorial.policies.flow import FlowConfig, FlowPolicy
+
 __all__ = [
     "ObservationEncoder",
     "MLPEncoder",
@@ -28,4 +32,7 @@ __all__ = [
     "BetaPolicy",
     "ClassifierPolicy",
     "MDNPolicy",
+    # the flow-matching policy
+    "FlowConfig",
+    "FlowPolicy",
 ]
