@@ -110,7 +110,7 @@ def test_energy_grid_matches_the_energy():
 
 
 def test_presets():
-    assert set(PRESETS) == {"paper", "laptop", "previous-laptop", "tiny"}
+    assert set(PRESETS) == {"paper", "laptop", "previous-laptop", "two-answers", "tiny"}
     assert (PAPER.lr, PAPER.epochs, PAPER.batch_size, PAPER.n_neg) == (1e-5, 400, 128, 1024)
     assert (PAPER.dfo_samples, PAPER.dfo_iters, PAPER.dfo_sigma_init, PAPER.dfo_shrink) == (
         16384,
@@ -130,6 +130,17 @@ def test_presets():
         "seeds": ([0, 1, 2, 3, 4, 5, 6], [0, 1, 2, 3, 4]),
     }
     assert LAPTOP.routes * LAPTOP.epochs == previous.routes * previous.epochs  # the same gradient steps
+    # chapter 12's designed data: the laptop preset with stem twins, a turn begun 2 m before the entry
+    two = get_preset("two-answers")
+    assert differences(LAPTOP, two) == {
+        "routes": (20, 6),
+        "turn_hold_m": (0.0, 2.0),
+        "stem_twins": (0, 20),
+        "epochs": (4, 3),
+        "eval_every": (2, 3),
+        "seeds": ([0, 1, 2, 3, 4, 5, 6], [0, 1, 2, 3, 4]),
+    }
+    assert two.collect_config().stem_twins == 20 and two.collect_config().turn_hold_m == 2.0
     with pytest.raises(ValueError, match="preset"):
         get_preset("huge")
     with pytest.raises(ValueError, match="epochs"):
