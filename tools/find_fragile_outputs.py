@@ -14,8 +14,10 @@ never changed. Each code cell's text outputs under each setting are compared wit
 as `pytest --nbval` compares them: streams and text data (images skipped), after the replacements of
 tools/nbval_sanitize.cfg; cells marked `# NBVAL_IGNORE_OUTPUT` or `# NBVAL_SKIP` are left out. A cell
 that raises under a setting (a failed assert) counts as a difference; execution goes on with the next
-cell. The table lists every cell whose text differs under any setting, with the first line that
-differs, and the exit code is 1 when there is one, 0 when every setting printed the stored outputs.
+cell; an execution that cannot finish (a cell over --timeout, a dead kernel) is reported as failed.
+The table lists every cell whose text differs under any setting, with the first line that differs;
+the exit code is 1 when there is one or an execution failed, 0 when every setting printed the stored
+outputs.
 
 Cells are numbered as nbval numbers them: code cells only, from 0. A difference under one setting
 is enough to change a cell: print fewer digits, a count with a margin, or an assert instead of a
@@ -212,7 +214,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--list-settings", action="store_true", help="print the settings and exit")
     parser.add_argument("--keep", type=Path, help="write the executed copies to this folder")
-    parser.add_argument("--timeout", type=int, default=900, help="seconds allowed per cell")
+    parser.add_argument("--timeout", type=int, default=3600, help="seconds allowed per cell")
     args = parser.parse_args(argv)
     if args.list_settings:
         for name, (env, what) in SETTINGS.items():
@@ -238,7 +240,13 @@ def main(argv: list[str] | None = None) -> int:
             runs = {}
             for name in names:
                 print(f"{path}: executing as {name} ...", flush=True)
-                runs[name] = execute(path.resolve(), SETTINGS[name][0], args.timeout)
+                try:
+                    runs[name] = execute(path.resolve(), SETTINGS[name][0], args.timeout)
+                except Exception as exc:  # a cell timed out, the kernel died: no notebook to compare
+                    found_any = True
+                    first = str(exc).strip().splitlines()[:1]
+                    print(f"{path}: execution as {name} FAILED: {type(exc).__name__} {' '.join(first)}")
+                    continue
                 nbformat.write(runs[name], out_dir / f"{path.stem}.{name}.ipynb")
             differences = compare(stored, runs, sanitizers)
             if differences:
@@ -246,8 +254,8 @@ def main(argv: list[str] | None = None) -> int:
                 cells = sorted({d.cell for d in differences})
                 print(f"{path}: {len(cells)} cell(s) differ from the stored outputs: {cells}")
                 print(format_table(differences))
-            else:
-                print(f"{path}: every setting printed the stored outputs ({', '.join(names)})")
+            elif runs:
+                print(f"{path}: every setting printed the stored outputs ({', '.join(runs)})")
     return 1 if found_any else 0
 
 
