@@ -4,16 +4,15 @@
     python benchmarks/bench_replicate.py       # the laptop preset, 1 thread, as one worker runs
     python benchmarks/bench_replicate.py --preset laptop --data book/results/laptop/data/town01.npz
     python benchmarks/bench_replicate.py --train-steps 40 --eval-steps 300
-    python benchmarks/bench_replicate.py --limits --prototypes    # how far from the peak; what speed-ups buy
+    python benchmarks/bench_replicate.py --limits       # how far each stage is from the CPU's peak
     python benchmarks/bench_replicate.py --set collect.routes=20 --set epochs=4 --set seeds=0,1,2,3,4,5,6,7
                                                                   # what a variant of the preset would cost
 
-With ``--limits`` / ``--prototypes`` (``replicate_limits.py`` beside this file, whose docstring says how
-the shares and ratios are measured), the run prints instead, on a rendered sample of the demonstrations
-(``--sample``): for every stage its FLOPs per unit, GFLOP/s and share of the peak of a GEMM and a
-convolution of its own shapes measured in the same run; and, for each candidate speed-up, the ratio of
-the current path's time to the candidate's, timed in alternation in this process. On a shared machine,
-read the ratios and shares, not the times.
+With ``--limits`` (``replicate_limits.py`` beside this file, whose docstring says how the shares are
+measured), the run prints instead, on a rendered sample of the demonstrations (``--sample``): for every
+stage its FLOPs per unit, GFLOP/s and share of the peak of a GEMM and a convolution of its own shapes
+measured in the same run. On a shared machine, read the shares, not the times. The candidate speed-ups
+once measured against the current path, and not adopted, are in ``RESULTS.md`` beside this file.
 
 Each stage of a replication is timed on a sample of its work in this process, with one torch
 thread (as each of ``replicate --workers 2 --threads 1``'s workers), and scaled to the preset:
@@ -85,11 +84,7 @@ def main() -> None:
     ap.add_argument("--eval-steps", type=int, default=200, help="steps of each timed episode")
     ap.add_argument("--workers", type=int, default=2, help="worker processes the wall-time estimate assumes")
     ap.add_argument("--limits", action="store_true", help="print each stage's share of the machine's peak")
-    ap.add_argument("--prototypes", action="store_true", help="print the candidate speed-ups' ratios")
-    ap.add_argument(
-        "--sample", type=int, default=4096, help="demonstrations rendered for --limits/--prototypes"
-    )
-    ap.add_argument("--stacked-k", default="1,2,5,10", help="agents stacked in prototype (a)")
+    ap.add_argument("--sample", type=int, default=4096, help="demonstrations rendered for --limits")
     ap.add_argument("--reps", type=int, default=5, help="timing rounds (minimum or median over them)")
     ap.add_argument(
         "--out",
@@ -107,8 +102,8 @@ def main() -> None:
         f"{torch.__version__}, 1 thread; load average before: {os.getloadavg()[0]:.2f}"
     )
 
-    if args.limits or args.prototypes:
-        return limits_and_prototypes(p, args)
+    if args.limits:
+        return run_limits(p, args)
 
     rows = []  # (stage, unit, seconds per unit, units, total seconds, parallel)
     if args.data:
@@ -193,8 +188,8 @@ def main() -> None:
     print(f"load average after: {os.getloadavg()[0]:.2f}")
 
 
-def limits_and_prototypes(p, args) -> None:
-    """``--limits`` / ``--prototypes``: on ``--sample`` rendered demonstrations of ``--data`` (or a route)."""
+def run_limits(p, args) -> None:
+    """``--limits``: on ``--sample`` rendered demonstrations of ``--data`` (or a route)."""
     import replicate_limits as rl  # beside this file
 
     if args.data:
@@ -234,19 +229,6 @@ def limits_and_prototypes(p, args) -> None:
             }
             write_json(args.out, report)
             print(f"written to {args.out}")
-    if args.prototypes:
-        print("\nprototypes: ratio = current path's time / candidate's time (> 1: the candidate is faster)")
-        ks = tuple(int(k) for k in args.stacked_k.split(","))
-        rl.stacked_gradient_agreement(p, ds, "ibc")
-        rl.proto_stacked(p, ds, probs, ks, "ibc", rounds=args.reps)
-        rl.proto_stacked(p, ds, probs, (1, 5), "bc", rounds=args.reps)
-        rl.proto_batched_eval(p, ds, probs, k=5, episodes=p.final_episodes, rounds=args.reps)
-        rl.proto_channels_last(p, ds, probs, rounds=args.reps)
-        rl.proto_unpack(p, ds, rounds=args.reps)
-        rl.proto_pool(ds, rounds=args.reps)
-        rl.proto_rollout(p, ds, probs)
-        rl.proto_sim_profile()
-        rl.proto_fused_first_layer(p, ds, probs, rounds=args.reps)
     print(
         f"load average after: {os.getloadavg()[0]:.2f} (2 cores; above ~1 the times are inflated, "
         "not the ratios)"

@@ -1,5 +1,8 @@
 """Fixtures shared by the tests."""
 
+import hashlib
+from pathlib import Path
+
 import pytest
 from hypothesis import settings
 
@@ -31,3 +34,35 @@ def stub_and_crash():
         assert fb.status == "hint" and "KeyError" in fb.message, fb.message
 
     return check
+
+
+def _digest(folder: Path) -> dict[str, str]:
+    """Every file under ``folder``: its SHA-256."""
+    return {
+        str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest()
+        for p in sorted(folder.rglob("*"))
+        if p.is_file()
+    }
+
+
+@pytest.fixture(scope="session")
+def tiny_replication(tmp_path_factory):
+    """One finished ``ibc-tutorial replicate --preset tiny`` folder, built once for the whole session and
+    shared by the tests that read one (``test_replicate``, ``test_claims``) or its demonstrations
+    (``tiny_demonstrations``). A test that changes a folder copies it first (``shutil.copytree``); the
+    session checks at its end that no test changed this one."""
+    from ibc_tutorial import cli
+
+    out = tmp_path_factory.mktemp("tiny-replication") / "rep"
+    assert cli.main(["replicate", "--preset", "tiny", "--out", str(out)]) == 0
+    before = _digest(out)
+    yield out
+    changed = sorted(set(before.items()) ^ set(_digest(out).items()))
+    assert not changed, f"a test changed the shared tiny replication (copy it first): {changed}"
+
+
+@pytest.fixture(scope="session")
+def tiny_demonstrations(tiny_replication):
+    """The tiny preset's demonstrations (``TINY.collect_config()``, about 100 samples): the file the
+    shared replication collected. Read it; write a changed copy elsewhere."""
+    return tiny_replication / "data" / "town01.npz"

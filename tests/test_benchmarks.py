@@ -1,9 +1,9 @@
 """The benchmark scripts (``benchmarks/``) run end to end at a tiny size.
 
 They are not part of the library and no test reads their figures (speed is measured, not asserted:
-CONTRIBUTING). But they call the library, and a script that no test runs falls behind its API unseen:
-``bench_replicate.py --prototypes`` once called ``rollout`` with an older signature. These runs check
-that each script still runs and prints its rows; they take a few seconds each.
+CONTRIBUTING). But they call the library, and a script that no test runs falls behind its API unseen
+(one once called ``rollout`` with an older signature). These runs check that each script still runs and
+prints its rows; they take a few seconds each.
 """
 
 import os
@@ -22,19 +22,13 @@ RUNS = {
             "--preset",
             "tiny",
             "--limits",
-            "--prototypes",
             "--sample",
             "64",
             "--reps",
             "1",
         ]
-        + ["--stacked-k", "1,2", "--train-steps", "2", "--eval-episodes", "1", "--eval-steps", "5"],
-        (
-            "share = time at the measured peaks",
-            "prototypes: ratio",
-            "(f) bc evaluation",
-            "(g) fused first layer",
-        ),
+        + ["--train-steps", "2", "--eval-episodes", "1", "--eval-steps", "5"],
+        ("share = time at the measured peaks",),
     ),
     "bench_dfo": (
         ["bench_dfo.py", "--samples", "64", "--iters", "2", "--decisions", "2", "--warmup", "1"]

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from ibc_tutorial import cli, stats
+from ibc_tutorial import stats
 from ibc_tutorial.experiments.agents.claims import (
     CLAIMS,
     ClaimVerdicts,
@@ -28,10 +28,9 @@ VERDICTS = {stats.HOLDS, stats.DOES_NOT_HOLD, stats.CANNOT_TELL}
 
 
 @pytest.fixture(scope="module")
-def replicated(tmp_path_factory):
-    out = tmp_path_factory.mktemp("claims") / "rep"
-    assert cli.main(["replicate", "--preset", "tiny", "--out", str(out)]) == 0
-    return out
+def replicated(tiny_replication):
+    """The session's tiny replication (tests/conftest.py), which every test here only reads."""
+    return tiny_replication
 
 
 @pytest.fixture(scope="module")

@@ -52,14 +52,11 @@ def refused(capsys, argv, *words, roots=()):
 
 
 @pytest.fixture(scope="module")
-def shared(tmp_path_factory):
-    """A small demonstration file (about 100 samples) and a finished tiny bc run trained on it."""
+def shared(tmp_path_factory, tiny_demonstrations):
+    """The tiny preset's demonstrations (about 100 samples; tests/conftest.py: read, never changed) and a
+    finished tiny bc run trained on them."""
     root = tmp_path_factory.mktemp("shared")
-    data = root / "town01.npz"
-    collect(
-        CollectConfig(routes=1, seed=0, min_minutes=0.15, max_minutes=0.2, brake_noise=TINY.brake_noise),
-        show_progress=False,
-    ).save(data)
+    data = tiny_demonstrations
     run = root / "run"
     assert (
         cli.main(["train", "--method", "bc", "--data", str(data), "--preset", "tiny", "--out", str(run)]) == 0

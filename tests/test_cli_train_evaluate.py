@@ -15,12 +15,9 @@ from ibc_tutorial.experiments.agents.run_folder import read_metrics
 
 
 @pytest.fixture(scope="module")
-def data(tmp_path_factory):
-    path = tmp_path_factory.mktemp("demo") / "town01.npz"
-    collect(CollectConfig(routes=1, seed=0, min_minutes=0.15, max_minutes=0.2), show_progress=False).save(
-        path
-    )
-    return path
+def data(tiny_demonstrations):
+    """The tiny preset's demonstrations, collected once for the session (tests/conftest.py)."""
+    return tiny_demonstrations
 
 
 @pytest.mark.parametrize("method", ["bc", "ibc", "da-ibc"])
@@ -136,9 +133,7 @@ def test_resume_accepts_the_same_demonstrations_collected_again(data, tmp_path):
     base = ["train", "--method", "bc", "--preset", "tiny", "--seed", "0", "--out", str(out)]
     assert cli.main(base + ["--data", str(data), "--epochs", "1"]) == 0
     again = tmp_path / "again.npz"
-    collect(CollectConfig(routes=1, seed=0, min_minutes=0.15, max_minutes=0.2), show_progress=False).save(
-        again
-    )
+    collect(TINY.collect_config(), show_progress=False).save(again)  # the settings that made ``data``
     assert cli.main(base + ["--data", str(again)]) == 0
     assert [m["epoch"] for m in read_metrics(out)] == list(range(1, TINY.epochs + 1))
 

@@ -2,6 +2,7 @@
 
 import json
 import re
+import shutil
 import subprocess
 from pathlib import Path
 
@@ -27,15 +28,15 @@ SHIPPED = Path(__file__).resolve().parents[1] / "book" / "results" / "laptop"
 PREVIOUS = SHIPPED.parent / "previous-laptop"  # the replication of PREVIOUS_LAPTOP, chapter 08's diagnosis
 
 
-@pytest.fixture(scope="module")
-def replicated(tmp_path_factory):
-    out = tmp_path_factory.mktemp("replication") / "rep"
-    assert cli.main(["replicate", "--preset", "tiny", "--out", str(out)]) == 0
-    return out
+@pytest.fixture
+def replicated(tiny_replication):
+    """The session's tiny replication (tests/conftest.py), which every test here only reads."""
+    return tiny_replication
 
 
-def test_replicate_tiny(replicated):
-    out = replicated
+def test_replicate_tiny(replicated, tmp_path):
+    out = tmp_path / "rep"
+    shutil.copytree(replicated, out)  # run again below: a copy, the shared folder stays as it is
     res = json.loads((out / "results.json").read_text())
     assert res["complete"] and res["preset"]["name"] == "tiny"
     assert set(res["table"]) == set(METHODS) | {"expert"} and set(res["heldout"]) == set(METHODS) | {"expert"}

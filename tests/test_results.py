@@ -92,14 +92,40 @@ def test_episode_table_reads_the_shipped_results():
         assert (t.values >= 0).all() and t.starts == tables[methods[0]].starts
 
 
+def _every_second_visit_by_the_next_exit(visits):
+    """``visits`` with every second visit of each approach leaving by the next exit (left -> straight ->
+    right -> left): an agent that splits its visits of every approach about half and half."""
+    turns = ("left", "straight", "right")
+    seen: dict[int, int] = {}
+    out = []
+    for v in visits:
+        k = seen[v["approach"]] = seen.get(v["approach"], -1) + 1
+        out.append(dict(v, turn=v["turn"] if k % 2 == 0 else turns[(turns.index(v["turn"]) + 1) % 3]))
+    return out
+
+
 @shipped
-def test_exit_test_runs_on_the_shipped_free_driving():
+def test_exit_test_gives_the_right_verdict_on_the_shipped_free_driving():
+    """Three verdicts known beforehand, on the shipped first-seed agents' junction visits: the book's
+    own test (DA-IBC 3 of 71 visits by a minority exit, BC 0 of 76, at the 15 approaches both visited
+    twice or more) cannot tell; BC's visits against the same visits with every second one turned
+    elsewhere (36 of 80 by a minority exit) holds, and the other way round does not hold."""
     res = json.loads((SHIPPED / "results.json").read_text())
     fd = res["free_driving"]
     a, b = ([v for e in fd[m]["episodes"] for v in e["visits"]] for m in ("da-ibc", "bc"))
-    t = stats.exit_spread_test(a, b, n_permutations=2_000)
-    assert t.verdict in (stats.HOLDS, stats.DOES_NOT_HOLD, stats.CANNOT_TELL)
-    assert 0 < t.p_greater <= 1 and 0 < t.p_less <= 1 and t.approaches <= len(exit_counts(a))
+    t = stats.exit_spread_test(a, b)  # chapter 09's call: p = 0.0825, above the 0.025 of a 95 % level
+    assert t.approaches == 15 and t.visits == (71, 76) and t.statistic == pytest.approx(3 / 71 - 0 / 76)
+    assert t.p_greater == pytest.approx(0.0825, abs=5e-5) and t.p_less == 1.0
+    assert t.verdict == stats.CANNOT_TELL
+    split = _every_second_visit_by_the_next_exit(b)
+    assert stats.exit_spread(split) == (36, 80) and stats.exit_spread(b) == (0, 80)
+    assert len(exit_counts(split)) == len(exit_counts(b)) == 16
+    more = stats.exit_spread_test(split, b, n_permutations=2_000)
+    assert more.statistic == pytest.approx(36 / 80) and more.p_greater < 0.001 and more.p_less == 1.0
+    assert more.verdict == stats.HOLDS
+    less = stats.exit_spread_test(b, split, n_permutations=2_000)
+    assert less.statistic == pytest.approx(-36 / 80) and less.p_less < 0.001 and less.p_greater == 1.0
+    assert less.verdict == stats.DOES_NOT_HOLD
 
 
 # --------------------------------------------------------------------------- bad arguments

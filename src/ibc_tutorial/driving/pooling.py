@@ -3,9 +3,9 @@
 ``bev.BEVRenderer`` renders a smaller view (96, 64, 48, 32) by pooling k x k blocks of the 192 view's packed
 bytes (``bev`` module docstring): OR of the two road bits, maximum of each of the three 2-bit light codes.
 Written as numpy reductions over the block axes (``reshape(S, k, S, k)`` then ``reduce``/``max`` over the
-axes of length k), each reduction pays numpy's per-row overhead on rows of k = 2..6 elements: measured by
-``benchmarks/bench_replicate.py --prototypes`` (``cProfile`` of an environment step), those reductions take
-about 60 % of a 64 px environment step.
+axes of length k), each reduction pays numpy's per-row overhead on rows of k = 2..6 elements: measured
+with ``cProfile`` on environment steps (``benchmarks/RESULTS.md``), those reductions took about 60 % of a
+64 px environment step.
 
 ``pool_packed`` computes the same bytes from the k² strided slices ``codes[..., i::k, j::k]``, each a whole
 (S, S) array: road |= slice & 3, and for each light code, max(code bits) = max(slice & mask) because a
