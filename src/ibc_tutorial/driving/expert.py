@@ -86,7 +86,7 @@ class ExpertConfig:
     yellow_brake: float = 4.0
     """At yellow, stop if this deceleration (m/s^2) suffices to stop before the line, else go on."""
     smooth_speed_control: bool = True
-    """False: the speed control before issue 12, kept to measure the change: derivative on the
+    """False: the book's earlier speed control, kept to measure the change: derivative on the
     error (a kick when the target switches) and stops handed back to the PID (chatter)."""
     min_throttle_scale: float = 0.25
     """Throttle is scaled by max(1 - |steer|, this)."""

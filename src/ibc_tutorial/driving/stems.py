@@ -1,4 +1,4 @@
-"""The stems of the T-junctions: where a car has two right answers, and whether it keeps both (issue 23).
+"""The stems of the T-junctions: where a car has two right answers, and whether it keeps both.
 
 Of a T's three approaches, the *stem* has only a left and a right exit, with a building straight
 ahead (``docs/design.md``; town02 has 8 stems among its 24 junction approaches). An expert that

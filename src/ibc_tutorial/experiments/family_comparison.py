@@ -1,4 +1,4 @@
-"""Part I side by side (issue 37): seven policy families on the junction world's three-way choice.
+"""Part I side by side: seven policy families on the junction world's three-way choice.
 
 Every family is trained on the same junction-world demonstrations (``toy.junction``; the data of
 chapter 04, ``counter_examples.make_datasets``) with the one loop, on the same ``MLPEncoder``, and

@@ -15,7 +15,7 @@ from ibc_tutorial.policies.explicit import (
     RegressionPolicy,
 )
 
-# the flow-matching policy (issue 37)
+# the flow-matching policy
 from ibc_tutorial.policies.flow import FlowConfig, FlowPolicy
 
 __all__ = [

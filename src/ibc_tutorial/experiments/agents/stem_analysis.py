@@ -1,4 +1,4 @@
-"""The stem analysis of issue 23 on the free drives of ``experiments.agents.stems``: measures, energies, DFO.
+"""The stem analysis of chapters 08-09 on the drives of ``experiments.agents.stems``: measures, energies, DFO.
 
 ``analyse_agent`` reads one agent's drive file and its checkpoint and writes ``analysis/<name>.json``
 (one per agent, atomically: an interrupted run resumes) with

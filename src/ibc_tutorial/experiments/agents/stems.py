@@ -1,4 +1,4 @@
-"""Free driving of every shipped agent (and the expert) in town02, recorded for the stem analysis (issue 23).
+"""Free driving of every shipped agent (and the expert) in town02, recorded for the stem analysis.
 
 The protocol is chapter 09's free driving (the DA-IBC paper's Fig. 5): routeless episodes of
 ``STEPS`` steps (300 s at 10 Hz) from ``reset(seed=EVAL_SEED + i)``, policy seed 0, in town02;

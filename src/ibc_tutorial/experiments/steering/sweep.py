@@ -1,4 +1,4 @@
-"""``ibc-tutorial sweep-steering``: the road-following study at several side-road shares (issue 24).
+"""``ibc-tutorial sweep-steering``: the road-following study at several side-road shares.
 
     ibc-tutorial sweep-steering --preset laptop --out book/results/steering-sweep --workers 2 --threads 1
 

@@ -84,7 +84,7 @@ def check_shares(shares) -> tuple:
 
 
 SWEEP = SweepSettings()
-"""The sweep of issue 24 at the laptop preset: 3 shares x 4 models x 3 seeds = 36 runs, 3 sessions each.
+"""The side-road sweep at the laptop preset: 3 shares x 4 models x 3 seeds = 36 runs, 3 sessions each.
 
 Its budget, about 60 minutes with ``--workers 2 --threads 1``, from CPU time (``time.process_time``)
 measured on a fraction of the work, on a loaded 2-core machine (AMD EPYC): 200 of the 3000 Adam steps
