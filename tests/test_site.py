@@ -10,8 +10,8 @@ raw ``$$``, ``\\(`` or ``\\[`` left in the visible text, MathJax's output elemen
 page has math), no console errors, and on chapter pages a "Live in Jupyter" note before each widget
 cell of the notebook. Every chapter page is read at a laptop's width (1,280 px): its title comes before its
 first code cell; no figure is drawn at less than 60 % of its natural width unless it stays at least 700 px
-wide; at most ``MAX_OVERFLOWING`` code or output blocks scroll sideways; one search box is in view. Screenshots go to a temporary
-folder (printed; ``IBC_TUTORIAL_SCREENSHOTS`` chooses it).
+wide; at most ``MAX_OVERFLOWING`` code or output blocks scroll sideways; one search box is in view.
+Screenshots go to a temporary folder (printed; ``IBC_TUTORIAL_SCREENSHOTS`` chooses it).
 """
 
 from __future__ import annotations
@@ -206,7 +206,9 @@ def test_page_renders(browser, server, shots, pattern):
     widgets = _widget_cells(page)
     if page.startswith("book/"):
         title, code = browser.execute_script(_ORDER)
-        assert title >= 0 and (code < 0 or title < code), f"{page}: the first code cell comes before the title"
+        assert title >= 0 and (code < 0 or title < code), (
+            f"{page}: the first code cell comes before the title"
+        )
         wide = browser.execute_script(_OVERFLOWING)
         assert len(wide) <= MAX_OVERFLOWING, f"{page}: {len(wide)} blocks scroll sideways: {wide}"
     searches = browser.execute_script(
