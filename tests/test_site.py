@@ -8,8 +8,10 @@ test is skipped with the reason, unless ``IBC_TUTORIAL_SITE_TEST=1`` (as CI sets
 page is checked for: every image loaded (natural width > 0), the equations typeset by MathJax (no
 raw ``$$``, ``\\(`` or ``\\[`` left in the visible text, MathJax's output elements present where the
 page has math), no console errors, and on chapter pages a "Live in Jupyter" note before each widget
-cell of the notebook. Screenshots go to a temporary folder (printed; ``IBC_TUTORIAL_SCREENSHOTS``
-chooses it).
+cell of the notebook. Every chapter page is read at a laptop's width (1,280 px): its title comes before its
+first code cell; no figure is drawn at less than 60 % of its natural width unless it stays at least 700 px
+wide; at most ``MAX_OVERFLOWING`` code or output blocks scroll sideways; one search box is in view.
+Screenshots go to a temporary folder (printed; ``IBC_TUTORIAL_SCREENSHOTS`` chooses it).
 """
 
 from __future__ import annotations
@@ -31,8 +33,15 @@ CHROMIUM = "/usr/bin/chromium"
 CHROMEDRIVER = "/usr/bin/chromedriver"
 WIDGET_MIME = "application/vnd.jupyter.widget-view+json"
 
-# the landing page, chapter 01, chapter 06 and one exercise page; found by number, not by full name
-PAGES = ["index.html", "book/01_*.html", "book/06_*.html", "exercises/03_*.html"]
+# the landing page, every chapter and one exercise page; found by number, not by full name
+CHAPTERS = sorted(p.stem for p in (ROOT / "book").glob("[0-9][0-9]_*.ipynb"))
+PAGES = ["index.html", *(f"book/{c[:2]}_*.html" for c in CHAPTERS), "exercises/03_*.html"]
+WIDTH = 1280
+"""The browser window's width, px: the narrow end of a laptop's."""
+MIN_SCALE, MIN_WIDE = 0.6, 700
+"""A figure drawn at less than MIN_SCALE of its natural width must stay at least MIN_WIDE px wide."""
+MAX_OVERFLOWING = 3
+"""Code or output blocks a page may have that scroll sideways."""
 
 
 def _missing() -> str | None:
@@ -71,7 +80,7 @@ def browser():
         "--disable-component-update",
         "--disable-sync",
         "--disable-dev-shm-usage",
-        "--window-size=1280,1000",
+        f"--window-size={WIDTH},1000",
         f"--user-data-dir={profile}",
     ):
         options.add_argument(flag)
@@ -151,7 +160,20 @@ const done = arguments[arguments.length - 1];
 const imgs = Array.from(document.images);
 imgs.forEach(i => { i.loading = 'eager'; });
 Promise.all(imgs.map(i => i.complete ? null : new Promise(r => { i.onload = i.onerror = r; })))
-  .then(() => done(imgs.map(i => [i.getAttribute('src'), i.naturalWidth])));
+  .then(() => done(imgs.map(i => [i.getAttribute('src'), i.naturalWidth, i.getBoundingClientRect().width,
+                                  i.closest('div.cell_output') !== null])));
+"""
+
+# where the title and the first code cell are, in document order (-1: none)
+_ORDER = """
+const all = Array.from(document.querySelectorAll('main h1, main div.cell'));
+return [all.findIndex(e => e.tagName === 'H1'), all.findIndex(e => e.tagName !== 'H1')];
+"""
+
+# code and output blocks wider than their box (they scroll sideways)
+_OVERFLOWING = """
+return Array.from(document.querySelectorAll('main div.cell pre'))
+  .filter(p => p.scrollWidth > p.clientWidth + 1).map(p => p.textContent.slice(0, 60));
 """
 
 
@@ -164,8 +186,14 @@ def test_page_renders(browser, server, shots, pattern):
         assert browser.execute_async_script(_MATHJAX_DONE) == "ok", f"{page}: MathJax did not typeset"
 
     images = browser.execute_async_script(_IMAGES)
-    broken = [src for src, width in images if not width]
+    broken = [src for src, width, _, _ in images if not width]
     assert not broken, f"{page}: images that did not load: {broken}"
+    shrunk = [
+        f"{src}: {drawn:.0f} of {width} px"
+        for src, width, drawn, figure in images
+        if figure and drawn < MIN_SCALE * width and drawn < MIN_WIDE
+    ]
+    assert not shrunk, f"{page}: figures drawn too small to read at {WIDTH} px: {shrunk}"
 
     typeset = browser.execute_script("return document.querySelectorAll('mjx-container').length")
     assert typeset >= math, f"{page}: {math} equations in the page, {typeset} typeset by MathJax"
@@ -176,6 +204,18 @@ def test_page_renders(browser, server, shots, pattern):
         )
 
     widgets = _widget_cells(page)
+    if page.startswith("book/"):
+        title, code = browser.execute_script(_ORDER)
+        assert title >= 0 and (code < 0 or title < code), (
+            f"{page}: the first code cell comes before the title"
+        )
+        wide = browser.execute_script(_OVERFLOWING)
+        assert len(wide) <= MAX_OVERFLOWING, f"{page}: {len(wide)} blocks scroll sideways: {wide}"
+    searches = browser.execute_script(
+        "return Array.from(document.querySelectorAll('.search-button-field, .search-button'))"
+        ".filter(e => e.offsetParent !== null).length"
+    )
+    assert searches == 1, f"{page}: {searches} search boxes in view, one expected"
     if widgets is not None:
         notes = browser.execute_script(
             "return Array.from(document.querySelectorAll('.admonition-title'))"

@@ -128,12 +128,56 @@ def insert_after_title(nb, text: str) -> None:
     raise SystemExit(f"{nb.metadata.get('_site_path')}: no level-1 heading (# Title) to put the notes under")
 
 
+LONG_CELL = 40
+"""A code cell of more source lines than this shows collapsed on its page (its outputs stay in view)."""
+EXERCISE_PATH = re.compile(r"`(exercises/[\w.-]+\.ipynb)`")
+
+
+def title_first(nb) -> None:
+    """The page opens with its title: the set-up code cells (those before the title's cell, and an import
+    cell right after it) follow the title, collapsed with their output (myst-nb's ``hide-cell`` tag)."""
+    index = next(
+        (
+            i
+            for i, c in enumerate(nb.cells)
+            if c.cell_type == "markdown" and any(line.startswith("# ") for line in c.source.splitlines())
+        ),
+        None,
+    )
+    if index is None:
+        return  # insert_after_title has already said what is missing
+    setup = [c for c in nb.cells[:index] if c.cell_type == "code"]
+    rest = [c for c in nb.cells[:index] if c.cell_type != "code"]
+    title = nb.cells[index]
+    after = nb.cells[index + 1 :]
+    if not setup and after and after[0].cell_type == "code" and after[0].source.lstrip().startswith("import"):
+        setup, after = [after[0]], after[1:]
+    for cell in setup:
+        _tag(cell, "hide-cell")
+    nb.cells = [*rest, title, *setup, *after]
+
+
+def _tag(cell, tag: str) -> None:
+    tags = cell.metadata.setdefault("tags", [])
+    if tag not in tags:
+        tags.append(tag)
+
+
 def page_notebook(src: Path, dest: Path, nb_path: str, header: str) -> int:
-    """Copy a notebook as a page: the notes added, widget views left out. Returns its widget cells."""
+    """Copy a notebook as a page: the title first, the notes added, set-up and long code cells collapsed,
+    exercise notebooks' paths made links, widget views left out. Returns its widget cells."""
     nb = nbformat.read(src, as_version=4)
     nb.metadata["_site_path"] = nb_path
     insert_after_title(nb, header)
     del nb.metadata["_site_path"]
+    title_first(nb)
+    depth = "../" * nb_path.count("/")
+    for cell in nb.cells:
+        if cell.cell_type == "code" and len(cell.source.splitlines()) > LONG_CELL:
+            if "hide-cell" not in cell.metadata.get("tags", []):
+                _tag(cell, "hide-input")
+        elif cell.cell_type == "markdown":
+            cell.source = EXERCISE_PATH.sub(lambda m: f"[{m.group(1)}]({depth}{m.group(1)})", cell.source)
     cells, widgets = [], 0
     for cell in nb.cells:
         if is_widget_cell(cell):

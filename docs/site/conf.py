@@ -52,6 +52,7 @@ napoleon_numpy_docstring = False
 html_theme = "sphinx_book_theme"
 html_title = "ibc-tutorial"
 html_static_path = ["_static"]
+templates_path = ["_templates"]  # article-header-nosearch.html
 html_favicon = "_static/favicon.svg"  # without one the browser asks for /favicon.ico, a 404
 html_context = {"default_mode": "light"}  # unset, the theme logs "invalid theme mode" on a first visit
 html_css_files = ["site.css"]
@@ -63,6 +64,9 @@ html_theme_options = {
     "use_fullscreen_button": False,
     "show_toc_level": 2,
     "home_page_in_toc": True,
+    # one search box: the primary sidebar's field; the article header keeps its other buttons
+    "article_header_end": ["article-header-nosearch.html"],
+    "navbar_persistent": [],  # the top bar's search field (the theme's default) would be a second one
 }
 
 
