@@ -16,7 +16,12 @@ from ibc_tutorial.experiments.agents.added_methods import (
 )
 from ibc_tutorial.experiments.agents.agent import Agent, architecture, build_network, nearest_previous_steer
 from ibc_tutorial.experiments.agents.checkpoints import load_agent, save_checkpoint
-from ibc_tutorial.experiments.agents.flow_readings import left_share, read_flow_states, sample_profile
+from ibc_tutorial.experiments.agents.flow_readings import (
+    READ_SAMPLES,
+    left_share,
+    read_flow_states,
+    sample_profile,
+)
 from ibc_tutorial.experiments.agents.presets import ALL_METHODS, LAPTOP, TINY, TWO_ANSWERS, Preset
 from ibc_tutorial.experiments.agents.train import counter_examples, objective_for
 from ibc_tutorial.experiments.agents.two_answers import STEER_GRID, read_states
@@ -168,7 +173,7 @@ def test_a_flow_agent_is_read_by_its_samples():
     agent.network = _Bimodal(two=True)
     r = read_states(agent, bev.astype(np.uint8), state)
     assert r["two_sided"].all() and (r["valleys"] == 2).all()
-    assert np.allclose(r["left_mass"], 0.5) and r["samples"].shape == (3, 256)
+    assert np.allclose(r["left_mass"], 0.5) and r["samples"].shape == (3, READ_SAMPLES)
     assert r["profile"].shape == (3, STEER_GRID) and "label_energy" not in r
     agent.network = _Bimodal(two=False)
     r = read_states(agent, bev.astype(np.uint8), state)
@@ -300,5 +305,5 @@ def test_methods_added_to_a_finished_study_and_analysed(tiny_replication, tmp_pa
     )
     assert "fork_label_energy_median" in summary["study"]["agents"]["da-ibc-rnce-seed0"]
     readings = np.load(tmp_path / "analysis" / "readings.npz")
-    assert readings["flow-seed0/forks/samples"].shape == (4, 256)
+    assert readings["flow-seed0/forks/samples"].shape == (4, READ_SAMPLES)
     assert summary["design"]["gap"] is None  # the tiny demonstrations hold no stem twins
