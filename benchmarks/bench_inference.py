@@ -14,7 +14,10 @@ The rows, all timed in one process on one batch of observations:
 - Langevin (the IBC reference's gradient-based inference, ``LangevinConfig``'s defaults: 1,024 chains x
   25 steps, each a forward and a backward pass of the head) on the same energy model;
 - the flow-matching policy (``policies.flow.FlowPolicy``) on a copy of the same encoder with a velocity
-  head of the same width and depth, K Euler steps (1, 4 and 10) on N samples per decision.
+  head of the same width and depth, K Euler steps (1, 4 and 10) on N samples per decision;
+- the town's flow agent at the preset's own K and N (``preset.flow_steps``, ``preset.flow_samples``: the
+  two-answers and laptop presets, 4 x 16), as ``experiments.agents.agent.Agent`` acts: its N samples and
+  the one whose steering is nearest the previous steering.
 
 Printed per row: decisions/s (median over the timed decisions; one decision = one action for each of
 the B observations of the batch), the network evaluations per observation and decision (encoder passes
@@ -35,7 +38,7 @@ import time
 
 import torch
 
-from ibc_tutorial.experiments.agents.agent import build_network
+from ibc_tutorial.experiments.agents.agent import Agent, build_network
 from ibc_tutorial.experiments.agents.presets import get_preset
 from ibc_tutorial.kde import inverse_density_weights
 from ibc_tutorial.optimizers import embedded_energy
@@ -137,6 +140,17 @@ def main(argv=None) -> int:
     for n in args.flow_samples:
         for k in args.flow_steps:
             rows[f"flow, K = {k}, N = {n}"] = flow_row(k, n)
+    agent = Agent("flow", build_network("flow", preset).eval(), preset, experts)
+    agent.network.encoder.load_state_dict(energy_model.encoder.state_dict())  # the same encoder again
+
+    def flow_agent_decide():
+        g = torch.Generator().manual_seed(0)
+        return lambda: agent.act(obs, g)
+
+    rows[f"flow agent, {preset.name} (K = {preset.flow_steps}, N = {preset.flow_samples})"] = (
+        flow_agent_decide(),
+        agent.network_evaluations(),
+    )
 
     print(
         f"inference benchmark: the {preset.name} preset's network (BEVStateEncoder {s}x{s}, CNN "

@@ -20,7 +20,7 @@ def data(tiny_demonstrations):
     return tiny_demonstrations
 
 
-@pytest.mark.parametrize("method", ["bc", "ibc", "da-ibc"])
+@pytest.mark.parametrize("method", ["bc", "ibc", "da-ibc", "flow", "da-ibc-rnce"])
 def test_train_then_evaluate(method, data, tmp_path, capsys):
     out = tmp_path / method
     assert (
@@ -100,9 +100,10 @@ def test_train_then_evaluate(method, data, tmp_path, capsys):
         assert rows == ev["episodes"]
 
 
-def test_resume_continues_exactly(data, tmp_path):
+@pytest.mark.parametrize("method", ["da-ibc", "flow"])
+def test_resume_continues_exactly(method, data, tmp_path):
     whole, parts = tmp_path / "whole", tmp_path / "parts"
-    base = ["train", "--method", "da-ibc", "--data", str(data), "--preset", "tiny", "--seed", "1"]
+    base = ["train", "--method", method, "--data", str(data), "--preset", "tiny", "--seed", "1"]
     assert cli.main(base + ["--out", str(whole)]) == 0
     assert cli.main(base + ["--out", str(parts), "--epochs", "1"]) == 0  # "interrupted" after epoch 1
     assert cli.main(base + ["--out", str(parts)]) == 0  # resumes from last.pt

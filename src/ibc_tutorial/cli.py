@@ -210,9 +210,14 @@ def _collect_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _train_arguments(p: argparse.ArgumentParser) -> None:
-    from ibc_tutorial.experiments.agents.presets import METHODS, PRESETS  # deferred: loads torch
+    from ibc_tutorial.experiments.agents.presets import ALL_METHODS, PRESETS  # deferred: loads torch
 
-    p.add_argument("--method", required=True, choices=METHODS, help="bc (Beta), ibc or da-ibc")
+    p.add_argument(
+        "--method",
+        required=True,
+        choices=ALL_METHODS,
+        help="bc (Beta), ibc, da-ibc, flow (flow matching) or da-ibc-rnce (DA-IBC with ranking NCE)",
+    )
     p.add_argument("--data", required=True, help="demonstrations written by 'ibc-tutorial collect'")
     p.add_argument("--preset", default="laptop", choices=PRESETS, help="settings (default: %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="training seed (default: %(default)s)")
@@ -387,6 +392,13 @@ def _two_answers_arguments(p: argparse.ArgumentParser) -> None:
         default=None,
         help="a replication folder whose agents are read at the same states too "
         "(chapter 12: book/results/laptop)",
+    )
+    p.add_argument(
+        "--methods",
+        default=None,
+        help="methods to add to the study's replication, comma-separated (flow,da-ibc-rnce): trained on its "
+        "data with its settings beside its agents, which are not retrained (resumable; recorded in "
+        "added_methods.json and the folder's provenance notes)",
     )
 
 

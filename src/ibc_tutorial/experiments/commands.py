@@ -232,15 +232,28 @@ def stems(args: argparse.Namespace) -> int:
 
 
 def two_answers(args: argparse.Namespace) -> int:
-    """``ibc-tutorial two-answers``: the two-answers replication (resumed, or nothing left to do), then its
-    readings (``experiments.agents.two_answers.analyse``) into ``<out>/analysis``."""
+    """``ibc-tutorial two-answers``: the two-answers replication (resumed, or nothing left to do; left
+    untouched when ``--methods`` adds methods to it finished), the added methods' runs
+    (``agents.added_methods``), then the readings of every agent present
+    (``experiments.agents.two_answers.analyse``) into ``<out>/analysis``."""
     from pathlib import Path
 
+    from ibc_tutorial.experiments.agents import added_methods, two_answers
     from ibc_tutorial.experiments.agents import replicate as replication
-    from ibc_tutorial.experiments.agents import two_answers
     from ibc_tutorial.experiments.agents.presets import get_preset
 
-    _run_study(args, replication, get_preset("two-answers"), [])
+    preset = get_preset("two-answers")
+    added = getattr(args, "methods", None)
+    added = None if added is None else added_methods.check_methods(added, preset)  # before any work
+    if added and not getattr(args, "force", False) and added_methods.replication_finished(args.out, preset):
+        replication.check_folder(args.out, preset)  # the finished replication is left untouched
+        if _threads(args):
+            torch.set_num_threads(_threads(args))
+    else:
+        _run_study(args, replication, preset, [])
+    if added:
+        workers = check_int("--workers", args.workers, minimum=1)
+        added_methods.add_methods(args.out, added, command=getattr(args, "command_line", ""), workers=workers)
     torch.set_num_threads(1)
     two_answers.analyse(
         args.out,

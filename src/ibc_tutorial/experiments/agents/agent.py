@@ -1,14 +1,27 @@
-"""The driving agents of the DA-IBC paper: its Fig. 2 network with a Beta head (BC) or an energy head (IBC,
-DA-IBC).
+"""The driving agents of the DA-IBC paper: its Fig. 2 network with a Beta head (BC), an energy head (IBC,
+DA-IBC, DA-IBC with ranking NCE) or a flow-matching velocity head (flow).
 
 The network (the DA-IBC paper's sec. 3.3 and Fig. 2):
 
 - ``policies.BEVStateEncoder``: a CNN turns the five-channel bird's-eye view (B, 5, S, S) into a
   256-d embedding, an MLP the state (speed, previous steer, previous acceleration) (B, 3) into
   another; their concatenation is the observation's embedding z (B, 512);
-- on top, either ``policies.BetaPolicy`` (BC, eq. 1; α, β > 0, see ``BC_MIN_CONCENTRATION``) or
-  ``policies.EnergyModel`` (IBC and DA-IBC; its first layer factorised, so z is computed once
-  per observation and only the action's part runs per candidate).
+- on top, either ``policies.BetaPolicy`` (BC, eq. 1; α, β > 0, see ``BC_MIN_CONCENTRATION``),
+  ``policies.EnergyModel`` (IBC, DA-IBC and DA-IBC with ranking NCE; its first layer factorised, so z is
+  computed once per observation and only the action's part runs per candidate), or ``policies.FlowPolicy``
+  (flow: a velocity head v(z, y_t, t) of the energy head's width and depth, factorised the same way).
+
+**How the flow agent chooses one action from its N samples.** Each decision draws ``preset.flow_samples``
+samples by ``preset.flow_steps`` Euler steps (``FlowPolicy.sample``) and keeps the one whose steering is
+nearest the *previous* steering, which every observation carries (``state[:, 1]``, the action the car
+applied last). At a state with two answers (the stem of a T) independent draws would pick left or right
+anew at every step, 10 times a second, and a car whose steering flips sign each step drives the average of
+the two, straight into the wall ahead; keeping the sample nearest the previous steering commits to the side
+the car has begun to take (the first step at a stem, the previous steering near straight, is a draw
+between the two sides that the flow's mass decides) and still follows the flow where it has one mode, whose
+samples all lie near each other. Only steering is matched: the expert's accelerations sit at -1 and +1, and
+matching them would hold a brake after the light turned green. The agent needs no memory of its own (the
+previous action is in the observation), so a batch of episodes of any size is served alike.
 
 ``architecture(method, preset)`` is the network's one description (what a checkpoint stores
 and checks); ``build_network`` builds from it. ``Agent`` couples a network with the way it acts
@@ -29,13 +42,14 @@ from torch import nn
 
 from ibc_tutorial.driving.commands import COMMANDS, N_COMMANDS
 from ibc_tutorial.driving.rollout import DrivingPolicy
-from ibc_tutorial.experiments.agents.presets import METHODS, Preset
+from ibc_tutorial.experiments.agents.presets import ALL_METHODS, DA_IBC_METHODS, Preset
 from ibc_tutorial.kde import inverse_density_weights
 from ibc_tutorial.optimizers.dfo import DFOConfig, act_with_dfo
 from ibc_tutorial.optimizers.grid import steer_accel_grid
 from ibc_tutorial.policies.encoders import BEVStateEncoder, to_tensor_obs
 from ibc_tutorial.policies.energy import EnergyModel
 from ibc_tutorial.policies.explicit import BetaPolicy
+from ibc_tutorial.policies.flow import FlowConfig, FlowPolicy
 from ibc_tutorial.utils import check_choice, check_device, check_tensor
 
 ACTION_DIM = 2
@@ -56,9 +70,10 @@ minibatches the predicted mean acceleration follows the label (correlation 0.94)
 def architecture(method: str, preset: Preset) -> dict:
     """The Fig. 2 network of ``method`` at ``preset``'s sizes, as plain data: what must match for weights to
     be reused."""
-    check_choice("method", method, METHODS)
+    check_choice("method", method, ALL_METHODS)
+    network = {"bc": "BetaPolicy", "flow": "FlowPolicy"}.get(method, "EnergyModel")
     arch = {
-        "network": "BetaPolicy" if method == "bc" else "EnergyModel",
+        "network": network,
         "encoder": "BEVStateEncoder",
         "bev_size": preset.bev_size,
         "cnn_channels": [int(c) for c in preset.cnn_channels],
@@ -71,37 +86,51 @@ def architecture(method: str, preset: Preset) -> dict:
         arch.update(min_concentration=BC_MIN_CONCENTRATION)
     else:
         arch.update(head_hidden=preset.head_hidden, head_layers=preset.head_layers)
+    if method == "flow":  # what the velocity head's input is made of (its inference settings are not weights)
+        arch.update(time_features=FlowConfig.time_features, noise=FlowConfig.noise)
     return arch
 
 
 def network_from_architecture(arch: dict) -> nn.Module:
     """Build the (untrained) network an ``architecture`` dict describes."""
-    heads = ("BetaPolicy", "EnergyModel")
+    heads = ("BetaPolicy", "EnergyModel", "FlowPolicy")
     if (
         not isinstance(arch, dict)
         or arch.get("encoder") != "BEVStateEncoder"
         or arch.get("network") not in heads
     ):
         raise ValueError(
-            f"arch must describe a BEVStateEncoder with a BetaPolicy or EnergyModel head, got {arch!r}"
+            f"arch must describe a BEVStateEncoder with a BetaPolicy, EnergyModel or FlowPolicy head, got "
+            f"{arch!r}"
         )
     enc = BEVStateEncoder(
         arch["bev_size"], tuple(arch["cnn_channels"]), arch["embed_dim"], n_commands=arch.get("commands", 0)
     )
     if arch["network"] == "BetaPolicy":
         return BetaPolicy(enc, action_dim=arch["action_dim"], min_concentration=arch["min_concentration"])
+    if arch["network"] == "FlowPolicy":
+        config = FlowConfig(time_features=arch["time_features"], noise=arch["noise"])
+        return FlowPolicy(
+            enc,
+            action_dim=arch["action_dim"],
+            hidden=arch["head_hidden"],
+            layers=arch["head_layers"],
+            config=config,
+        )
     return EnergyModel(
         enc, action_dim=arch["action_dim"], hidden=arch["head_hidden"], layers=arch["head_layers"]
     )
 
 
 def build_network(method: str, preset: Preset) -> nn.Module:
-    """The Fig. 2 network for ``method``: a ``BetaPolicy`` (bc) or an ``EnergyModel`` (ibc, da-ibc)."""
+    """The Fig. 2 network for ``method``: a ``BetaPolicy`` (bc), a ``FlowPolicy`` (flow) or an ``EnergyModel``
+    (ibc, da-ibc, da-ibc-rnce)."""
     return network_from_architecture(architecture(method, preset))
 
 
 def dfo_config(method: str, preset: Preset) -> DFOConfig | None:
-    """How ``method`` runs Algorithm 1 (None for bc): ``preset.dfo_config(method)`` (see ``presets``)."""
+    """How ``method`` runs Algorithm 1 (None for bc and flow): ``preset.dfo_config(method)`` (see
+    ``presets``)."""
     return preset.dfo_config(method)
 
 
@@ -109,13 +138,13 @@ class Agent:
     """A trained network and how it acts: the closed-loop policy of one method.
 
     Args:
-        method: "bc", "ibc" or "da-ibc" (see ``presets`` for what each means).
+        method: "bc", "ibc", "da-ibc", "flow" or "da-ibc-rnce" (see ``presets`` for what each means).
         network: from ``build_network(method, preset)``.
-        preset: the settings (DFO sizes, KDE bandwidth).
+        preset: the settings (DFO sizes, KDE bandwidth, the flow's K and N).
         expert_actions: (M, 2) the training set's expert actions: the support of the DFO
-            initialisation of DA-IBC (unused by bc and ibc, but kept for every method).
+            initialisation of DA-IBC (unused by bc, ibc and flow, but kept for every method).
         init_weights: optional precomputed (M,) DFO initial weights w ∝ 1 / ĝ
-            (``kde.inverse_density_weights``); computed here if None and needed (da-ibc).
+            (``kde.inverse_density_weights``); computed here if None and needed (da-ibc, da-ibc-rnce).
 
     The agent acts on the device of its network's weights (``to`` moves it; the CPU by default).
     """
@@ -128,17 +157,26 @@ class Agent:
         expert_actions: torch.Tensor,
         init_weights: torch.Tensor | None = None,
     ):
-        self.method = check_choice("method", method, METHODS)
+        self.method = check_choice("method", method, ALL_METHODS)
+        want = {"bc": BetaPolicy, "flow": FlowPolicy}.get(method, EnergyModel)
+        if not isinstance(network, want):
+            raise ValueError(
+                f"network must be a {want.__name__} for method {method!r}, got {type(network).__name__}"
+            )
         self.network = network
         self.preset = preset
         self.expert_actions = check_tensor("expert_actions", expert_actions, ndim=2).float()  # (M, 2)
-        if method == "da-ibc" and init_weights is None:
+        if method in DA_IBC_METHODS and init_weights is None:
             init_weights = inverse_density_weights(
                 self.expert_actions.cpu(), preset.kde_bandwidth
             )  # (M,) eqs. 4-5
         self.init_weights = None if init_weights is None else init_weights.cpu()  # drawn from on the CPU
         self.dfo_config = dfo_config(method, preset)
-        """Algorithm 1's settings for this agent (None for bc)."""
+        """Algorithm 1's settings for this agent (None for bc and flow)."""
+        self.flow_config = preset.flow_config() if method == "flow" else None
+        """The flow's K and N at a decision (None but for flow)."""
+        if method == "flow":
+            network.config = self.flow_config  # the preset's K and N, not the ones it was built with
 
     @property
     def device(self) -> torch.device:
@@ -152,6 +190,16 @@ class Agent:
         self.network.to(device)
         self.expert_actions = self.expert_actions.to(device)  # (M, 2): the DFO population lives here
         return self
+
+    @property
+    def has_energy(self) -> bool:
+        """Whether the agent's network is an energy model (ibc, da-ibc, da-ibc-rnce); bc and flow have
+        none."""
+        return self.method not in ("bc", "flow")
+
+    def network_evaluations(self) -> dict[str, int]:
+        """Encoder and head passes per observation and decision (``Preset.network_evaluations``)."""
+        return self.preset.network_evaluations(self.method)
 
     @property
     def takes_command(self) -> bool:
@@ -182,7 +230,10 @@ class Agent:
         self.network.eval()
         if self.method == "bc":
             return self.network.act(obs, mode="mean").cpu()  # (B, 2)
-        weights = self.init_weights if self.method == "da-ibc" else None
+        if self.method == "flow":
+            samples = self.network.sample(obs, generator=generator)  # (B, N, 2): K Euler steps each
+            return nearest_previous_steer(samples, obs["state"][:, 1]).cpu()  # (B, 2), module docstring
+        weights = self.init_weights if self.method in DA_IBC_METHODS else None
         actions = act_with_dfo(  # Algorithm 1 of the DA-IBC paper
             self.network, obs, self.expert_actions, self.dfo_config, init_weights=weights, generator=generator
         )
@@ -192,7 +243,8 @@ class Agent:
         """The seeded ``driving.rollout.DrivingPolicy`` of this agent: numpy obs batch -> numpy actions (B, 2)
         (with ``"command"`` in the batch for an agent that takes one).
 
-        Its DFO draws come from a CPU generator seeded with ``seed``, whatever the agent's device."""
+        Its DFO draws (a flow agent's noise) come from a CPU generator seeded with ``seed``, whatever the
+        agent's device."""
         gen = torch.Generator().manual_seed(int(seed))
 
         def policy(obs):
@@ -204,11 +256,24 @@ class Agent:
     def energy_grid(self, obs, n_per_dim: int = 41) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """E over a (steer, acceleration) grid for one observation: (steer (G,), accel (G,), E (G, G)) [accel,
         steer]."""
-        if self.method == "bc":
-            raise ValueError("energy_grid needs an energy agent (ibc or da-ibc), got bc")
+        if not self.has_energy:
+            raise ValueError(
+                f"energy_grid needs an energy agent (ibc, da-ibc, da-ibc-rnce), got {self.method}"
+            )
         self.check_command(obs)
         obs = to_tensor_obs(obs, self.device)
         v, grid = steer_accel_grid(n_per_dim)  # (G,) straight exactly 0 on every CPU, (G², 2)
         grid = grid.to(self.device)
         e = self.network.energy_from_embedding(self.network.embed(obs), grid)[0].cpu()  # (G²,)
         return v.numpy(), v.numpy(), e.reshape(n_per_dim, n_per_dim).numpy()
+
+
+def nearest_previous_steer(samples: torch.Tensor, previous_steer: torch.Tensor) -> torch.Tensor:
+    """Of N sampled actions per observation, the one whose steering is nearest the previous steering (ties:
+    the first): ``samples`` (B, N, 2), ``previous_steer`` (B,) -> (B, 2). The flow agent's choice (module
+    docstring)."""
+    check_tensor("samples", samples, ndim=3)
+    check_tensor("previous_steer", previous_steer, shape=(len(samples),))
+    gap = (samples[..., 0] - previous_steer.to(samples)[:, None]).abs()  # (B, N)
+    pick = gap.argmin(dim=1)  # (B,)
+    return samples[torch.arange(len(samples), device=samples.device), pick]  # (B, 2)

@@ -32,7 +32,7 @@ import torch
 
 from ibc_tutorial import __version__
 from ibc_tutorial.experiments.agents.agent import Agent, architecture, network_from_architecture
-from ibc_tutorial.experiments.agents.presets import METHODS, Preset
+from ibc_tutorial.experiments.agents.presets import ALL_METHODS, Preset
 from ibc_tutorial.experiments.runs import read_torch_file
 from ibc_tutorial.utils import atomic_torch_save, check_choice
 
@@ -81,7 +81,7 @@ def save_checkpoint(
         "format": FORMAT,
         "format_version": FORMAT_VERSION,
         "package_version": __version__,
-        "method": check_choice("method", agent.method, METHODS),
+        "method": check_choice("method", agent.method, ALL_METHODS),
         "architecture": architecture(agent.method, agent.preset),
         "preset": agent.preset.to_dict(),
         "data_sha256": str(data_sha256),
@@ -223,9 +223,9 @@ def load_checkpoint(
             f"{path} was written by ibc_tutorial {ckpt.get('package_version')}; this is {__version__}: "
             "train it again with this version"
         )
-    if ckpt.get("method") not in METHODS:
+    if ckpt.get("method") not in ALL_METHODS:
         raise ValueError(
-            f"{path} is damaged: its method must be one of {METHODS}, got {ckpt.get('method')!r}"
+            f"{path} is damaged: its method must be one of {ALL_METHODS}, got {ckpt.get('method')!r}"
         )
     _check_fields(path, ckpt, resumable)
     if method is not None and ckpt["method"] != method:

@@ -55,11 +55,13 @@ def ended_crossing_energies(
     steering value, minus its minimum over the steering values (so 0 at the preferred steering), in
     nats. Returns the steering grid (n_grid,), or None when no crossing ended.
 
-    Raises ValueError for a BC agent (it has no energy), or if the replay does not end those episodes
+    Raises ValueError for a BC or flow agent (it has no energy), or if the replay does not end those episodes
     as ``rows`` say (e.g. evaluated on another machine, whose arithmetic sent the car elsewhere).
     """
-    if agent.method == "bc":
-        raise ValueError("ended_crossing_energies needs an energy agent (ibc or da-ibc), got bc")
+    if not agent.has_energy:
+        raise ValueError(
+            f"ended_crossing_energies needs an energy agent (ibc, da-ibc or da-ibc-rnce), got {agent.method}"
+        )
     check_int("n_grid", n_grid, minimum=2)
     check_int("steps", steps, minimum=1)
     wanted = {

@@ -8,6 +8,8 @@ A replication folder holds
   for the stem analysis, ``STEM_DRIVE``);
 - ``runs/expert/``: the PID expert's evaluations on the same starts (``expert_dir``);
 - ``results.json``: everything the chapters read (``RESULTS``);
+- ``added_methods.json``: methods trained into the folder after its replication (``ADDED``,
+  ``added_methods``), with their own table and invocations;
 - ``free_driving.npz`` and ``landscapes.npz``: the arrays of the Fig. 5 and Fig. 6 analogues;
 - ``provenance.json`` and ``PROVENANCE.md`` (``experiments.runs.Provenance``).
 
@@ -26,7 +28,9 @@ FREE_DRIVING = "free_driving.npz"
 """Trajectories of the free-driving episodes (Fig. 5 analogue)."""
 LANDSCAPES = "landscapes.npz"
 """Energy grids, observations and DFO inferences (Fig. 6 analogue)."""
-ENTRIES = ("data", "runs", RESULTS, PROVENANCE, PROVENANCE_MD, FREE_DRIVING, LANDSCAPES)
+ADDED = "added_methods.json"
+"""The record of the methods added to a finished replication (``added_methods``)."""
+ENTRIES = ("data", "runs", RESULTS, PROVENANCE, PROVENANCE_MD, FREE_DRIVING, LANDSCAPES, ADDED)
 """What a replication folder holds (``--force`` deletes these, and only these)."""
 EVALUATIONS = {"final": "final_eval.json", "heldout": "heldout_eval.json"}
 """The evaluations of a run, by name: the table's starts (``final``, ``evaluate.EVAL_SEED``) and the

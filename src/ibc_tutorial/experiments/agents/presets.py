@@ -23,6 +23,18 @@ the network's size, the training settings of the DA-IBC paper's sec. 4.2, the in
   weights (the text of sec. 2.4.1; chapter 06 explains why not the printed w ∝ KDE) and the
   final action *sampled*, ŷ ~ Categorical(p̃) (line 14).
 
+**Two more families** (``FAMILY_METHODS``), trained on the same data with the same minibatches (KDE-weighted),
+epochs, step size and head size, and driven in the same evaluations:
+
+- ``flow``: the flow-matching policy (``policies.flow.FlowPolicy``: a velocity head v(z, y_t, t) on the Fig. 2
+  embedding, conditional flow matching on straight paths from N(0, I) noise, Lipman et al. 2023 eq. 23). It
+  acts by ``flow_steps`` Euler steps on ``flow_samples`` samples per decision and keeps the sample whose
+  steering is nearest the previous steering (``agent.Agent``); no search, no energy.
+- ``da-ibc-rnce``: DA-IBC with its InfoNCE replaced by ranking NCE (``losses.ranking_nce``: the logits
+  subtract log q of the counter-examples' proposal, here the exact log-density of DA-IBC's expert sampler,
+  ``negatives.ExpertSampler.log_prob``), so that exp(-E) learns p(y | x) itself rather than p / q; the same
+  counter-examples and the same Algorithm 1 as ``da-ibc``.
+
 The paper gives no σ for the counter-example noise; ``neg_sigma`` = 0.1 is the value chapter
 04 studied.
 
@@ -54,6 +66,8 @@ from ibc_tutorial.driving.collect import CollectConfig
 from ibc_tutorial.experiments.settings import StoredSettings, config_from
 from ibc_tutorial.experiments.settings import with_overrides as _with_overrides
 from ibc_tutorial.optimizers.dfo import DFOConfig
+from ibc_tutorial.policies.flow import FlowConfig
+from ibc_tutorial.policies.flow import network_evaluations as flow_network_evaluations
 from ibc_tutorial.training import LR_SCHEDULES, TrainConfig
 from ibc_tutorial.utils import check_choice, check_int, check_positive
 
@@ -61,6 +75,14 @@ LEGACY_LIGHT_ENCODING = "intensity"
 """How presets stored without a ``light_encoding`` field (written before it existed) drew the lights."""
 METHODS = ("bc", "ibc", "da-ibc")
 """The three agents of the DA-IBC paper's sec. 4: Beta BC, conventional IBC and DA-IBC."""
+FAMILY_METHODS = ("flow", "da-ibc-rnce")
+"""Two more policy families on the same Fig. 2 encoder, data and training budget (chapter 12 reads them beside
+the paper's three): the flow-matching policy and DA-IBC trained with ranking NCE (module docstring)."""
+ALL_METHODS = METHODS + FAMILY_METHODS
+"""Every method an agent can be trained with."""
+DA_IBC_METHODS = ("da-ibc", "da-ibc-rnce")
+"""The methods that act with DA-IBC's Algorithm 1 (inverse-KDE start, sampled final action) and draw DA-IBC's
+counter-examples (expert actions plus noise)."""
 
 CONFIG_FIELDS = {
     "collect.routes": "routes",
@@ -156,6 +178,12 @@ class Preset(StoredSettings):
     """σ_init of Algorithm 1 (the paper: 0.5)."""
     dfo_shrink: float = 0.5
     """K, the shrink factor of Algorithm 1 (the paper: 0.5)."""
+    # ---- the flow policy's inference (``flow`` agents only)
+    flow_steps: int = 4
+    """K, the flow policy's Euler steps per decision (``policies.flow.FlowConfig.n_steps``)."""
+    flow_samples: int = 16
+    """N, the flow policy's samples per decision, drawn in one batch (``FlowConfig.n_samples``): N x K = 64
+    head evaluations, 1/24 of the laptop preset's DFO (512 x 3)."""
     # ---- evaluation (the paper's Fig. 4)
     eval_every: int = 10
     """Closed-loop evaluation in town02 every this many epochs (the paper: 10)."""
@@ -195,6 +223,9 @@ class Preset(StoredSettings):
         self.collect_config()
         for method in ("ibc", "da-ibc"):
             self.dfo_config(method)
+        check_int("flow_steps", self.flow_steps, minimum=1)
+        check_int("flow_samples", self.flow_samples, minimum=1)
+        self.flow_config()
         check_bev_size(self.bev_size)  # the renderer's rule: only the sizes it draws
         check_choice("light_encoding", self.light_encoding, LIGHT_ENCODINGS)
         check_choice("lr_schedule", self.lr_schedule, LR_SCHEDULES)
@@ -212,6 +243,8 @@ class Preset(StoredSettings):
             "final_episodes",
             "final_steps",
             "routeless_steps",
+            "flow_steps",
+            "flow_samples",
         ):
             check_int(f, getattr(self, f), minimum=1)
         if not isinstance(self.commands, bool):
@@ -222,10 +255,10 @@ class Preset(StoredSettings):
             check_int(f, getattr(self, f), minimum=0)
         if (
             not self.methods
-            or any(m not in METHODS for m in self.methods)
+            or any(m not in ALL_METHODS for m in self.methods)
             or len(set(self.methods)) < len(self.methods)
         ):
-            raise ValueError(f"methods must name distinct methods of {METHODS}, got {self.methods!r}")
+            raise ValueError(f"methods must name distinct methods of {ALL_METHODS}, got {self.methods!r}")
         check_positive("neg_sigma", self.neg_sigma, allow_zero=True)
         if not self.cnn_channels or any(int(c) < 1 for c in self.cnn_channels):
             raise ValueError(f"cnn_channels must be positive integers, got {self.cnn_channels!r}")
@@ -238,10 +271,10 @@ class Preset(StoredSettings):
         return config_from(CollectConfig, self, CONFIG_FIELDS, "collect", town="town01")
 
     def dfo_config(self, method: str) -> DFOConfig | None:
-        """How ``method`` runs Algorithm 1 (None for bc): the original IBC's DFO, or DA-IBC's (module
-        docstring)."""
-        check_choice("method", method, METHODS)
-        if method == "bc":
+        """How ``method`` runs Algorithm 1 (None for bc and flow, which do not search): the original IBC's
+        DFO, or DA-IBC's (module docstring; da-ibc-rnce acts as da-ibc)."""
+        check_choice("method", method, ALL_METHODS)
+        if method in ("bc", "flow"):
             return None
         if method == "ibc":
             init, select = "uniform", "argmax"  # the original IBC's DFO: uniform start, lowest energy
@@ -251,6 +284,21 @@ class Preset(StoredSettings):
                 "sample",
             )  # Algorithm 1: w ∝ 1 / ĝ start, ŷ ~ Categorical(p̃) (line 14)
         return config_from(DFOConfig, self, CONFIG_FIELDS, "dfo", init=init, select=select)
+
+    def flow_config(self) -> FlowConfig:
+        """The ``FlowConfig`` a ``flow`` agent acts with: ``flow_steps`` Euler steps on ``flow_samples``
+        samples, N(0, I) noise, the action box [-1, 1]²."""
+        return FlowConfig(n_steps=self.flow_steps, n_samples=self.flow_samples)
+
+    def network_evaluations(self, method: str) -> dict[str, int]:
+        """What one decision of a ``method`` agent costs per observation: encoder passes and head passes
+        (DFO: N_samples x N_iters energy evaluations; flow: N x K velocity evaluations; bc: one Beta head)."""
+        check_choice("method", method, ALL_METHODS)
+        if method == "bc":
+            return {"encoder": 1, "head": 1}
+        if method == "flow":
+            return flow_network_evaluations(self.flow_samples, self.flow_steps)
+        return {"encoder": 1, "head": self.dfo_samples * self.dfo_iters}  # Algorithm 1: N x N_iters
 
     def train_config(self, steps_per_epoch: int, seed: int, **extra) -> TrainConfig:
         """The ``TrainConfig`` of a run: ``epochs`` x ``steps_per_epoch`` Adam steps, a callback (evaluation

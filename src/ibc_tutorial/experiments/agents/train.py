@@ -1,4 +1,5 @@
-"""Training a driving agent (BC, IBC or DA-IBC) on town01 demonstrations, evaluated in town02 as it learns.
+"""Training a driving agent (BC, IBC, DA-IBC, flow or DA-IBC with ranking NCE) on town01 demonstrations,
+evaluated in town02 as it learns.
 
     ibc-tutorial train --method da-ibc --data data/town01.npz --preset laptop --seed 0 --out runs/da-ibc/seed0
 
@@ -9,7 +10,10 @@ top of the book's one loop, ``training.Trainer``:
   (eq. 5 applied by sampling, sec. 2.5; ``kde.inverse_density_weights``), ``ceil(M / batch_size)``
   of them per epoch;
 - the objective: the Beta NLL (eq. 1) for bc; InfoNCE (eq. 2) with ``n_neg`` counter-examples,
-  uniform over the action box for ibc, expert actions plus N(0, σ²I) for da-ibc;
+  uniform over the action box for ibc, expert actions plus N(0, σ²I) for da-ibc; for da-ibc-rnce the
+  same counter-examples in ranking NCE (``losses.ranking_nce``: the logits minus log q, q the expert
+  sampler's exact Gaussian-mixture density, ``ExpertSampler.log_prob``); for flow the conditional
+  flow-matching loss (``objectives.flow_matching_objective``; Lipman et al. 2023, eq. 23);
 - Adam with step size ``lr``;
 - every ``eval_every`` epochs (and after the last), a closed-loop evaluation in town02, one JSON
   line in ``metrics.jsonl`` and a checkpoint ``last.pt``; at the end ``final.pt`` (weights only).
@@ -38,10 +42,10 @@ import torch
 from ibc_tutorial.driving.dataset import DemoDataset
 from ibc_tutorial.experiments.agents.agent import Agent, build_network
 from ibc_tutorial.experiments.agents.bookkeeping import RunBook, TrainingData, finished_run, open_run
-from ibc_tutorial.experiments.agents.presets import METHODS, Preset
+from ibc_tutorial.experiments.agents.presets import ALL_METHODS, DA_IBC_METHODS, Preset
 from ibc_tutorial.experiments.agents.run_folder import clear_run, inspect_run, read_metrics
 from ibc_tutorial.negatives import ExpertSampler, NegativeSampler, UniformSampler
-from ibc_tutorial.objectives import info_nce_objective, likelihood_objective
+from ibc_tutorial.objectives import flow_matching_objective, info_nce_objective, likelihood_objective
 from ibc_tutorial.training import Objective, Trainer
 from ibc_tutorial.utils import check_choice, check_device, check_int
 
@@ -96,9 +100,10 @@ class DemoBatches:
 
 
 def counter_examples(method: str, preset: Preset) -> NegativeSampler | None:
-    """The counter-example sampler of a method: uniform for IBC, expert + noise for DA-IBC, None for BC."""
-    check_choice("method", method, METHODS)
-    if method == "bc":
+    """The counter-example sampler of a method: uniform for IBC, expert + noise for DA-IBC (and DA-IBC with
+    ranking NCE), None for BC and flow."""
+    check_choice("method", method, ALL_METHODS)
+    if method in ("bc", "flow"):
         return None
     return UniformSampler(-1.0, 1.0) if method == "ibc" else ExpertSampler(preset.neg_sigma)
 
@@ -107,9 +112,12 @@ def objective_for(method: str, network: torch.nn.Module, preset: Preset) -> Obje
     """The training objective of a method (see the module docstring): ``train_agent``'s, and that of code
     that trains outside it (tests, benchmarks)."""
     sampler = counter_examples(method, preset)
+    if method == "flow":
+        return flow_matching_objective(network)  # Lipman et al. 2023, eq. 23 (σ_min = 0)
     if sampler is None:
         return likelihood_objective(network)  # eq. 1
-    return info_nce_objective(network, sampler, preset.n_neg)  # eq. 2
+    ranking = method == "da-ibc-rnce"  # logits − log q(ỹ) of the expert sampler (Ma & Collins 2018)
+    return info_nce_objective(network, sampler, preset.n_neg, ranking=ranking)  # eq. 2, or its ranking form
 
 
 @torch.no_grad()
@@ -148,7 +156,7 @@ def train_agent(
     run finished returns it, training nothing.
 
     Args:
-        method: "bc", "ibc" or "da-ibc".
+        method: "bc", "ibc", "da-ibc", "flow" or "da-ibc-rnce".
         data: the demonstrations (their content's SHA-256 goes into every checkpoint): a file, a ``DemoLog``,
             or already rendered at the preset's BEV, a ``DemoDataset`` or a ``TrainingData`` (with its
             minibatch probabilities: saves making them again when several runs share them).
@@ -161,7 +169,7 @@ def train_agent(
         device: where the network trains and acts ("cpu", "cuda", "cuda:1", "mps"; see the module
             docstring); the returned agent is on it.
     """
-    check_choice("method", method, METHODS)
+    check_choice("method", method, ALL_METHODS)
     seed = check_int("seed", seed, minimum=0)
     device = check_device("device", device)
     out, t0 = Path(out), time.perf_counter()
@@ -175,12 +183,14 @@ def train_agent(
     torch.manual_seed(seed)  # the network's initial weights (drawn on the CPU, whatever the device)
     network = build_network(method, preset).to(device)
     probs = run.data.sample_probs  # (M,) w ∝ 1 / ĝ: eqs. 4-5 applied by sampling, and DA-IBC's DFO start
-    agent = Agent(method, network, preset, run.data.dataset.actions, probs if method == "da-ibc" else None)
+    agent = Agent(
+        method, network, preset, run.data.dataset.actions, probs if method in DA_IBC_METHODS else None
+    )
     agent.to(device)
     n_steps = steps_per_epoch(len(run.data.dataset), preset.batch_size)
     config = preset.train_config(n_steps, seed, progress=show_progress, desc=f"{method} seed {seed}")
     batches = DemoBatches(run.data.dataset, device)  # minibatch indices drawn on the CPU, with probs (M,)
-    objective = objective_for(method, network, preset)  # eq. 1 of the DA-IBC paper (BC) or eq. 2
+    objective = objective_for(method, network, preset)  # eq. 1 of the DA-IBC paper (BC), eq. 2, R-NCE or CFM
     trainer = Trainer(network, objective, batches, config, sample_probs=probs)
     book = RunBook(out, agent, seed, run.data_sha256, log)
     if run.status == "resume":

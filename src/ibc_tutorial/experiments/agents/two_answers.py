@@ -22,7 +22,13 @@ the minimum, separated by a barrier of at least ``BARRIER`` = 1 nat; on ``STEER_
 0.0125 apart, fine enough to resolve valleys 0.1 apart), whether there are two valleys, one left and one
 right of straight, and the Boltzmann mass p(y | x) ∝ exp(-E(x, y)) of the marginal over acceleration left
 and right of straight; at a fork also the energies of the two labels. For BC, its Beta over steering: the
-mean (what it acts with), the mass left of straight and the shape.
+mean (what it acts with), the mass left of straight and the shape. A flow agent has no energy: its reading is
+the distribution of its own samples' steering (``flow_readings``): the share left of straight in place of
+the Boltzmann mass, and the valleys of -log of their density read by the same criterion.
+
+Every method present in the folder's ``runs/`` is read (the paper's three, and the families added by
+``added_methods``: flow, DA-IBC with ranking NCE); each method's summary also gives what one decision costs
+(network evaluations per observation, ``Preset.network_evaluations``) and its agents' training times.
 
     ibc-tutorial two-answers --out book/results/two-answers --workers 2 --threads 1
 """
@@ -48,8 +54,10 @@ from ibc_tutorial.driving.route_following import (
 from ibc_tutorial.driving.stems import EXITS, episode_measures, stem_approaches, stem_crossings
 from ibc_tutorial.experiments.agents.checkpoints import load_agent
 from ibc_tutorial.experiments.agents.evaluate import EVAL_TOWN
-from ibc_tutorial.experiments.agents.layout import DATA, STEM_DRIVE, expert_dir
-from ibc_tutorial.experiments.agents.presets import Preset
+from ibc_tutorial.experiments.agents.flow_readings import read_flow_states
+from ibc_tutorial.experiments.agents.layout import DATA, FINAL_EVAL, STEM_DRIVE, expert_dir
+from ibc_tutorial.experiments.agents.presets import ALL_METHODS, Preset
+from ibc_tutorial.experiments.agents.run_folder import read_metrics
 from ibc_tutorial.experiments.agents.stems import load_drive
 from ibc_tutorial.experiments.runs import (
     RESULTS,
@@ -152,10 +160,14 @@ def stem_approach_states(preset: Preset) -> dict:
 @torch.no_grad()
 def read_states(agent, bev: np.ndarray, state: np.ndarray, labels: np.ndarray | None = None) -> dict:
     """Readings of ``agent`` at N states (``bev`` (N, 5, S, S), ``state`` (N, 3); ``labels`` (N, 2, 2):
-    two actions per state whose energies are read too). See the module's docstring. Returns arrays of N.
+    two actions per state whose energies are read too, energy agents only). See the module's docstring.
+    Returns arrays of N.
     """
     if len(bev) != len(state):
         raise ValueError(f"bev and state must hold the same states, got {len(bev)} and {len(state)}")
+    if agent.method == "flow":  # no energy: its samples' steering (flow_readings)
+        steer = steer_accel_grid(STEER_GRID, ACCEL_GRID)[0].double().numpy()  # (G,) straight exactly 0
+        return read_flow_states(agent, bev, state, steer, CHUNK)
     if agent.method == "bc":
         alpha, beta = [], []
         for a in range(0, len(state), CHUNK):
@@ -284,6 +296,7 @@ def data_forks(log, town="town01") -> dict:
     gaps = np.array([f["gap"] for f in forks])
     entry = np.array([f["entry_m"] for f in forks])
     per_stem = forks_per_stem(forks, town)
+    spread = lambda v, *qs: [round(float(np.percentile(v, q)), 3) for q in qs] if len(v) else None  # noqa: E731
     return {
         "crossings": len(forks),
         "left": sum(f["turn"] == "left" for f in forks),
@@ -291,8 +304,8 @@ def data_forks(log, town="town01") -> dict:
         "stems": len(per_stem),
         "least_each_way": min(min(c[e] for e in EXITS) for c in per_stem.values()),
         "most_each_way": max(max(c[e] for e in EXITS) for c in per_stem.values()),
-        "gap": [round(float(x), 3) for x in (gaps.min(), np.median(gaps), gaps.max())],
-        "entry_m": [round(float(x), 2) for x in (entry.min(), entry.max())],
+        "gap": spread(gaps, 0, 50, 100),  # None for demonstrations without a fork
+        "entry_m": None if not len(entry) else [round(float(x), 2) for x in (entry.min(), entry.max())],
         "samples": len(log),
         "fork_share": round(len(forks) / len(log), 5),
     }
@@ -307,8 +320,20 @@ def crossings_of(drive: dict) -> list[dict]:
     return out
 
 
+def train_times(run: Path) -> dict:
+    """One run's training time from its files: ``train_seconds`` (the ``train_agent`` call, as its
+    ``final_eval.json`` records it; a resumed run's last call only) and ``learn_seconds`` (that minus the
+    periodic town02 evaluations of ``metrics.jsonl``); None where not recorded."""
+    ev = read_json_dict(run / FINAL_EVAL, "re-run the replication")
+    total = ev.get("train_seconds")
+    if not isinstance(total, (int, float)):
+        return {"train_seconds": None, "learn_seconds": None}
+    evals = sum(float(m.get("eval_seconds", 0.0)) for m in read_metrics(run))
+    return {"train_seconds": round(float(total), 1), "learn_seconds": round(float(total) - evals, 1)}
+
+
 def runs_of(folder) -> list[tuple[str, int, Path]]:
-    """(method, seed, run folder) of every finished run of a replication folder."""
+    """(method, seed, run folder) of every finished run of a replication folder, every method present."""
     out = []
     for m_dir in sorted((Path(folder) / "runs").iterdir()):
         if m_dir.name == "expert":
@@ -321,7 +346,8 @@ def runs_of(folder) -> list[tuple[str, int, Path]]:
 
 # ------------------------------------------------------------------ the study's analysis
 def agent_summary(method: str, fork_r: dict, appr_r: dict, approach: dict, exits: dict) -> dict:
-    """One agent's numbers: at the forks, at the town02 stem approaches, in closed loop."""
+    """One agent's numbers: at the forks, at the town02 stem approaches, in closed loop (a flow agent's
+    valleys and masses are those of its samples: ``flow_readings``)."""
     at_mass = np.isin(approach["read_at"], MASS_DISTANCES_M)  # the states read at 6 and 4.5 m
     row = {
         "crossings": exits["crossings"],
@@ -338,20 +364,25 @@ def agent_summary(method: str, fork_r: dict, appr_r: dict, approach: dict, exits
         row["fork_mean_steer"] = [round(float(x), 3) for x in np.percentile(fork_r["mean"], [0, 50, 100])]
         row["fork_shapes"] = {s: int((fork_r["shape"] == s).sum()) for s in np.unique(fork_r["shape"])}
         return row
-    le = fork_r["label_energy"]  # (F, 2): left label, right label, above the grid's minimum
     row.update(
         fork_two_valleys=int(fork_r["two_sided"].sum()),
         forks=len(fork_r["two_sided"]),
-        fork_label_energy_median=[round(float(x), 2) for x in np.median(le, axis=0)],
-        fork_label_within_depth=int(((le <= DEPTH).all(axis=1)).sum()),
         **{f"approach_{k}": v for k, v in pair_counts(appr_r, approach["pair"]).items()},
     )
+    if "label_energy" in fork_r:  # an energy agent: its two labels' energies at the forks
+        le = fork_r["label_energy"]  # (F, 2): left label, right label, above the grid's minimum
+        row.update(
+            fork_label_energy_median=[round(float(x), 2) for x in np.median(le, axis=0)],
+            fork_label_within_depth=int(((le <= DEPTH).all(axis=1)).sum()),
+        )
     return row
 
 
-def method_summary(rows: list[dict], exits: list[dict]) -> dict:
+def method_summary(rows: list[dict], exits: list[dict], evaluations: dict | None = None) -> dict:
     """A method's agents pooled: crossings, the minority share with its interval, agents taking both exits,
-    stem ends, and (energy agents) the approach pairs and forks with two valleys."""
+    stem ends, and (energy and flow agents) the approach pairs and forks with two valleys; with
+    ``evaluations`` (``Preset.network_evaluations``) the cost of a decision, and the agents' training times
+    (median and each, in seed order) where their rows hold them."""
     iv = minority_interval(exits) if sum(e["crossings"] for e in exits) else None
     out = {
         "agents": len(rows),
@@ -370,6 +401,12 @@ def method_summary(rows: list[dict], exits: list[dict]) -> dict:
             forks=sum(r["forks"] for r in rows),
             fork_two_valleys=sum(r["fork_two_valleys"] for r in rows),
         )
+    if evaluations is not None:
+        out["network_evaluations_per_decision"] = dict(evaluations)
+    for key in ("train_seconds", "learn_seconds"):
+        times = [r.get(key) for r in rows]
+        if times and all(isinstance(t, (int, float)) for t in times):
+            out[key] = {"median": round(float(np.median(times)), 1), "agents": times}
     return out
 
 
@@ -377,14 +414,15 @@ def read_folder(folder, forks: dict, approach: dict, log=print) -> tuple[dict, d
     """Every agent of a replication folder read at ``forks`` and ``approach`` (``read_states``) and its own
     recorded drives (``stem_exits``): ``({"agents": {name: row}, "methods": {method: pooled}}, arrays)``;
     ``arrays`` holds each agent's readings (``<name>/<where>/<key>``)."""
-    rows, exits, arrays = {}, {}, {}
+    rows, exits, arrays, costs = {}, {}, {}, {}
     for method, seed, d in runs_of(folder):
         name = f"{method}-seed{seed}"
         agent = load_agent(d / "final.pt")[0]
-        fr = read_states(agent, forks["bev"], forks["state"], None if method == "bc" else forks["labels"])
+        fr = read_states(agent, forks["bev"], forks["state"], forks["labels"] if agent.has_energy else None)
         ar = read_states(agent, approach["bev"], approach["state"])
         ex = stem_exits(load_drive(d / STEM_DRIVE))
-        rows[name] = agent_summary(method, fr, ar, approach, ex)
+        rows[name] = {**agent_summary(method, fr, ar, approach, ex), **train_times(d)}
+        costs[method] = agent.network_evaluations()
         exits.setdefault(method, []).append(ex)
         for where, r in (("forks", fr), ("approach", ar)):
             for k, v in r.items():
@@ -392,13 +430,14 @@ def read_folder(folder, forks: dict, approach: dict, log=print) -> tuple[dict, d
         if log:
             log(f"read {name}: {rows[name]['crossings']} stem crossings in its table drives")
     methods = {
-        m: method_summary([rows[n] for n in rows if n.startswith(f"{m}-seed")], exits[m]) for m in exits
+        m: method_summary([rows[n] for n in rows if n.startswith(f"{m}-seed")], exits[m], costs[m])
+        for m in exits
     }
     crossed = {m for m, ex in exits.items() if sum(e["crossings"] for e in ex)}  # a share needs crossings
     claim4 = {
         f"{a} - bc": minority_difference(exits[a], exits["bc"])
-        for a in ("ibc", "da-ibc")
-        if {a, "bc"} <= crossed
+        for a in sorted(exits, key=ALL_METHODS.index)
+        if a != "bc" and {a, "bc"} <= crossed
     }
     return {"agents": rows, "methods": methods, "claim4": claim4}, arrays
 
