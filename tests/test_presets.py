@@ -135,3 +135,12 @@ def test_differences_from_the_paper_mark_what_it_does_not_state():
     assert d["bev_size"] == (192, 64)  # stated: given as it is
     assert P.differences(P.LAPTOP, P.TINY)["bev_size"] == (64, 32)  # between presets: values only
     assert P.PAPER_UNSTATED <= {f.name for f in dataclasses.fields(P.Preset)}
+
+
+def test_an_unknown_field_lists_each_field_once_by_the_presets_name():
+    with pytest.raises(ValueError) as caught:
+        P.with_overrides(P.TINY, ["dfo.samples=4"])
+    listed = str(caught.value).split("the fields are ")[1].split(" (")[0].split(", ")
+    fields = sorted(f.name for f in dataclasses.fields(P.TINY) if f.name != "name")
+    assert listed == fields  # once each, no config alias (bev.size beside bev_size)
+    assert "dfo.n_samples" not in listed and "dfo_samples" in listed

@@ -6,7 +6,8 @@ a frozen dataclass whose ``__post_init__`` builds and so validates the library c
 returns the preset with those fields replaced: a name is a field of the preset (``dfo_samples``) or
 the library config's own name for it (``dfo.n_samples``, via the preset's ``CONFIG_FIELDS``); the
 value is read as the field's type (an integer, a number, a word, a comma-separated tuple). An unknown
-field, an unreadable value or a value the configs refuse is a ``ValueError`` naming ``--set`` and the
+field (the message lists each field once, by the preset's name for it), an unreadable value or a value
+the configs refuse is a ``ValueError`` naming ``--set`` and the
 field, raised before any work.
 
 ``StoredSettings`` is what every preset and the sweep's settings share: their flat JSON form
@@ -101,8 +102,11 @@ def with_overrides(preset, overrides, aliases: dict[str, str] | None = None):
         key, text = (part.strip() for part in item.split("=", 1))
         field = aliases.get(key, key)
         if field not in names:
-            known = sorted(set(names) | set(aliases))
-            raise ValueError(f"--set: unknown field {key!r}; the fields are {', '.join(known)}")
+            raise ValueError(
+                f"--set: unknown field {key!r}; the fields are {', '.join(sorted(names))} "
+                "(a library config's own name for one, such as dfo.n_samples for dfo_samples, is "
+                "accepted too)"
+            )
         changes[field] = _parse(key, text, getattr(preset, field))
     if not changes:
         return preset
