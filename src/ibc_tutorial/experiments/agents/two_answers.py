@@ -48,9 +48,9 @@ from ibc_tutorial.driving.route_following import (
 from ibc_tutorial.driving.stems import EXITS, episode_measures, stem_approaches, stem_crossings
 from ibc_tutorial.experiments.agents.checkpoints import load_agent
 from ibc_tutorial.experiments.agents.evaluate import EVAL_TOWN
-from ibc_tutorial.experiments.agents.layout import DATA, STEM_DRIVE, expert_dir
 from ibc_tutorial.experiments.agents.presets import Preset
-from ibc_tutorial.experiments.agents.stems import load_drive
+from ibc_tutorial.experiments.agents.replication_folder import DATA, STEM_DRIVE, expert_dir
+from ibc_tutorial.experiments.agents.stem_drives import load_drive
 from ibc_tutorial.experiments.runs import (
     RESULTS,
     git_commit,
@@ -200,7 +200,7 @@ def read_states(agent, bev: np.ndarray, state: np.ndarray, labels: np.ndarray | 
 
 # ------------------------------------------------------------------ closed loop
 def stem_exits(drive: dict) -> dict:
-    """The stems in an agent's recorded drive (``experiments.agents.stems.load_drive``): per episode its
+    """The stems in an agent's recorded drive (``experiments.agents.stem_drives.load_drive``): per episode its
     finished stem crossings left and right and whether it ended at a stem; and in all."""
     per_episode = []
     for row, tr in zip(drive["rows"], drive["episodes"], strict=True):
