@@ -71,7 +71,7 @@ from ibc_tutorial.experiments.agents.route_driving import ROUTE_SEED, evaluate_o
 from ibc_tutorial.experiments.agents.stem_drives import recorded_drive
 from ibc_tutorial.experiments.agents.train import train_agent
 from ibc_tutorial.experiments.agents.training_run import TrainingData, inspect_run
-from ibc_tutorial.experiments.runs import RESULTS, read_json_dict, write_json, write_npz
+from ibc_tutorial.experiments.runs import RESULTS, differing, read_json_dict, write_json, write_npz
 from ibc_tutorial.parallel import imap_unordered
 from ibc_tutorial.utils import check_device, check_int
 
@@ -97,12 +97,10 @@ def check_folder(out, preset: Preset) -> None:
         return
 
     def describe(stored) -> str:
-        try:
-            diff = ", ".join(sorted(differences(Preset.from_dict(stored), preset))[:5]) or "name"
-        except (TypeError, ValueError):
-            diff = "a damaged preset"
         name = stored.get("name") if isinstance(stored, dict) else None
-        return f"a replication of preset {name!r}, not {preset.name!r} (differs in {diff})"
+        return (
+            f"a replication of preset {name!r}, not {preset.name!r} (differs in {differing(stored, preset)})"
+        )
 
     FOLDER.check_settings(out, lambda stored: _same_preset(stored, preset), describe)
     data, checksum = out / DATA, None

@@ -119,6 +119,16 @@ def read_folder(out, arrays: dict[str, str], command: str) -> dict:
     return res
 
 
+def differing(stored, settings) -> str:
+    """For a message: the fields (up to five, sorted) in which a stored settings dict differs from
+    ``settings`` (a preset: ``experiments.settings.StoredSettings``), "name" if only the name does, "a
+    damaged preset" if ``stored`` cannot be read as one."""
+    try:
+        return ", ".join(sorted(type(settings).from_dict(stored).differences(settings))[:5]) or "name"
+    except (TypeError, ValueError):
+        return "a damaged preset"
+
+
 # ---------------------------------------------------------------------- a study's folder
 @dataclass(frozen=True)
 class StudyFolder:

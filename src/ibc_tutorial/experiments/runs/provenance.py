@@ -77,7 +77,7 @@ def git_commit() -> str:
 
 
 def invocations_of(prov: dict) -> list[dict]:
-    """The invocations recorded in a ``provenance.json`` dict (an older file's ``wall_seconds`` as one)."""
+    """The invocations recorded in a ``provenance.json`` dict (one, if it records only ``wall_seconds``)."""
     inv = prov.get("invocations")
     if isinstance(inv, list) and all(
         isinstance(i, dict) and isinstance(i.get("seconds"), (int, float)) for i in inv

@@ -36,6 +36,7 @@ from ibc_tutorial.experiments.runs import (
     RESULTS,
     Run,
     StudyFolder,
+    differing,
     read_npz,
     run_dir,
     write_npz,
@@ -105,11 +106,7 @@ def check_folder(out, preset: SteeringPreset) -> None:
         return
 
     def describe(stored) -> str:
-        try:
-            diff = ", ".join(sorted(differences(SteeringPreset.from_dict(stored), preset))[:5]) or "name"
-        except (TypeError, ValueError):
-            diff = "a damaged preset"
-        return f"a study of another preset (differs in {diff})"
+        return f"a study of another preset (differs in {differing(stored, preset)})"
 
     FOLDER.check_settings(out, lambda stored: stored == preset.to_dict(), describe)
     if (out / DATA).exists() and DemoLog.load(out / DATA).meta.get("config") != _data_config(preset):
