@@ -201,6 +201,12 @@ def test_ended_crossing_energies_replay_the_episode_and_refuse_what_they_cannot_
     np.testing.assert_allclose(
         profiles[-1], e.min(axis=0) - e.min(), atol=2e-3
     )  # the last state's, as recorded
+    ended = rows[0]["junction_crossings"][0]  # read as every reading of an energy at a state
+    assert len(ended["valleys_by_state"]) == len(ended["argmin_steer_by_state"]) == 3
+    for k, p in enumerate(profiles):
+        assert ended["valleys_by_state"][k] >= 1
+        j = int(np.argmin(np.abs(steer - ended["argmin_steer_by_state"][k])))
+        assert p[j] == 0  # the preferred steering: where the profile is 0
     assert "energy_by_steer" not in rows[1]["junction_crossings"][0]
     rows[0]["distance_m"] += 1.0  # not what a replay gives
     with pytest.raises(ValueError, match="the replay of episode 0 ended"):

@@ -21,7 +21,7 @@ from ibc_tutorial.experiments.agents.claims import (
     stem_files,
 )
 from ibc_tutorial.experiments.agents.presets import TINY
-from ibc_tutorial.experiments.agents.results import episode_table
+from ibc_tutorial.experiments.agents.replication_folder import episode_table
 
 SHIPPED = Path(__file__).resolve().parents[1] / "book" / "results" / "laptop"
 VERDICTS = {stats.HOLDS, stats.DOES_NOT_HOLD, stats.CANNOT_TELL}

@@ -17,7 +17,7 @@ from ibc_tutorial.driving.dataset import FORMAT, VERSION, DemoLog
 from ibc_tutorial.experiments.agents import replicate as replicate_module
 from ibc_tutorial.experiments.agents import train as train_module
 from ibc_tutorial.experiments.agents.presets import LAPTOP, TINY
-from ibc_tutorial.experiments.agents.results import load_results
+from ibc_tutorial.experiments.agents.replication_folder import load_results
 
 UNWRITABLE = Path("/proc/ibc-tutorial-test/out")  # no file can be created under /proc, even by root
 

@@ -11,7 +11,7 @@ from ibc_tutorial.driving.dataset import DemoLog
 from ibc_tutorial.driving.sim import score
 from ibc_tutorial.experiments.agents.checkpoints import load_checkpoint
 from ibc_tutorial.experiments.agents.presets import TINY
-from ibc_tutorial.experiments.agents.run_folder import read_metrics
+from ibc_tutorial.experiments.agents.training_run import read_metrics
 
 
 @pytest.fixture(scope="module")

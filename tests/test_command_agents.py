@@ -11,7 +11,7 @@ import torch
 from ibc_tutorial.experiments.agents.agent import Agent, architecture, build_network
 from ibc_tutorial.experiments.agents.checkpoints import load_agent, save_checkpoint
 from ibc_tutorial.experiments.agents.presets import TINY, Preset
-from ibc_tutorial.experiments.agents.route_eval import evaluate_on_routes
+from ibc_tutorial.experiments.agents.route_driving import evaluate_on_routes
 
 SHIPPED = Path(__file__).parents[1] / "book" / "results" / "laptop" / "runs" / "da-ibc" / "seed0" / "final.pt"
 CMD = dataclasses.replace(TINY, commands=True)
@@ -98,7 +98,7 @@ def test_replicate_with_commands_end_to_end(tmp_path, capsys):
 
 def test_route_drives_of_a_folder_resume_and_keep_each_agents_input(tmp_path, capsys):
     from ibc_tutorial.cli import main
-    from ibc_tutorial.experiments.agents.route_drives import load_route_drives, run_route_drives
+    from ibc_tutorial.experiments.agents.route_study import load_route_drives, run_route_drives
 
     folder = tmp_path / "rep"
     for method, preset in (("bc", TINY), ("da-ibc", CMD)):  # a routeless agent and a command agent

@@ -11,7 +11,6 @@ import pytest
 import torch
 
 from ibc_tutorial import cli
-from ibc_tutorial.experiments.agents.ablations import ABLATION_SEEDS, ablation_preset
 from ibc_tutorial.experiments.agents.checkpoints import load_agent
 from ibc_tutorial.experiments.agents.presets import (
     LAPTOP,
@@ -20,8 +19,9 @@ from ibc_tutorial.experiments.agents.presets import (
     TINY,
     Preset,
     differences,
+    with_overrides,
 )
-from ibc_tutorial.experiments.agents.results import collect_results, load_results, run_dir
+from ibc_tutorial.experiments.agents.replication_folder import collect_results, load_results, run_dir
 from ibc_tutorial.experiments.runs import machine
 
 SHIPPED = Path(__file__).resolve().parents[1] / "book" / "results" / "laptop"
@@ -147,7 +147,7 @@ def test_the_shipped_route_drives_cover_every_shipped_agent_from_a_clean_ancesto
     routes, without commands, from clean ancestor commits, each driver's every route once (made when that
     replication's folder was ``laptop``)."""
     from ibc_tutorial.driving.route_following import ROUTES
-    from ibc_tutorial.experiments.agents.route_drives import load_route_drives
+    from ibc_tutorial.experiments.agents.route_study import load_route_drives
 
     folder = SHIPPED.parent / "previous-laptop-on-routes"
     if not folder.exists():
@@ -185,37 +185,44 @@ def test_the_shipped_crossings_are_clean_runs_of_an_ancestor_commit():
             assert ancestor.returncode == 0, f"{f.name}: commit {commit} is not an ancestor of HEAD"
 
 
-@pytest.mark.parametrize(
-    "folder, variant", [("flag-lights", "no-brake-noise"), ("previous-preset", "previous-preset")]
-)
-def test_the_shipped_ablation_folders_are_variants_of_the_previous_laptop_preset(folder, variant):
-    """Chapter 08 compares each shipped ablation folder with the previous laptop replication as the variant
-    named here: the folder's preset must be that variant of ``PREVIOUS_LAPTOP`` in every setting (its name
-    aside)."""
+ABLATION = ["methods=bc,da-ibc", "seeds=0,1,2", "heldout_episodes=0", "routeless_episodes=0"]
+"""What every ablation of chapter 08's chain sets: BC and DA-IBC, three seeds, the table's evaluation only."""
+VARIANTS = {  # folder -> the --set overrides of its variant, beside ``ABLATION``
+    "flag-lights": ["brake_noise=0"],
+    "previous-preset": ["brake_noise=0", "epochs=6", "lr_schedule=constant"],
+}
+
+
+@pytest.mark.parametrize("folder", sorted(VARIANTS))
+def test_the_shipped_ablation_folders_are_the_previous_laptop_preset_with_overrides(folder):
+    """Chapter 08 compares each shipped ablation folder with the previous laptop replication: the folder's
+    preset must be ``PREVIOUS_LAPTOP`` with its ``--set`` overrides in every setting (its name aside)."""
     stored = json.loads((SHIPPED.parent / "ablations" / folder / "provenance.json").read_text())["preset"]
-    assert differences(Preset.from_dict(stored), ablation_preset(PREVIOUS_LAPTOP, variant)) == {}
+    variant = with_overrides(PREVIOUS_LAPTOP, ABLATION + VARIANTS[folder])
+    assert differences(Preset.from_dict(stored), variant) == {}
 
 
-def test_an_ablation_is_a_smaller_replication_of_a_variant(tmp_path):
+def test_an_ablation_is_a_replication_with_overrides_recorded_in_its_provenance(tmp_path):
     out = tmp_path / "intensity"
-    assert (
-        cli.main(["replicate", "--preset", "tiny", "--ablation", "intensity-lights", "--out", str(out)]) == 0
-    )
+    sets = ["light_encoding=intensity", "methods=bc,da-ibc", "heldout_episodes=0", "routeless_episodes=0"]
+    argv = ["replicate", "--preset", "tiny", *[w for o in sets for w in ("--set", o)], "--out", str(out)]
+    assert cli.main(argv) == 0
     res = json.loads((out / "results.json").read_text())
     preset = Preset.from_dict(res["preset"])
     assert TINY.light_encoding == "flag"
-    assert preset == ablation_preset(TINY, "intensity-lights") and preset.light_encoding == "intensity"
+    assert preset == with_overrides(TINY, sets) and preset.light_encoding == "intensity"
     assert (
         set(res["table"]) == {"bc", "da-ibc", "expert"} and not res["heldout"] and "free_driving" not in res
     )
-    assert len(res["final_per_seed"]["bc"]) == len(ABLATION_SEEDS)
+    assert len(res["final_per_seed"]["bc"]) == len(TINY.seeds)
     agent, ckpt = load_agent(run_dir(out, "da-ibc", 0) / "final.pt")
     assert agent.preset.light_encoding == "intensity"
+    prov = json.loads((out / "provenance.json").read_text())
+    assert prov["overrides"] == sets and all(f"`{o}`" in (out / "PROVENANCE.md").read_text() for o in sets)
     assert (
         cli.main(["replicate", "--preset", "tiny", "--out", str(out)]) == 2
     )  # the folder holds another preset
-    with pytest.raises(ValueError, match="ablation"):
-        ablation_preset(TINY, "no-such-thing")
+    assert cli.main(["replicate", "--preset", "tiny", "--ablation", "x", "--out", str(tmp_path / "n")]) == 2
 
 
 def _folder_of_episodes(
@@ -241,7 +248,7 @@ def _folder_of_episodes(
 
 
 def test_compare_folders_reads_shared_seeds_and_counts_standstills(tmp_path):
-    from ibc_tutorial.experiments.agents.ablations import STILL_M, compare_folders
+    from ibc_tutorial.experiments.agents.claims import STILL_M, compare_folders
 
     var = _folder_of_episodes(tmp_path / "var", "bc", {0: [(500, 0), (600, 1)], 1: [(400, 0), (5, 0)]})
     ref = _folder_of_episodes(
@@ -269,7 +276,7 @@ def test_the_shipped_stem_analysis_is_complete_and_from_clean_ancestor_commits(r
     """``book/results/<replication>/stems``: a drive (its own, or the one ``replicate`` recorded) and an
     analysis file for every shipped agent and the expert, every invocation (drives, their resumption, the
     analyses) from a clean commit that is an ancestor."""
-    from ibc_tutorial.experiments.agents.stems import drive_file
+    from ibc_tutorial.experiments.agents.stem_drives import drive_file
 
     root_folder = SHIPPED.parent / replication
     folder = root_folder / "stems"
@@ -295,9 +302,9 @@ def test_the_shipped_stem_analysis_is_complete_and_from_clean_ancestor_commits(r
 def test_the_replication_records_its_table_episodes_for_the_stem_analysis(replicated, tmp_path):
     """Every run (and the expert) writes ``stem_drive.npz``: the same episodes as its ``final_eval.json``;
     ``stems analyse`` reads them without a second drive."""
-    from ibc_tutorial.experiments.agents.layout import STEM_DRIVE, expert_dir
+    from ibc_tutorial.experiments.agents.replication_folder import STEM_DRIVE, expert_dir
     from ibc_tutorial.experiments.agents.stem_analysis import run_analysis
-    from ibc_tutorial.experiments.agents.stems import drive_file, load_drive
+    from ibc_tutorial.experiments.agents.stem_drives import drive_file, load_drive
 
     out = replicated
     for d in [run_dir(out, m, 0) for m in METHODS] + [expert_dir(out)]:
@@ -316,7 +323,7 @@ def test_the_replication_records_its_table_episodes_for_the_stem_analysis(replic
 def test_stem_drives_with_a_changed_dfo(replicated, tmp_path):
     """``stems drive --dfo-select sample``: the IBC agent draws its action instead of taking the lowest
     energy; the change is part of the folder's protocol, and BC and the expert are not changed."""
-    from ibc_tutorial.experiments.agents.stems import DriveProtocol, run_drives, with_dfo
+    from ibc_tutorial.experiments.agents.stem_drives import DriveProtocol, run_drives, with_dfo
 
     out = tmp_path / "sampled"
     sampled = DriveProtocol(episodes=1, steps=5, dfo={"select": "sample", "samples": 16})
@@ -346,8 +353,8 @@ def test_stem_drives_with_a_changed_dfo(replicated, tmp_path):
 def test_stem_drives_with_the_table_seeds_repeat_the_recorded_table_episodes(replicated, tmp_path):
     """``stems drive --table-seeds``: each agent's DFO draws seeded with its training seed, so that a second
     drive of the table's starts repeats, on the same machine, the episodes ``replicate`` recorded."""
-    from ibc_tutorial.experiments.agents.layout import STEM_DRIVE
-    from ibc_tutorial.experiments.agents.stems import DriveProtocol, run_drives, table_policy_seed
+    from ibc_tutorial.experiments.agents.replication_folder import STEM_DRIVE
+    from ibc_tutorial.experiments.agents.stem_drives import DriveProtocol, run_drives, table_policy_seed
 
     assert table_policy_seed("da-ibc-seed3") == 3 and table_policy_seed("expert") == 0
     for bad in ("da-ibc", "ibc-seedx", "dqn-seed1"):
@@ -369,7 +376,7 @@ def test_stem_drives_with_the_table_seeds_repeat_the_recorded_table_episodes(rep
 
 def test_observation_and_landscape_at_a_kept_state(replicated, tmp_path):
     from ibc_tutorial.experiments.agents.stem_analysis import landscape_at, observation_at
-    from ibc_tutorial.experiments.agents.stems import TRACE
+    from ibc_tutorial.experiments.agents.stem_drives import TRACE
     from ibc_tutorial.experiments.runs import write_npz
 
     agent = load_agent(run_dir(replicated, "da-ibc", 0) / "final.pt")[0]
@@ -412,8 +419,6 @@ def test_the_shipped_stem_ablations_are_the_previous_laptop_preset_with_their_ov
     if not (folder / "provenance.json").exists():
         pytest.skip(f"no shipped {name} ablation")
     prov = json.loads((folder / "provenance.json").read_text())
-    from ibc_tutorial.experiments.agents.presets import with_overrides
-
     overrides, seeds = STEM_ABLATIONS[name]
     assert prov["overrides"] == overrides
     assert (
@@ -475,7 +480,7 @@ def test_the_shipped_reevaluations_are_the_seed0_agents_here_and_on_the_older_cp
 def test_a_drive_protocol_checks_its_dfo_values_before_any_drive():
     """``DriveProtocol(dfo=...)``: a bad value is refused when the protocol is built, by ``DFOConfig``'s own
     check, not when the first energy agent drives."""
-    from ibc_tutorial.experiments.agents.stems import DriveProtocol
+    from ibc_tutorial.experiments.agents.stem_drives import DriveProtocol
 
     dfo = {"samples": 64, "select": "sample"}
     assert DriveProtocol(dfo=dfo).record()["dfo"] == dfo

@@ -1,4 +1,4 @@
-"""experiments.agents.results: reading a replication folder (episode tables, shipped results)."""
+"""experiments.agents.replication_folder: reading a replication folder (episode tables, shipped results)."""
 
 import json
 from pathlib import Path
@@ -8,7 +8,7 @@ import pytest
 
 from ibc_tutorial import stats
 from ibc_tutorial.driving.analysis import exit_counts
-from ibc_tutorial.experiments.agents.results import episode_table
+from ibc_tutorial.experiments.agents.replication_folder import episode_table
 
 SHIPPED = Path(__file__).resolve().parents[1] / "book" / "results" / "laptop"
 

@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from ibc_tutorial.experiments.agents import route_results as rr
+from ibc_tutorial.experiments.agents import route_tables as rr
 
 
 def _row(route, completion, end="completed", crossings=(), seed=0):

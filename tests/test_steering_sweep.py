@@ -64,7 +64,7 @@ def test_tiny_sweep_files_and_tables(swept):
 
 def test_measures_are_recomputed_from_the_traces(swept):
     for share in (0.3, 0.5):
-        d = S.run_dir(swept, share, "ebm", 0)
+        d = S.FOLDER.run_dir(swept, S.sweep_run(share, "ebm", 0))
         r = S.read_sweep_eval(d / S.EVAL)
         with np.load(d / S.PASSES) as z:
             arrays = {k: z[k] for k in z.files}
@@ -123,29 +123,24 @@ def test_kill_and_rerun_skips_the_finished_runs(tmp_path):
     env = dict(os.environ, OMP_NUM_THREADS="1", TQDM_DISABLE="1")
     cmd = [sys.executable, "-m", "ibc_tutorial.cli", "sweep-steering", *ARGS, "--out", str(out)]
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    first = S.run_dir(out, 0.3, "ebm", 0) / S.EVAL
+    first = S.FOLDER.run_dir(out, S.sweep_run(0.3, "ebm", 0)) / S.EVAL
     t0 = time.monotonic()
     while not first.exists() and proc.poll() is None and time.monotonic() - t0 < 300:
         time.sleep(0.05)
     assert first.exists() and proc.poll() is None, "the first run did not finish before the sweep ended"
     proc.send_signal(signal.SIGKILL)
     proc.wait()
-    done = S.finished_runs(
-        out, S.SweepSettings(shares=(0.3, 0.5), models=("ebm", "regression"), seeds=(0,), sessions=2)
-    )
+    settings = S.SweepSettings(shares=(0.3, 0.5), models=("ebm", "regression"), seeds=(0,), sessions=2)
+    done = [r for r in S.planned(settings) if S.FOLDER.is_done(out, r)]
+    assert S.FOLDER.finished(out, S.planned(settings)) == [r.name for r in done]
     assert 1 <= len(done) < len(RUNS)
-    kept = {r: (S.run_dir(out, *_split(r)) / S.EVAL).read_text() for r in done}
+    kept = {r: (S.FOLDER.run_dir(out, r) / S.EVAL).read_text() for r in done}
     assert _run(*ARGS, "--out", str(out)) == 0
     prov = json.loads((out / "provenance.json").read_text())
     assert prov["complete"] and prov["resumed"] and len(prov["invocations"]) == 2
     assert prov["runs_done"] == RUNS
     for r, text in kept.items():  # finished runs were skipped, not made again
-        assert (S.run_dir(out, *_split(r)) / S.EVAL).read_text() == text
-
-
-def _split(name: str):
-    share, model, seed = name.split("/")
-    return float(share.removeprefix("share")), model, int(seed.removeprefix("seed"))
+        assert (S.FOLDER.run_dir(out, r) / S.EVAL).read_text() == text
 
 
 def test_drive_route_measures_the_mass_of_a_scorer_at_the_junction():

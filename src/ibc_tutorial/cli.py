@@ -4,7 +4,7 @@ The CLI is the top layer (CONTRIBUTING.md, "Layers"): it parses the arguments, c
 they name (``check_input_file``, ``check_output_file``, ``check_output_dir``: before any work,
 ``--out`` never overwritten without ``--force``), records the command line for the provenance
 (``args.command_line``: the library never reads ``sys.argv``), and then calls the sub-command's
-function in ``ibc_tutorial.experiments.commands``. Only the chosen sub-command's arguments are
+function in ``ibc_tutorial.experiments.subcommands``. Only the chosen sub-command's arguments are
 added and its modules imported, so ``ibc-tutorial --version`` and ``--help`` are instant.
 
 **User errors** (a bad argument or ``--set`` override, a damaged or foreign file, a folder that
@@ -302,16 +302,9 @@ def _study_arguments(p: argparse.ArgumentParser, presets: tuple, study: str, run
 
 
 def _replicate_arguments(p: argparse.ArgumentParser) -> None:
-    from ibc_tutorial.experiments.agents.ablations import ABLATIONS  # deferred: loads torch
-    from ibc_tutorial.experiments.agents.presets import PRESETS
+    from ibc_tutorial.experiments.agents.presets import PRESETS  # deferred: loads torch
 
     _study_arguments(p, tuple(PRESETS), "replication", runs="training runs")
-    p.add_argument(
-        "--ablation",
-        default=None,
-        choices=ABLATIONS,
-        help="replicate a variant of the preset instead (chapter 08's ablations; BC and DA-IBC, 3 seeds)",
-    )
     p.add_argument(
         "--set", action="append", default=[], metavar="FIELD=VALUE", dest="overrides", help=SET_HELP
     )
@@ -440,7 +433,7 @@ def _sweep_steering_arguments(p: argparse.ArgumentParser) -> None:
             action.help = "start over: delete the sweep already in --out"
 
 
-COMMANDS = "ibc_tutorial.experiments.commands"
+COMMANDS = "ibc_tutorial.experiments.subcommands"
 """The module holding each sub-command's work, a function of the parsed arguments."""
 
 # name -> (function of ``COMMANDS`` taking the parsed arguments, function adding the arguments, help)

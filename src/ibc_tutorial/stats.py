@@ -14,7 +14,7 @@ farther than IBC" is about the *method*, so its uncertainty has both parts. This
   another does, beyond what chance gives with so few visits (a stratified permutation test);
 
 The intervals take (agents, episodes) arrays of numbers; this module reads no file and knows no
-folder. A replication folder's arrays come from ``experiments.agents.results.episode_table``.
+folder. A replication folder's arrays come from ``experiments.agents.replication_folder.episode_table``.
 
 Everything is numpy, seeded (``seed``: an int or a ``np.random.Generator``) and vectorised over
 the resamples.

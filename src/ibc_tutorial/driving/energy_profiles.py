@@ -9,6 +9,8 @@ concentrated at the red light. These pure functions read one profile e(s) (nats,
 grid s, increasing, left < 0 < right):
 
 - ``steering_profile``: the profile itself, from energies on a (steering, acceleration) grid;
+- ``read_profile``: the one reading of a profile at a state (valleys, mass left of straight, 3-nat range),
+  and ``read_grid``, the same from the energies on the grid (every reading of an agent at one state);
 - ``valleys``: the valleys within ``depth`` (3) nats of the minimum that a barrier of at least
   ``barrier`` (1) nat separates from every lower one (topographic prominence);
 - ``boltzmann_sides``: the mass of p(s) ∝ exp(-e(s)) left and right of straight;
@@ -127,6 +129,19 @@ def read_profile(steer, low, marg) -> dict:
         "range_extent": r["extent"],
         "range_measure": r["measure"],
     }
+
+
+def read_grid(steer, energy) -> dict:
+    """``read_profile`` of energies on an (acceleration, steering) grid at one state, with the profile itself.
+
+    ``steer`` (G,) the grid's steering values (straight exactly 0), ``energy`` (A accel, G steer), e.g.
+    ``Agent.energy_grid``'s. Returns ``read_profile``'s entries and ``profile`` (G,): the lowest energy over
+    acceleration minus its minimum (``steering_profile``, in ``energy``'s dtype); the marginal read beside
+    it is -log sum_a exp(-E)."""
+    e = np.asarray(energy)
+    low = steering_profile(e)  # (G,)
+    marg = -np.logaddexp.reduce(-e, axis=-2)  # (G,) the marginal over acceleration
+    return {"profile": low, **read_profile(steer, low, marg)}
 
 
 def boltzmann_sides(steer, energy, temperature: float = 1.0) -> dict[str, float]:

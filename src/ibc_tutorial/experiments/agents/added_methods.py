@@ -10,12 +10,13 @@ minibatches' weighting, epochs, step size, network sizes and evaluations as the 
 evaluations). They go to ``runs/<method>/seed<k>/`` like the others. Nothing of the folder's replication is
 changed: not its data, runs, ``results.json`` or figures. What the added runs make is recorded in
 ``ADDED`` (``added_methods.json``: the methods, every invocation with its command, commit, machine and
-times, and the table of the added agents as ``results.json`` gives it, ``results.collect_results``), and one
-note per invocation is appended to the folder's provenance (``provenance.json`` notes, ``PROVENANCE.md``).
+times, and the table of the added agents as ``results.json`` gives it,
+``replication_folder.collect_results``), and one note per invocation is appended to the folder's
+provenance (``provenance.json`` notes, ``PROVENANCE.md``).
 
 Interrupted, the same command resumes: finished runs are skipped, an unfinished one resumes from its
 ``last.pt`` (``train.train_agent``), and a run folder of other settings or data is refused before any work
-(``run_folder.inspect_run``).
+(``training_run.inspect_run``).
 """
 
 from __future__ import annotations
@@ -28,23 +29,23 @@ from pathlib import Path
 import torch
 
 from ibc_tutorial.driving.dataset import DemoLog
-from ibc_tutorial.experiments.agents.layout import (
+from ibc_tutorial.experiments.agents.presets import ALL_METHODS, Preset
+from ibc_tutorial.experiments.agents.replicate import run_one
+from ibc_tutorial.experiments.agents.replication_folder import (
     ADDED,
     DATA,
     FINAL_EVAL,
+    collect_results,
     finished_runs,
-    planned_runs,
+    planned,
     run_dir,
-    run_name,
 )
-from ibc_tutorial.experiments.agents.presets import ALL_METHODS, Preset
-from ibc_tutorial.experiments.agents.replicate import run_one
-from ibc_tutorial.experiments.agents.results import collect_results
-from ibc_tutorial.experiments.agents.run_folder import inspect_run
+from ibc_tutorial.experiments.agents.training_run import inspect_run
 from ibc_tutorial.experiments.runs import (
     PROVENANCE,
     PROVENANCE_MD,
     RESULTS,
+    Run,
     git_commit,
     machine,
     now,
@@ -106,7 +107,7 @@ def replication_finished(folder, preset: Preset) -> bool:
         return False
     results = read_json_dict(folder / RESULTS, "delete it and re-run the replication")
     return results.get("complete") is True and finished_runs(folder, preset) == [
-        run_name(m, s) for m, s in planned_runs(preset)
+        r.name for r in planned(preset)
     ]
 
 
@@ -117,7 +118,7 @@ def added_runs(preset: Preset, methods: tuple[str, ...]) -> list[tuple[str, int]
 
 def _check_runs(folder: Path, preset: Preset, methods: tuple[str, ...]) -> None:
     """Before any work: the folder's data exist, and every added run folder holds nothing, this run
-    unfinished, or this run finished (``run_folder.inspect_run``; ValueError otherwise)."""
+    unfinished, or this run finished (``training_run.inspect_run``; ValueError otherwise)."""
     data = folder / DATA
     if not data.exists():
         raise ValueError(f"{folder} holds no demonstrations ({DATA}): run the replication first")
@@ -178,11 +179,11 @@ def add_methods(
         invocation.update(last_seen=now(), seconds=round(time.perf_counter() - t0, 1))
         every = replace(preset, methods=tuple(record["methods"]))
         invocation["runs_done"] = [
-            run_name(m, s)
+            Run(m, s).name
             for m, s in added_runs(preset, methods)
             if (run_dir(folder, m, s) / FINAL_EVAL).exists()
         ]
-        record["runs_planned"] = [run_name(m, s) for m, s in added_runs(every, every.methods)]
+        record["runs_planned"] = [Run(m, s).name for m, s in added_runs(every, every.methods)]
         record["results"] = collect_results(folder, every)  # the added agents' table (and the expert's row)
         write_json(record_file, record)
 

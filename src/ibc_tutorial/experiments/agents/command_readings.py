@@ -16,7 +16,7 @@ import numpy as np
 import torch
 
 from ibc_tutorial.driving.commands import command_index
-from ibc_tutorial.driving.energy_profiles import beta_shape, read_profile, steering_profile
+from ibc_tutorial.driving.energy_profiles import beta_shape, read_grid
 from ibc_tutorial.optimizers.grid import symmetric_axis
 from ibc_tutorial.policies.encoders import to_tensor_obs
 
@@ -53,14 +53,12 @@ def reading(agent, obs: dict, command: str | None, n_grid: int = GRID) -> dict:
             "mean": shape["mean"],
             "left_mass": shape["mass_left"],
         }
-    steer, _, e = agent.energy_grid(batch, n_per_dim=n_grid)  # (G,), (G,), (G accel, G steer)
+    _, _, e = agent.energy_grid(batch, n_per_dim=n_grid)  # (G,), (G,), (G accel, G steer)
     steer = symmetric_axis(n_grid, torch.float64).numpy()  # (G,) the grid's values, exactly (straight is 0)
-    low = steering_profile(e)  # (G,) the lowest over acceleration, minus its minimum
-    marg = -np.logaddexp.reduce(-e, axis=0)  # (G,) -log sum over acceleration of exp(-E)
-    r = read_profile(steer, low, marg)  # the one reading of a profile (driving.energy_profiles)
+    r = read_grid(steer, e)  # the one reading of an energy at a state (driving.energy_profiles)
     return {
         "steer": steer,
-        "profile": low,
+        "profile": r["profile"],
         "valleys": r["valleys"],
         "valley_steer": [round(v, 3) for v in r["valley_steer"]],
         "argmin_steer": r["argmin_steer"],

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ibc_tutorial.driving.analysis import junction_crossings
-from ibc_tutorial.driving.energy_profiles import steering_profile
+from ibc_tutorial.driving.energy_profiles import read_grid
 from ibc_tutorial.driving.rollout import EpisodeResult, RolloutRecording
 from ibc_tutorial.experiments.agents.agent import Agent
 from ibc_tutorial.experiments.agents.evaluate import evaluate_agent
@@ -50,10 +50,12 @@ def ended_crossing_energies(
     ``rows`` are the episode rows of one evaluation (``episode_rows``) with their ``junction_crossings``
     (``crossing_rows``), in episode order. The episodes are driven again, up to the last of those
     crossings, with the same starts and policy seed, and at each state of each such crossing the agent's
-    energy is computed on an ``n_grid`` x ``n_grid`` grid of (steer, acceleration) in [-1, 1]². Each
-    ended crossing gets ``energy_by_steer``: per state, the lowest energy over the accelerations at each
-    steering value, minus its minimum over the steering values (so 0 at the preferred steering), in
-    nats. Returns the steering grid (n_grid,), or None when no crossing ended.
+    energy is computed on an ``n_grid`` x ``n_grid`` grid of (steer, acceleration) in [-1, 1]² and read as
+    every chapter reads an energy at a state (``driving.energy_profiles.read_grid``). Each ended crossing
+    gets, per state, ``energy_by_steer``: the lowest energy over the accelerations at each steering value,
+    minus its minimum over the steering values (so 0 at the preferred steering), in nats;
+    ``valleys_by_state``: its valleys within 3 nats; ``argmin_steer_by_state``: the preferred steering.
+    Returns the steering grid (n_grid,), or None when no crossing ended.
 
     Raises ValueError for a BC or flow agent (it has no energy), or if the replay does not end those episodes
     as ``rows`` say (e.g. evaluated on another machine, whose arithmetic sent the car elsewhere).
@@ -102,9 +104,11 @@ def ended_crossing_energies(
             )
     steer = None
     for i, c in wanted.items():
-        profiles = []
+        readings = []
         for obs in captured[i]:
             steer, _accel, e = agent.energy_grid(obs, n_grid)  # e: (G accel, G steer)
-            profiles.append([round(float(v), 3) for v in steering_profile(e)])  # (G,)
-        c["energy_by_steer"] = profiles  # (states, G)
+            readings.append(read_grid(steer, e))  # the one reading of an energy at a state
+        c["energy_by_steer"] = [[round(float(v), 3) for v in r["profile"]] for r in readings]  # (states, G)
+        c["valleys_by_state"] = [r["valleys"] for r in readings]
+        c["argmin_steer_by_state"] = [round(r["argmin_steer"], 3) for r in readings]
     return steer

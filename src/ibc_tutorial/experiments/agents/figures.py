@@ -21,8 +21,8 @@ from ibc_tutorial.driving.analysis import exits_per_approach, junction_visits, r
 from ibc_tutorial.driving.rollout import RolloutRecording
 from ibc_tutorial.experiments.agents.agent import Agent
 from ibc_tutorial.experiments.agents.evaluate import EVAL_SEED, EVAL_TOWN, episode_rows, evaluate_agent
-from ibc_tutorial.experiments.agents.layout import FREE_DRIVING, LANDSCAPES
 from ibc_tutorial.experiments.agents.presets import Preset
+from ibc_tutorial.experiments.agents.replication_folder import FREE_DRIVING, LANDSCAPES
 from ibc_tutorial.experiments.runs import write_npz
 
 JUNCTION_DISTANCE = 8.0

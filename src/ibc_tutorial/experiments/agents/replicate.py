@@ -5,7 +5,7 @@
 
 With ``--commands`` (``Preset.commands``: chapter 11) every method's agents take a route command, are
 trained on the same town01 demonstrations with their commands (``driving.commands``), and their final
-evaluation (and the expert's row) drives the town02 routes (``driving.route_following``, ``route_eval``)
+evaluation (and the expert's row) drives the town02 routes (``driving.route_following``, ``route_driving``)
 instead of the routeless episodes; there is no held-out set and no Fig. 5/6 analogue.
 
 Steps (the DA-IBC paper's secs. 4.1-4.3, at the preset's scale):
@@ -18,7 +18,7 @@ Steps (the DA-IBC paper's secs. 4.1-4.3, at the preset's scale):
    the PID expert drives both sets of starts too (``runs/expert/``), the table's reference row;
 3. once the first seed's BC and DA-IBC agents are done: free driving in town02 (the Fig. 5
    analogue) and DA-IBC's energy landscapes (the Fig. 6 analogue), see ``figures``;
-4. after every run: ``results.json``, ``PROVENANCE.md`` and ``provenance.json`` (see ``results``).
+4. after every run: ``results.json``, ``PROVENANCE.md`` and ``provenance.json`` (see ``replication_folder``).
 
 Interrupted, the same command resumes: finished runs are skipped and an unfinished one resumes
 from its ``last.pt``. Before any work, ``check_folder`` compares the folder with the request: a
@@ -44,7 +44,6 @@ import torch
 from ibc_tutorial.driving.collect import collect
 from ibc_tutorial.driving.dataset import DemoLog
 from ibc_tutorial.driving.route_following import ROUTES
-from ibc_tutorial.experiments.agents.bookkeeping import TrainingData
 from ibc_tutorial.experiments.agents.checkpoints import load_agent
 from ibc_tutorial.experiments.agents.evaluate import (
     EVAL_SEED,
@@ -55,33 +54,24 @@ from ibc_tutorial.experiments.agents.evaluate import (
     summarize_episodes,
 )
 from ibc_tutorial.experiments.agents.figures import free_driving, landscapes
-from ibc_tutorial.experiments.agents.layout import (
+from ibc_tutorial.experiments.agents.presets import PAPER, Preset, differences
+from ibc_tutorial.experiments.agents.replication_folder import (
     DATA,
-    ENTRIES,
     EVALUATIONS,
     FINAL_EVAL,
-    PROVENANCE,
-    RESULTS,
+    FOLDER,
     STEM_DRIVE,
+    collect_results,
     expert_dir,
-    finished_runs,
-    planned_runs,
+    planned,
+    preset_results,
     run_dir,
-    run_name,
 )
-from ibc_tutorial.experiments.agents.presets import PAPER, Preset, differences
-from ibc_tutorial.experiments.agents.results import collect_results, preset_results
-from ibc_tutorial.experiments.agents.route_eval import ROUTE_SEED, evaluate_on_routes, summarize_route_rows
-from ibc_tutorial.experiments.agents.run_folder import inspect_run
-from ibc_tutorial.experiments.agents.stems import recorded_drive
+from ibc_tutorial.experiments.agents.route_driving import ROUTE_SEED, evaluate_on_routes, summarize_route_rows
+from ibc_tutorial.experiments.agents.stem_drives import recorded_drive
 from ibc_tutorial.experiments.agents.train import train_agent
-from ibc_tutorial.experiments.runs import (
-    Provenance,
-    clear_entries,
-    read_json_dict,
-    write_json,
-    write_npz,
-)
+from ibc_tutorial.experiments.agents.training_run import TrainingData, inspect_run
+from ibc_tutorial.experiments.runs import RESULTS, differing, read_json_dict, write_json, write_npz
 from ibc_tutorial.parallel import imap_unordered
 from ibc_tutorial.utils import check_device, check_int
 
@@ -103,29 +93,16 @@ def check_folder(out, preset: Preset) -> None:
     unfinished or finished replication of ``preset``: other files, another preset, other demonstrations,
     runs of other settings or data, or a damaged file (named, with what to do)."""
     out = Path(out)
-    if not out.exists():
+    if not FOLDER.check_entries(out):
         return
-    names = {p.name for p in out.iterdir() if not p.name.startswith(".")}
-    if names and not names & {"data", "runs", RESULTS, PROVENANCE}:
-        raise ValueError(
-            f"{out} holds other files ({', '.join(sorted(names)[:3])}), not a replication: use another --out"
-        )
-    fix = "delete it and re-run the same command to make it again"
-    stored = None
-    for name in (PROVENANCE, RESULTS):
-        if (out / name).exists():
-            d = read_json_dict(out / name, fix)
-            stored = stored if stored is not None else d.get("preset")
-    if stored is not None and not _same_preset(stored, preset):
-        try:
-            diff = ", ".join(sorted(differences(Preset.from_dict(stored), preset))[:5]) or "name"
-        except (TypeError, ValueError):
-            diff = "a damaged preset"
+
+    def describe(stored) -> str:
         name = stored.get("name") if isinstance(stored, dict) else None
-        raise ValueError(
-            f"{out} holds a replication of preset {name!r}, not {preset.name!r} (differs in {diff}): "
-            "use another --out, or --force to start over"
+        return (
+            f"a replication of preset {name!r}, not {preset.name!r} (differs in {differing(stored, preset)})"
         )
+
+    FOLDER.check_settings(out, lambda stored: _same_preset(stored, preset), describe)
     data, checksum = out / DATA, None
     if data.exists():
         log = DemoLog.load(data)
@@ -140,15 +117,16 @@ def check_folder(out, preset: Preset) -> None:
                 "--out, or --force to start over"
             )
         checksum = log.checksum()
-    for m in preset.methods:
-        for seed in preset.seeds:
-            inspect_run(run_dir(out, m, seed), m, preset, seed, checksum, data if data.exists() else None)
+    for r in planned(preset):
+        inspect_run(
+            FOLDER.run_dir(out, r), r.method, preset, r.seed, checksum, data if data.exists() else None
+        )
 
 
 def clear_folder(out) -> None:
-    """Delete a replication's entries (``ENTRIES``) from ``out``, nothing else: ``--force``. ValueError if
-    ``out`` holds other files (they are not a replication's to delete)."""
-    clear_entries(out, ENTRIES, "replication")
+    """Delete a replication's entries (``replication_folder.ENTRIES``) from ``out``, nothing else:
+    ``--force``. ValueError if ``out`` holds other files (they are not a replication's to delete)."""
+    FOLDER.clear(out)
 
 
 _WORKER_DATA: dict = {}
@@ -179,8 +157,8 @@ def final_evaluations(
     extra: dict | None = None,
 ) -> dict:
     """The table's evaluation (``final_eval.json``, its episodes recorded for the stem analysis in
-    ``stem_drive.npz``: ``stems.recorded_drive``) and the held-out one (``heldout_eval.json``) of an agent
-    (an ``Agent`` or "expert") into ``out_dir``; returns the first. With ``preset.commands``: the town02
+    ``stem_drive.npz``: ``stem_drives.recorded_drive``) and the held-out one (``heldout_eval.json``) of an
+    agent (an ``Agent`` or "expert") into ``out_dir``; returns the first. With ``preset.commands``: the town02
     routes instead (``route_evaluation``)."""
     if preset.commands:
         return route_evaluation(agent, out_dir, preset, policy_seed, show_progress, extra)
@@ -224,7 +202,8 @@ def route_evaluation(
     agent, out_dir: Path, preset: Preset, policy_seed: int, show_progress=False, extra: dict | None = None
 ) -> dict:
     """A command replication's final evaluation: ``preset.route_episodes`` drives of every town02 route
-    (``route_eval.evaluate_on_routes``) into ``final_eval.json``, its rows one per route drive; returns it."""
+    (``route_driving.evaluate_on_routes``) into ``final_eval.json``, its rows one per route drive; returns
+    it."""
     te = time.perf_counter()
     rows = evaluate_on_routes(
         agent,
@@ -313,30 +292,24 @@ def replicate(
     out.mkdir(parents=True, exist_ok=True)
     res_file = out / RESULTS
     results = read_json_dict(res_file, "delete it and re-run") if res_file.exists() else {}
-    provenance = Provenance(
+    provenance = FOLDER.provenance(
         out,
+        planned(preset),
         title=f"the `{preset.name}` replication" + (" with route commands" if preset.commands else ""),
         command=command or f"ibc-tutorial replicate --preset {preset.name} --out {out}",
         preset=preset.to_dict(),
         differences=differences(PAPER, preset),
         reference="the paper's settings",
-        planned=[run_name(m, s) for m, s in planned_runs(preset)],
-        finished=lambda: finished_runs(out, preset),
         overrides=list(overrides),
     )
 
-    def save(complete: bool) -> None:
-        results.update(collect_results(out, preset))
-        results.update(preset_results(preset, complete))
-        write_json(res_file, results)
-        provenance.write(complete)
+    def collect(complete: bool) -> dict:
+        return collect_results(out, preset) | preset_results(preset, complete)
 
-    with provenance:
+    def work(save) -> None:
         _work(out, preset, results, save, workers, log, show_progress, device)
-        save(True)
-    if log:
-        log(f"replication finished in {provenance.wall_seconds / 60:.1f} min; results in {out}")
-    return results
+
+    return FOLDER.run(out, provenance, results, collect, work, log)
 
 
 def _work(
@@ -360,7 +333,7 @@ def _work(
     results["data"] = {"file": DATA, "samples": len(DemoLog.load(data)), "routes": preset.routes}
 
     # 2-3. the runs, seed by seed (in ``workers`` processes: the first seed's runs are submitted first)
-    todo = [(m, s) for m, s in planned_runs(preset) if not (run_dir(out, m, s) / FINAL_EVAL).exists()]
+    todo = FOLDER.todo(out, planned(preset))
 
     def after_run(ev: dict) -> None:
         if log:
@@ -391,8 +364,8 @@ def _work(
     here = {"log": log, "show_progress": show_progress} if workers == 1 else {}  # a worker's are quiet
     runs = imap_unordered(  # submitted now; with one worker, each run when its result is asked for
         [
-            functools.partial(run_one, m, s, str(out), preset.to_dict(), device=device, **here)
-            for m, s in todo
+            functools.partial(run_one, r.method, r.seed, str(out), preset.to_dict(), device=device, **here)
+            for r in todo
         ],
         workers=workers,
         threads=torch.get_num_threads(),

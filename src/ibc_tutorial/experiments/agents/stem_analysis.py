@@ -1,10 +1,10 @@
-"""The stem analysis of chapters 08-09 on the drives of ``experiments.agents.stems``: measures, energies, DFO.
+"""The stem analysis of chapters 08-09 on the drives of ``agents.stem_drives``: measures, energies, DFO.
 
 ``analyse_agent`` reads one agent's drive file and its checkpoint and writes ``analysis/<name>.json``
 (one per agent, atomically: an interrupted run resumes) with
 
 - per episode, ``driving.stems.episode_measures`` and the steering onset of every finished stem crossing;
-- per state of every stem crossing (from ``stems.LEAD`` states before its entry to its exit) and per
+- per state of every stem crossing (from ``stem_drives.LEAD`` states before its entry to its exit) and per
   stop at a red light: for an energy agent, its energy over steering (the lowest over acceleration on a
   ``GRID`` x ``GRID`` grid of [-1, 1]², as ``crossings.ended_crossing_energies`` computes it) read by
   ``driving.energy_profiles``: valleys within 3 nats separated by >= 1 nat, the Boltzmann mass left of
@@ -50,7 +50,7 @@ from ibc_tutorial.driving.stems import (
 )
 from ibc_tutorial.experiments.agents.checkpoints import load_agent
 from ibc_tutorial.experiments.agents.evaluate import EVAL_TOWN
-from ibc_tutorial.experiments.agents.stems import METHODS, drive_file, drivers, load_drive, unpack_bev
+from ibc_tutorial.experiments.agents.stem_drives import METHODS, drive_file, drivers, load_drive, unpack_bev
 from ibc_tutorial.experiments.runs import git_commit, machine, now, write_json
 from ibc_tutorial.optimizers.dfo import dfo_trace
 from ibc_tutorial.optimizers.grid import steer_accel_grid
@@ -214,8 +214,8 @@ def analyse_agent(name: str, checkpoint: Path | None, drive_path: Path) -> dict:
 
 
 def run_analysis(folder, out, log=print, command: str = "") -> list[str]:
-    """``analyse_agent`` for every drive file (``stems.drive_file``: ``out/drives``, else the replication's
-    own records in ``folder/runs``) without its ``out/analysis`` file.
+    """``analyse_agent`` for every drive file (``stem_drives.drive_file``: ``out/drives``, else the
+    replication's own records in ``folder/runs``) without its ``out/analysis`` file.
 
     Each invocation that analyses something is recorded in ``out/analysis/provenance.json``
     (commit, command, machine, CPU seconds per agent)."""

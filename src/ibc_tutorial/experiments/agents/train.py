@@ -17,7 +17,7 @@ top of the book's one loop, ``training.Trainer``:
 - Adam with step size ``lr``;
 - every ``eval_every`` epochs (and after the last), a closed-loop evaluation in town02, one JSON
   line in ``metrics.jsonl`` and a checkpoint ``last.pt``; at the end ``final.pt`` (weights only).
-  That bookkeeping is ``bookkeeping``'s; this module is the learning.
+  What happens beside the learning is ``training_run``'s; this module is the learning.
 
 On a GPU (``--device cuda``): the network and each minibatch are on the device; the minibatch
 indices, the counter-examples and the evaluations' DFO draws are still drawn with the run's seeded
@@ -27,7 +27,7 @@ CPU copies and read back onto the CPU first: a run trained on a GPU resumes or e
 
 Interrupted, the same command resumes from ``last.pt`` and continues exactly as the
 uninterrupted run would have. A folder holding another run is refused before any work
-(``run_folder.inspect_run``).
+(``training_run.inspect_run``).
 """
 
 from __future__ import annotations
@@ -41,9 +41,16 @@ import torch
 
 from ibc_tutorial.driving.dataset import DemoDataset
 from ibc_tutorial.experiments.agents.agent import Agent, build_network
-from ibc_tutorial.experiments.agents.bookkeeping import RunBook, TrainingData, finished_run, open_run
 from ibc_tutorial.experiments.agents.presets import ALL_METHODS, DA_IBC_METHODS, Preset
-from ibc_tutorial.experiments.agents.run_folder import clear_run, inspect_run, read_metrics
+from ibc_tutorial.experiments.agents.training_run import (
+    RunBook,
+    TrainingData,
+    clear_run,
+    finished_run,
+    inspect_run,
+    open_run,
+    read_metrics,
+)
 from ibc_tutorial.negatives import ExpertSampler, NegativeSampler, UniformSampler
 from ibc_tutorial.objectives import flow_matching_objective, info_nce_objective, likelihood_objective
 from ibc_tutorial.training import Objective, Trainer
@@ -152,7 +159,7 @@ def train_agent(
     """Train one agent (see the module docstring); resumes from ``out/last.pt`` if present.
 
     A folder holding another run, or this run trained beyond ``preset.epochs``, is refused with a
-    ValueError (``run_folder.inspect_run``; ``run_folder.clear_run`` starts over); a folder holding this
+    ValueError (``training_run.inspect_run``; ``training_run.clear_run`` starts over); a folder holding this
     run finished returns it, training nothing.
 
     Args:

@@ -55,10 +55,10 @@ from ibc_tutorial.driving.stems import EXITS, episode_measures, stem_approaches,
 from ibc_tutorial.experiments.agents.checkpoints import load_agent
 from ibc_tutorial.experiments.agents.evaluate import EVAL_TOWN
 from ibc_tutorial.experiments.agents.flow_readings import read_flow_states
-from ibc_tutorial.experiments.agents.layout import DATA, FINAL_EVAL, STEM_DRIVE, expert_dir
 from ibc_tutorial.experiments.agents.presets import ALL_METHODS, Preset
-from ibc_tutorial.experiments.agents.run_folder import read_metrics
-from ibc_tutorial.experiments.agents.stems import load_drive
+from ibc_tutorial.experiments.agents.replication_folder import DATA, FINAL_EVAL, STEM_DRIVE, expert_dir
+from ibc_tutorial.experiments.agents.stem_drives import load_drive
+from ibc_tutorial.experiments.agents.training_run import read_metrics
 from ibc_tutorial.experiments.runs import (
     RESULTS,
     git_commit,
@@ -212,7 +212,7 @@ def read_states(agent, bev: np.ndarray, state: np.ndarray, labels: np.ndarray | 
 
 # ------------------------------------------------------------------ closed loop
 def stem_exits(drive: dict) -> dict:
-    """The stems in an agent's recorded drive (``experiments.agents.stems.load_drive``): per episode its
+    """The stems in an agent's recorded drive (``experiments.agents.stem_drives.load_drive``): per episode its
     finished stem crossings left and right and whether it ended at a stem; and in all."""
     per_episode = []
     for row, tr in zip(drive["rows"], drive["episodes"], strict=True):

@@ -9,6 +9,8 @@ replicate-steering``).
 - ``train``: one run (train, evaluate, trace) with resumable checkpoints;
 - ``replicate``: the command, its results and provenance, ``load_results`` for the chapter;
 - ``junctions``: the sweep's measures at a side-road junction (probability on the side road, whiteness);
-- ``sweep_settings``, ``sweep``: ``ibc-tutorial sweep-steering``, the study at several side-road shares,
-  each model driven in several sessions.
+- ``sweep``: ``ibc-tutorial sweep-steering``, the study at several side-road shares, each model driven in
+  several sessions: its settings (``SweepSettings``), its folder, its work and its tables.
+
+Both commands' folders go through the lifecycle every study's folder does (``experiments.runs``).
 """

@@ -30,16 +30,15 @@ import torch
 
 from ibc_tutorial.driving.dataset import DemoDataset, DemoLog
 from ibc_tutorial.experiments.runs import (
+    DATA,
     PROVENANCE,
     PROVENANCE_MD,
     RESULTS,
-    Provenance,
-    check_folder_entries,
-    clear_entries,
-    read_folder,
-    read_json_dict,
+    Run,
+    StudyFolder,
+    differing,
     read_npz,
-    write_json,
+    run_dir,
     write_npz,
 )
 from ibc_tutorial.experiments.steering import evaluate as ev
@@ -47,16 +46,22 @@ from ibc_tutorial.experiments.steering.evaluate import REFERENCES
 from ibc_tutorial.experiments.steering.models import LABELS, MODELS
 from ibc_tutorial.experiments.steering.presets import LAPTOP, SteeringPreset, differences
 from ibc_tutorial.experiments.steering.task import preset_demonstrations, side_road_counts
-from ibc_tutorial.experiments.steering.train import EVAL, TRACE, StudyInputs, read_eval, run_dir, run_one
+from ibc_tutorial.experiments.steering.train import EVAL, TRACE, StudyInputs, read_eval, run_one
 from ibc_tutorial.parallel import imap_unordered
 from ibc_tutorial.utils import check_int
 
-DATA = "data/town01.npz"
-"""The demonstrations, relative to the folder."""
 TRACES = "traces.npz"
 """The Fig. 5 analogue's arrays."""
 ENTRIES = ("data", "runs", REFERENCES, RESULTS, TRACES, PROVENANCE, PROVENANCE_MD)
 """What a study folder holds (``--force`` deletes these, and only these)."""
+FOLDER = StudyFolder(
+    what="road-following study",
+    command="ibc-tutorial replicate-steering",
+    entries=ENTRIES,
+    done=EVAL,
+    arrays={"traces": TRACES},
+)
+"""The study's folder (``experiments.runs.StudyFolder``): its checks, ``--force``, resuming, loading."""
 
 PAPER = {
     "table1": {  # per run: real-world interventions, W_eff, W_cmd (°/s); VISTA crashes, W_cmd (°/s)
@@ -89,31 +94,24 @@ PAPER = {
 and 2, as printed."""
 
 
+def planned(preset: SteeringPreset) -> list[Run]:
+    """The runs of ``preset``, seed by seed."""
+    return [Run(m, s) for s in preset.seeds for m in MODELS]
+
+
 def check_folder(out, preset: SteeringPreset) -> None:
     """Refuse (ValueError: what differs and what to do) a folder holding anything but this preset's study."""
     out = Path(out)
-    if not check_folder_entries(out, ENTRIES, "road-following study"):
+    if not FOLDER.check_entries(out):
         return
-    for name in (PROVENANCE, RESULTS):
-        if (out / name).exists():
-            stored = read_json_dict(out / name, "delete it and re-run the same command").get("preset")
-            if stored != preset.to_dict():
-                try:
-                    diff = (
-                        ", ".join(sorted(differences(SteeringPreset.from_dict(stored), preset))[:5]) or "name"
-                    )
-                except (TypeError, ValueError):
-                    diff = "a damaged preset"
-                raise ValueError(
-                    f"{out} holds a study of another preset (differs in {diff}): use another --out, "
-                    "or --force to start over"
-                )
+
+    def describe(stored) -> str:
+        return f"a study of another preset (differs in {differing(stored, preset)})"
+
+    FOLDER.check_settings(out, lambda stored: stored == preset.to_dict(), describe)
     if (out / DATA).exists() and DemoLog.load(out / DATA).meta.get("config") != _data_config(preset):
         raise ValueError(f"{out / DATA} was collected with other settings: use another --out, or --force")
-    for model in MODELS:
-        for seed in preset.seeds:
-            if (run_dir(out, model, seed) / EVAL).exists():
-                read_eval(run_dir(out, model, seed) / EVAL)
+    FOLDER.check_runs(out, planned(preset), read_eval)
 
 
 def _data_config(p: SteeringPreset) -> dict:
@@ -220,12 +218,12 @@ def collect_results(out: Path, preset: SteeringPreset) -> dict:
 
 def clear_folder(out) -> None:
     """Delete a study's entries (``ENTRIES``) from ``out``, nothing else: ``--force``."""
-    clear_entries(out, ENTRIES, "study")
+    FOLDER.clear(out)
 
 
 def finished_runs(out, preset: SteeringPreset) -> list[str]:
     """The runs of ``preset`` under ``out`` that have their ``eval.json``, in planned order."""
-    return [f"{m}/seed{s}" for s in preset.seeds for m in MODELS if (run_dir(out, m, s) / EVAL).exists()]
+    return FOLDER.finished(out, planned(preset))
 
 
 def replicate(
@@ -239,32 +237,27 @@ def replicate(
     workers = check_int("workers", workers, minimum=1)
     check_folder(out, preset)
     out.mkdir(parents=True, exist_ok=True)
-    provenance = Provenance(
+    provenance = FOLDER.provenance(
         out,
+        planned(preset),
         title=f"the `{preset.name}` road-following study",
         command=command or f"ibc-tutorial replicate-steering --preset {preset.name} --out {out}",
         preset=preset.to_dict(),
         differences=differences(LAPTOP, preset),
         reference="the `laptop` preset",
-        planned=[f"{m}/seed{s}" for s in preset.seeds for m in MODELS],
-        finished=lambda: finished_runs(out, preset),
         overrides=list(overrides),
     )
     results: dict = {}
 
-    def save(complete: bool) -> None:
+    def collect(complete: bool) -> dict:
         agg = collect_results(out, preset)
         write_npz(out / TRACES, agg.pop("traces"))
-        results.update(agg, complete=complete)
-        write_json(out / RESULTS, results)
-        provenance.write(complete)
+        return dict(agg, complete=complete)
 
-    with provenance:
+    def work(save) -> None:
         _work(out, preset, results, save, workers, log)
-        save(True)
-    if log:
-        log(f"study finished in {provenance.wall_seconds / 60:.1f} min; results in {out}")
-    return results
+
+    return FOLDER.run(out, provenance, results, collect, work, log)
 
 
 def _work(out: Path, preset: SteeringPreset, results: dict, save, workers: int, log) -> None:
@@ -312,7 +305,7 @@ def _work(out: Path, preset: SteeringPreset, results: dict, save, workers: int, 
     }
     results["fig5"] = {"route": str(arrays["fig5/route"]), "steps": arrays["fig5/steps"].tolist()}
     save(False)
-    todo = [(m, s) for s in preset.seeds for m in MODELS if not (run_dir(out, m, s) / EVAL).exists()]
+    todo = FOLDER.todo(out, planned(preset))
 
     def after(r: dict) -> None:
         if log:
@@ -326,7 +319,7 @@ def _work(out: Path, preset: SteeringPreset, results: dict, save, workers: int, 
         save(False)
 
     runs = imap_unordered(
-        [functools.partial(_work_one, m, s, str(out), preset.to_dict()) for m, s in todo],
+        [functools.partial(_work_one, r.method, r.seed, str(out), preset.to_dict()) for r in todo],
         workers=workers,
         threads=torch.get_num_threads(),
     )
@@ -337,7 +330,7 @@ def _work(out: Path, preset: SteeringPreset, results: dict, save, workers: int, 
 def load_results(out) -> dict:
     """What chapter 10 reads: ``results.json`` and ``provenance.json`` as dicts, ``traces.npz`` as a dict of
     arrays. ValueError naming the file if one is missing or damaged."""
-    res = read_folder(out, RESULTS, {"traces": TRACES}, "ibc-tutorial replicate-steering")
+    res = FOLDER.load(out)
     if not res["traces"]:
         raise ValueError(
             f"{Path(out) / TRACES} is missing: delete {out} and re-run 'ibc-tutorial replicate-steering'"

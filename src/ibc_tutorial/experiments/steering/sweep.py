@@ -17,59 +17,155 @@ and a crash are still measured against keeping straight. The measures of each si
 the junction (``junctions.side_road_mass``: EBMs, classifier, MDN; not the regression), and the W of the
 commands inside the junction sections (``junctions.section_whiteness``).
 
-The settings and the folder's names are in ``sweep_settings``. Folder: ``sweep.json`` (the settings),
+Its settings are ``SweepSettings`` (``SWEEP``). Folder: ``sweep.json`` (the settings),
 ``references.npz`` (the expert's drives of every route and session, shared by every share),
 ``share<p>/data/town01.npz`` (each share's demonstrations), ``share<p>/runs/<model>/seed<k>/``
 (``last.pt`` while training, then ``passes.npz``, the per-state traces of every pass, and ``eval.json``,
 written last), ``results.json``, ``provenance.json`` and ``PROVENANCE.md``. Interrupted, the same
 command resumes: a run with its ``eval.json`` is skipped, an unfinished one continues from ``last.pt``.
-Other settings in the folder are refused before any work.
+Other settings in the folder are refused before any work. The folder lives through the lifecycle every
+study's folder does (``experiments.runs.StudyFolder``: ``FOLDER``), its runs in the parts ``share<p>``.
 """
 
 from __future__ import annotations
 
 import functools
 import time
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
 from ibc_tutorial.driving.dataset import DemoDataset, DemoLog
 from ibc_tutorial.experiments.runs import (
-    Provenance,
-    check_folder_entries,
-    clear_entries,
-    read_folder,
-    read_json_dict,
+    DATA,
+    PROVENANCE,
+    PROVENANCE_MD,
+    RESULTS,
+    Run,
+    StudyFolder,
     read_run_file,
     write_json,
     write_npz,
 )
+from ibc_tutorial.experiments.settings import StoredSettings
 from ibc_tutorial.experiments.steering import evaluate as ev
-from ibc_tutorial.experiments.steering.models import LABELS
+from ibc_tutorial.experiments.steering.evaluate import REFERENCES
+from ibc_tutorial.experiments.steering.junctions import MASS_THRESHOLD
+from ibc_tutorial.experiments.steering.models import LABELS, MODELS
 from ibc_tutorial.experiments.steering.presets import LAPTOP, SteeringPreset, differences
-from ibc_tutorial.experiments.steering.sweep_settings import (
-    ENTRIES,
-    EVAL,
-    MEASURES,
-    PASSES,
-    REFERENCES,
-    RESULTS,
-    SETTINGS,
-    SWEEP,
-    SweepSettings,
-    check_shares,
-    finished_runs,
-    planned,
-    run_dir,
-    run_name,
-    share_name,
-    share_preset,
-)
 from ibc_tutorial.experiments.steering.task import preset_demonstrations, side_road_counts
-from ibc_tutorial.experiments.steering.train import SteeringModel, train_model
+from ibc_tutorial.experiments.steering.train import EVAL, SteeringModel, train_model
 from ibc_tutorial.parallel import imap_unordered
-from ibc_tutorial.utils import check_int
+from ibc_tutorial.utils import check_choice, check_int, check_positive
+
+SETTINGS = "sweep.json"
+"""The sweep's settings (``SweepSettings`` and the base preset)."""
+PASSES = "passes.npz"
+"""A finished run's per-pass traces: offsets towards the side road and the probability on it, per state."""
+ENTRIES = (SETTINGS, REFERENCES, RESULTS, PROVENANCE, PROVENANCE_MD)
+"""The files of a sweep folder beside its ``share<p>`` folders."""
+MEASURES = ("peak_m", "side_mass", "section_w_cmd", "w_cmd", "crashes_per_km", "swerve_rate")
+"""What the table reports per share and model (``evaluate.summarize_run_routes``'s names)."""
+
+
+@dataclass(frozen=True)
+class SweepSettings(StoredSettings):
+    """What the sweep varies and how much of it it runs (the base preset holds everything else); stored flat
+    (``to_dict``, ``from_dict``)."""
+
+    shares: tuple = (0.15, 0.3, 0.5)
+    """The side-road shares (``SteeringPreset.side_road_share``); 0.5 is the limit where the side road is
+    as likely as keeping straight (as the stems' left and right)."""
+    models: tuple = ("ebm", "ebm-soft", "regression", "mdn")
+    """The models trained at every share: four of the study's six, for the budget. The grid EBM (the
+    paper's subject), soft targets (the EBM variant that keeps steering: temporal smoothing at α = 1
+    collapsed in the chapter's study, and trains on pairs, twice the time per step), the MAE regression
+    (the model the paper saw swerve) and the MDN (the explicit multimodal model; the classifier asks the
+    same question of a density, with bins)."""
+    seeds: tuple = (0, 1, 2)
+    """Training seeds per model and share."""
+    sessions: int = 3
+    """Driving sessions per trained model (``evaluate.SESSION_SHIFT_M``)."""
+    mass_threshold: float = MASS_THRESHOLD
+    """How far beyond the expert's steer (towards the side road) a steering value counts as the side
+    road's (``junctions.side_road_mass``)."""
+
+    def __post_init__(self):
+        check_shares(self.shares)
+        if not self.models or not self.seeds:
+            raise ValueError("models and seeds must name at least one each")
+        for m in self.models:
+            check_choice("models", m, MODELS)
+        for s in self.seeds:
+            check_int("seeds", s, minimum=0)
+        check_int("sessions", self.sessions, minimum=1)
+        check_positive("mass_threshold", self.mass_threshold, allow_zero=True)
+
+
+def check_shares(shares) -> tuple:
+    """``shares`` (a tuple of numbers, or the text "0.15,0.3,0.5") as a tuple of distinct shares in (0, 1],
+    in the order given; ValueError naming ``--shares`` otherwise."""
+    if isinstance(shares, str):
+        try:
+            shares = tuple(float(x) for x in shares.split(",") if x.strip())
+        except ValueError:
+            raise ValueError(
+                f"--shares must be numbers separated by commas, e.g. 0.15,0.3,0.5, got {shares!r}"
+            ) from None
+    shares = tuple(shares)
+    if not shares:
+        raise ValueError("--shares must name at least one side-road share")
+    for s in shares:
+        if isinstance(s, bool) or not isinstance(s, (int, float)) or not 0.0 < float(s) <= 1.0:
+            raise ValueError(f"--shares: each share must be a number in (0, 1], got {s!r}")
+    if len({round(float(s), 6) for s in shares}) != len(shares):
+        raise ValueError(f"--shares: each share once, got {list(shares)}")
+    return tuple(float(s) for s in shares)
+
+
+SWEEP = SweepSettings()
+"""The side-road sweep at the laptop preset: 3 shares x 4 models x 3 seeds = 36 runs, 3 sessions each.
+
+Its budget, about 60 minutes with ``--workers 2 --threads 1``, from CPU time (``time.process_time``)
+measured on a fraction of the work, on a loaded 2-core machine (AMD EPYC): 200 of the 3000 Adam steps
+took 5.85 s (grid EBM) and 5.06 s (regression) once the BEVs were cached (7.4 s and 7.9 s with the
+rendering), so about 90 s per model for 3000 steps; one session of loop-cw (about 2,050 steps) with
+the side-road mass took 8.0 s (EBM) and 8.6 s (MDN), so about 23 s for the four routes' 5,600 steps and
+70 s for 3 sessions. About 160 s per run, x 36 runs = 96 CPU minutes: 48 minutes on 2 workers, plus
+under a minute for the demonstrations (0.36 s per route) and the references (about 2 s per route and
+session). A 4th seed (48 runs) would take about 64 minutes, all six models (54 runs, smoothing at twice
+the training time) about 75."""
+
+
+def share_name(share: float) -> str:
+    """A share's folder name, the part of the sweep that holds its data and runs: ``share0.15``."""
+    return f"share{float(share):g}"
+
+
+def share_preset(base: SteeringPreset, share: float) -> SteeringPreset:
+    """The base preset at side-road share ``share``."""
+    return replace(base, side_road_share=float(share))
+
+
+FOLDER = StudyFolder(
+    what="sweep",
+    command="ibc-tutorial sweep-steering",
+    entries=ENTRIES,
+    done=EVAL,
+    part_prefix="share",
+)
+"""A sweep's folder (``experiments.runs.StudyFolder``): its runs sit in the parts ``share<p>``."""
+
+
+def sweep_run(share: float, model: str, seed: int) -> Run:
+    """The run of ``model`` with ``seed`` at side-road share ``share``."""
+    return Run(model, seed, share_name(share))
+
+
+def planned(settings: SweepSettings) -> list[Run]:
+    """Every run, shares first (each share's data is then loaded once per worker)."""
+    return [sweep_run(p, m, s) for p in settings.shares for s in settings.seeds for m in settings.models]
 
 
 def _stored(settings: SweepSettings, base: SteeringPreset) -> dict:
@@ -80,34 +176,26 @@ def _stored(settings: SweepSettings, base: SteeringPreset) -> dict:
 def check_folder(out, settings: SweepSettings, base: SteeringPreset) -> None:
     """Refuse (ValueError: what and what to do) a folder holding anything but this sweep's files, or this
     sweep with other settings; a damaged run's ``eval.json`` is named."""
-    out = Path(out)
-    if not check_folder_entries(out, ENTRIES, "sweep", allowed=lambda name: name.startswith("share")):
+    if not FOLDER.check_entries(out):
         return
-    if (out / SETTINGS).exists():
-        stored = read_json_dict(out / SETTINGS, "delete it and re-run the same command")
-        if stored != _stored(settings, base):
-            diff = sorted(
-                k
-                for part in ("sweep", "preset")
-                for k in set(stored.get(part) or {}) | set(_stored(settings, base)[part])
-                if (stored.get(part) or {}).get(k) != _stored(settings, base)[part].get(k)
-            )
-            raise ValueError(
-                f"{out} holds a sweep of other settings (differs in {', '.join(diff[:5]) or 'its form'}): "
-                "use another --out, or --force to start over"
-            )
-    for r in planned(settings):
-        if (run_dir(out, *r) / EVAL).exists():
-            read_sweep_eval(run_dir(out, *r) / EVAL)
+    mine = _stored(settings, base)
+
+    def describe(stored: dict) -> str:
+        diff = sorted(
+            k
+            for part in ("sweep", "preset")
+            for k in set(stored.get(part) or {}) | set(mine[part])
+            if (stored.get(part) or {}).get(k) != mine[part].get(k)
+        )
+        return f"a sweep of other settings (differs in {', '.join(diff[:5]) or 'its form'})"
+
+    FOLDER.check_settings(out, lambda stored: stored == mine, describe, files=(SETTINGS,), key=None)
+    FOLDER.check_runs(out, planned(settings), read_sweep_eval)
 
 
 def clear_folder(out) -> None:
     """``--force``: delete a sweep's files and ``share*`` folders from ``out``, nothing else."""
-    out = Path(out)
-    if not out.is_dir():
-        return
-    shares = tuple(p.name for p in out.iterdir() if p.is_dir() and p.name.startswith("share"))
-    clear_entries(out, ENTRIES + shares, "sweep")
+    FOLDER.clear(out)
 
 
 def read_sweep_eval(path) -> dict:
@@ -138,7 +226,7 @@ def make_references(out: Path, base: SteeringPreset, sessions: int) -> None:
 def _collect_one(out: str, share: float, base_d: dict) -> dict:
     """Collect one share's demonstrations (a worker's call); returns the side-road counts."""
     p = share_preset(SteeringPreset.from_dict(base_d), share)
-    path = Path(out) / share_name(share) / "data" / "town01.npz"
+    path = Path(out) / share_name(share) / DATA
     return {"share": share, "counts": side_road_counts(preset_demonstrations(p, path))}
 
 
@@ -153,7 +241,7 @@ def _run_one(out: str, share: float, model: str, seed: int, base_d: dict, settin
     key = (out, share, repr(base_d))
     if key not in _WORKER:
         _WORKER.clear()
-        log = DemoLog.load(Path(out) / share_name(share) / "data" / "town01.npz")
+        log = DemoLog.load(Path(out) / share_name(share) / DATA)
         ds = DemoDataset(log, bev_size=preset.bev_size, cache=True)
         _WORKER[key] = (
             ds,
@@ -161,7 +249,7 @@ def _run_one(out: str, share: float, model: str, seed: int, base_d: dict, settin
             ev.read_references(Path(out) / REFERENCES, base.eval_routes, settings.sessions)[0],
         )
     ds, sha, refs = _WORKER[key]
-    d = run_dir(out, share, model, seed)
+    d = FOLDER.run_dir(out, sweep_run(share, model, seed))
     c0 = time.process_time()
     steering, losses, seconds, resumed = train_model(model, seed, ds, preset, d, data_sha256=sha)
     c1 = time.process_time()
@@ -247,10 +335,11 @@ def collect_results(out: Path, settings: SweepSettings) -> dict:
         sn = share_name(share)
         runs[sn], table[sn] = {}, {}
         for model in settings.models:
+            runs_here = [sweep_run(share, model, seed) for seed in settings.seeds]
             done = {
-                str(seed): read_sweep_eval(run_dir(out, share, model, seed) / EVAL)
-                for seed in settings.seeds
-                if (run_dir(out, share, model, seed) / EVAL).exists()
+                str(r.seed): read_sweep_eval(FOLDER.run_dir(out, r) / EVAL)
+                for r in runs_here
+                if FOLDER.is_done(out, r)
             }
             runs[sn][model] = done
             if done:
@@ -281,15 +370,14 @@ def sweep(
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / SETTINGS, _stored(settings, base))
     runs = planned(settings)
-    provenance = Provenance(
+    provenance = FOLDER.provenance(
         out,
+        runs,
         title=f"the side-road share sweep on the `{base.name}` preset",
         command=command or f"ibc-tutorial sweep-steering --preset {base.name} --out {out}",
         preset=_stored(settings, base),
         differences=differences(LAPTOP, base),
         reference="the `laptop` preset (the sweep's own settings are in `sweep.json`)",
-        planned=[run_name(*r) for r in runs],
-        finished=lambda: finished_runs(out, settings),
         overrides=list(overrides),
     )
     results: dict = {
@@ -307,12 +395,9 @@ def sweep(
         },
     }
 
-    def save(complete: bool) -> None:
-        results.update(collect_results(out, settings), complete=complete)
-        write_json(out / RESULTS, results)
-        provenance.write(complete)
+    shares = {share_name(p): p for p in settings.shares}
 
-    with provenance:
+    def work(save) -> None:
         # 1. each share's demonstrations, and the references, side by side
         calls = [functools.partial(_collect_one, str(out), p, base.to_dict()) for p in settings.shares]
         collected = imap_unordered(calls, workers=workers, threads=threads)  # submitted now (2+ workers)
@@ -327,15 +412,17 @@ def sweep(
                     f"share {r['share']:g}: side roads taken {c['side_road']} of "
                     f"{c['straight'] + c['side_road']} passes"
                 )
-        results["data"] = {share_name(p): data[share_name(p)] for p in settings.shares}
+        results["data"] = {name: data[name] for name in shares}
         save(False)
         # 2. every run not finished yet
-        todo = [r for r in runs if not (run_dir(out, *r) / EVAL).exists()]
+        todo = FOLDER.todo(out, runs)
         if log:
             log(f"{len(runs) - len(todo)} of {len(runs)} runs already finished; {len(todo)} to run")
         calls = [
-            functools.partial(_run_one, str(out), p, m, s, base.to_dict(), settings.to_dict())
-            for p, m, s in todo
+            functools.partial(
+                _run_one, str(out), shares[r.part], r.method, r.seed, base.to_dict(), settings.to_dict()
+            )
+            for r in todo
         ]
         for r in imap_unordered(calls, workers=workers, threads=threads):
             if log:
@@ -347,31 +434,14 @@ def sweep(
                     f"{r['eval_cpu_seconds']:.0f} s driving, CPU)"
                 )
             save(False)
-        save(True)
-    if log:
-        log(f"sweep finished in {provenance.wall_seconds / 60:.1f} min; results in {out}")
-    return results
+
+    def collect(complete: bool) -> dict:
+        return dict(collect_results(out, settings), complete=complete)
+
+    return FOLDER.run(out, provenance, results, collect, work, log)
 
 
 def load_results(out) -> dict:
     """``results.json`` and ``provenance.json`` of a sweep folder (ValueError naming a missing or damaged
     file)."""
-    return read_folder(out, RESULTS, {}, "ibc-tutorial sweep-steering")
-
-
-__all__ = [
-    "EVAL",
-    "MEASURES",
-    "PASSES",
-    "SWEEP",
-    "SweepSettings",
-    "check_folder",
-    "check_shares",
-    "clear_folder",
-    "collect_results",
-    "finished_runs",
-    "load_results",
-    "read_sweep_eval",
-    "run_dir",
-    "sweep",
-]
+    return FOLDER.load(out)

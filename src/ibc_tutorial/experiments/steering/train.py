@@ -20,7 +20,7 @@ import torch
 
 from ibc_tutorial import __version__
 from ibc_tutorial.driving.dataset import DemoDataset
-from ibc_tutorial.experiments.runs import read_run_file, read_torch_file, write_json, write_npz
+from ibc_tutorial.experiments.runs import read_run_file, read_torch_file, run_dir, write_json, write_npz
 from ibc_tutorial.experiments.steering.evaluate import (
     Reference,
     drive_route,
@@ -47,11 +47,6 @@ EVAL = "eval.json"
 """A finished run's results."""
 TRACE = "trace.npz"
 """A finished run's outputs along the Fig. 5 window."""
-
-
-def run_dir(out, model: str, seed: int) -> Path:
-    """Folder of one run."""
-    return Path(out) / "runs" / model / f"seed{seed}"
 
 
 def save_model_checkpoint(

@@ -52,7 +52,7 @@ def train(args: argparse.Namespace) -> int:
     from ibc_tutorial.driving.dataset import DemoLog
     from ibc_tutorial.experiments.agents import train as training
     from ibc_tutorial.experiments.agents.presets import get_preset, with_overrides
-    from ibc_tutorial.experiments.agents.run_folder import clear_run, inspect_run
+    from ibc_tutorial.experiments.agents.training_run import clear_run, inspect_run
 
     preset = get_preset(args.preset)
     if args.epochs is not None:
@@ -166,14 +166,12 @@ def evaluate(args: argparse.Namespace) -> int:
 
 
 def replicate(args: argparse.Namespace) -> int:
-    """``ibc-tutorial replicate``: the preset (ablation, overrides) and the folder checked, then replicate."""
+    """``ibc-tutorial replicate``: the preset (with its ``--set`` overrides) and the folder checked, then
+    replicate. A one-off variant of a preset (chapter 08's ablations) is a replication with overrides."""
     from ibc_tutorial.experiments.agents import replicate as replication
-    from ibc_tutorial.experiments.agents.ablations import ablation_preset
     from ibc_tutorial.experiments.agents.presets import get_preset, with_overrides
 
     preset = get_preset(args.preset)
-    if getattr(args, "ablation", None):
-        preset = ablation_preset(preset, args.ablation)
     overrides = list(getattr(args, "overrides", ()))
     if getattr(args, "commands", False):
         preset = dataclasses.replace(preset, commands=True)  # before the overrides: --set may still change it
@@ -212,8 +210,7 @@ def stems(args: argparse.Namespace) -> int:
     """``ibc-tutorial stems drive|analyse``: the stem analysis of a replication folder (resumable)."""
     from pathlib import Path
 
-    from ibc_tutorial.experiments.agents import stem_analysis
-    from ibc_tutorial.experiments.agents import stems as stem_drives
+    from ibc_tutorial.experiments.agents import stem_analysis, stem_drives
 
     command = getattr(args, "command_line", "")
     torch.set_num_threads(1)
@@ -266,7 +263,7 @@ def two_answers(args: argparse.Namespace) -> int:
 
 def routes(args: argparse.Namespace) -> int:
     """``ibc-tutorial routes``: every agent of ``--folder`` and the expert on the routes (resumable)."""
-    from ibc_tutorial.experiments.agents.route_drives import run_route_drives
+    from ibc_tutorial.experiments.agents.route_study import run_route_drives
 
     drives = check_int("--drives", args.drives, minimum=1)
     torch.set_num_threads(1)

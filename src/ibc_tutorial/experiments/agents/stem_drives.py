@@ -37,8 +37,8 @@ from ibc_tutorial.driving.rollout import RolloutRecording
 from ibc_tutorial.driving.stems import kept_states
 from ibc_tutorial.experiments.agents.checkpoints import load_agent
 from ibc_tutorial.experiments.agents.evaluate import EVAL_SEED, EVAL_TOWN, episode_rows, evaluate_agent
-from ibc_tutorial.experiments.agents.layout import STEM_DRIVE, expert_dir, run_dir
 from ibc_tutorial.experiments.agents.presets import METHODS
+from ibc_tutorial.experiments.agents.replication_folder import STEM_DRIVE, expert_dir, run_dir
 from ibc_tutorial.experiments.runs import git_commit, machine, now, run_missing, write_json, write_npz
 from ibc_tutorial.optimizers.dfo import DFOConfig
 from ibc_tutorial.utils import check_int
@@ -257,7 +257,8 @@ def run_drives(
 
 def drive_file(folder, out, name: str) -> Path | None:
     """The drive file of driver ``name`` (``<method>-seed<k>`` or "expert"): ``out/drives/<name>.npz`` if
-    there, else the one a replication recorded in its run folder (``layout.STEM_DRIVE``), else None."""
+    there, else the one a replication recorded in its run folder (``replication_folder.STEM_DRIVE``), else
+    None."""
     own = Path(out) / "drives" / f"{name}.npz"
     if own.exists():
         return own

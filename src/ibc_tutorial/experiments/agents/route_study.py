@@ -4,9 +4,9 @@ A command replication (``replicate --commands``) drives its own agents on the ro
 evaluation. Chapter 11 also needs the routeless agents of chapter 09 on the same routes, without a command:
 their completion shows what luck at the junctions gives. ``run_route_drives`` does that for any folder
 (``ibc-tutorial routes --folder book/results/laptop --out book/results/routeless-on-routes``): each driver
-(``stems.drivers``: every ``runs/<method>/seed<k>/final.pt``, then the expert) drives every route
+(``stem_drives.drivers``: every ``runs/<method>/seed<k>/final.pt``, then the expert) drives every route
 ``drives`` times, given a command exactly when its checkpoint takes one, with the light phases of
-``route_eval.ROUTE_SEED`` and the DFO draws of its training seed, as the command replication's evaluation.
+``route_driving.ROUTE_SEED`` and the DFO draws of its training seed, as the command replication's evaluation.
 One JSON file per driver in ``out`` (``<method>-seed<k>.json``, ``expert.json``); a driver whose file
 exists is skipped, so an interrupted run resumes, and ``provenance.json`` records every invocation.
 """
@@ -17,8 +17,8 @@ import json
 from pathlib import Path
 
 from ibc_tutorial.experiments.agents.checkpoints import load_agent, training_seed
-from ibc_tutorial.experiments.agents.route_eval import ROUTE_SEED, evaluate_on_routes, summarize_route_rows
-from ibc_tutorial.experiments.agents.stems import drivers
+from ibc_tutorial.experiments.agents.route_driving import ROUTE_SEED, evaluate_on_routes, summarize_route_rows
+from ibc_tutorial.experiments.agents.stem_drives import drivers
 from ibc_tutorial.experiments.runs import PROVENANCE, git_commit, machine, now, run_missing, write_json
 from ibc_tutorial.utils import check_int
 

@@ -1,10 +1,24 @@
-"""Reading a replication folder: its checked files, the table ``results.json`` aggregates, ``load_results``.
+"""The replication folder (``ibc-tutorial replicate --out FOLDER``): where everything sits, and reading it.
 
-``load_results(folder)`` is what chapters 08-09 call; ``episode_table(folder, method)`` gives one
-method's per-episode values, agents by seed, for the statistics of chapter 09 (``stats``, which
-knows numbers only, never files). ``collect_results`` aggregates the finished runs into what
-``results.json`` holds. Every file is checked as it is read; a damaged one gives a ``ValueError``
-naming it and saying how to make it again. Where the files sit: ``layout``.
+A replication folder holds
+
+- ``data/town01.npz``: the demonstrations (``DATA``);
+- ``runs/<method>/seed<k>/``: one training run each (``run_dir``: ``run.json``, ``metrics.jsonl``,
+  the evaluations of ``EVALUATIONS``, the agent, ``final.pt``, and the record of its table's episodes
+  for the stem analysis, ``STEM_DRIVE``);
+- ``runs/expert/``: the PID expert's evaluations on the same starts (``expert_dir``);
+- ``results.json``: everything the chapters read (``RESULTS``);
+- ``added_methods.json``: methods trained into the folder after its replication (``ADDED``,
+  ``added_methods``), with their own table and invocations;
+- ``free_driving.npz`` and ``landscapes.npz``: the arrays of the Fig. 5 and Fig. 6 analogues;
+- ``provenance.json`` and ``PROVENANCE.md`` (``experiments.runs.Provenance``).
+
+The names are here, once, with the folder's lifecycle (``FOLDER``, an ``experiments.runs.StudyFolder``);
+``replicate`` writes the files. ``load_results(folder)`` is what chapters 08-09 call;
+``episode_table(folder, method)`` gives one method's per-episode values, agents by seed, for the
+statistics of chapter 09 (``stats``, which knows numbers only, never files). ``collect_results``
+aggregates the finished runs into what ``results.json`` holds. Every file is checked as it is read; a
+damaged one gives a ``ValueError`` naming it and saying how to make it again.
 """
 
 from __future__ import annotations
@@ -15,31 +29,86 @@ from pathlib import Path
 import numpy as np
 
 from ibc_tutorial.experiments.agents.evaluate import summarize_episodes
-from ibc_tutorial.experiments.agents.layout import (
+from ibc_tutorial.experiments.agents.presets import PAPER, Preset, differences
+from ibc_tutorial.experiments.agents.training_run import read_metrics
+from ibc_tutorial.experiments.runs import (
     DATA,
-    EVALUATIONS,
-    FREE_DRIVING,
-    LANDSCAPES,
+    PROVENANCE,
+    PROVENANCE_MD,
     RESULTS,
-    expert_dir,
+    Run,
+    StudyFolder,
+    read_json_dict,
     run_dir,
 )
-from ibc_tutorial.experiments.agents.presets import PAPER, Preset, differences
-from ibc_tutorial.experiments.agents.run_folder import read_metrics
-from ibc_tutorial.experiments.runs import read_folder, read_json_dict
 from ibc_tutorial.utils import check_choice
 
-__all__ = [
+__all__ = [  # the folder's names (``DATA`` and ``run_dir`` are every study's: ``experiments.runs``)
+    "ADDED",
     "DATA",
+    "ENTRIES",
     "EPISODE_KEYS",
+    "EVALUATIONS",
+    "FINAL_EVAL",
+    "FOLDER",
+    "FREE_DRIVING",
+    "LANDSCAPES",
+    "STEM_DRIVE",
     "EpisodeTable",
     "collect_results",
     "episode_table",
+    "expert_dir",
+    "finished_runs",
     "load_results",
+    "planned",
     "preset_results",
     "read_final_eval",
     "run_dir",
 ]
+
+FREE_DRIVING = "free_driving.npz"
+"""Trajectories of the free-driving episodes (Fig. 5 analogue)."""
+LANDSCAPES = "landscapes.npz"
+"""Energy grids, observations and DFO inferences (Fig. 6 analogue)."""
+ADDED = "added_methods.json"
+"""The record of the methods added to a finished replication (``added_methods``)."""
+ENTRIES = ("data", "runs", RESULTS, PROVENANCE, PROVENANCE_MD, FREE_DRIVING, LANDSCAPES, ADDED)
+"""What a replication folder holds (``--force`` deletes these, and only these)."""
+EVALUATIONS = {"final": "final_eval.json", "heldout": "heldout_eval.json"}
+"""The evaluations of a run, by name: the table's starts (``final``, ``evaluate.EVAL_SEED``) and the
+held-out starts (``heldout``, ``evaluate.HELDOUT_SEED``), with the file each is written to."""
+STEM_DRIVE = "stem_drive.npz"
+"""In a run folder (and ``runs/expert/``): the per-state record of the table's episodes and the
+observations of its stem crossings and red stops (``stem_drives.recorded_drive``), which the stem analysis
+reads."""
+FINAL_EVAL = EVALUATIONS["final"]
+"""A run is finished once this file exists (it is written last)."""
+FOLDER = StudyFolder(
+    what="replication",
+    command="ibc-tutorial replicate",
+    entries=ENTRIES,
+    done=FINAL_EVAL,
+    arrays={"free_driving": FREE_DRIVING, "landscapes": LANDSCAPES},
+    markers=("data", "runs", RESULTS, PROVENANCE),
+)
+"""The replication's folder (``experiments.runs.StudyFolder``): the stem and route analyses write their
+own folders into it too, so a folder holding any of ``markers`` is taken for a replication's."""
+
+
+def expert_dir(out) -> Path:
+    """Folder of the PID expert's evaluations on the agents' starts (the table's reference row)."""
+    return Path(out) / "runs" / "expert"
+
+
+def planned(preset) -> list[Run]:
+    """The runs of a preset, in the order a replication makes them (seed by seed)."""
+    return [Run(m, s) for s in preset.seeds for m in preset.methods]
+
+
+def finished_runs(out, preset) -> list[str]:
+    """The runs of ``preset`` under ``out`` that have their ``final_eval.json``, in planned order."""
+    return FOLDER.finished(out, planned(preset))
+
 
 EPISODE_KEYS = ("seed", "steps", "distance_m", "red_light_infractions", "score", "termination")
 """What every episode row of a ``final_eval.json`` holds."""
@@ -177,6 +246,4 @@ def load_results(out) -> dict:
     dicts, ``free_driving.npz`` and ``landscapes.npz`` as dicts of arrays (empty if absent).
 
     ValueError naming the file if one is missing or damaged."""
-    return read_folder(
-        out, RESULTS, {"free_driving": FREE_DRIVING, "landscapes": LANDSCAPES}, "ibc-tutorial replicate"
-    )
+    return FOLDER.load(out)

@@ -2,7 +2,7 @@
 
 Two folders hold route drives: a command replication (``replicate --commands``), whose agents' and
 expert's ``final_eval.json`` list one row per route drive, and a ``routes`` folder
-(``route_drives.run_route_drives``: chapter 09's routeless agents on the same routes). Both become
+(``route_study.run_route_drives``: chapter 09's routeless agents on the same routes). Both become
 ``{driver name: rows}`` (``<method>-seed<k>`` or "expert"; rows are ``RouteResult.row()`` dicts), and the
 functions here turn those into what the chapter's table and intervals need:
 
@@ -26,9 +26,9 @@ import numpy as np
 from ibc_tutorial.driving.commands import COMMANDS
 from ibc_tutorial.driving.route_following import ROUTE_TOWN
 from ibc_tutorial.driving.stems import stem_approaches
-from ibc_tutorial.experiments.agents.layout import FINAL_EVAL, expert_dir
 from ibc_tutorial.experiments.agents.presets import METHODS
-from ibc_tutorial.experiments.agents.route_drives import load_route_drives
+from ibc_tutorial.experiments.agents.replication_folder import FINAL_EVAL, expert_dir
+from ibc_tutorial.experiments.agents.route_study import load_route_drives
 from ibc_tutorial.utils import check_choice
 
 ROUTE_TOWN_STEMS = frozenset(stem_approaches(ROUTE_TOWN))
@@ -73,7 +73,7 @@ def _route_rows(path: Path) -> list[dict]:
 
 
 def routeless_drivers(folder) -> dict[str, list[dict]]:
-    """``{name: rows}`` of a ``routes`` folder (``route_drives.load_route_drives``)."""
+    """``{name: rows}`` of a ``routes`` folder (``route_study.load_route_drives``)."""
     return {name: d["episodes"] for name, d in load_route_drives(folder).items()}
 
 
