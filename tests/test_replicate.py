@@ -488,3 +488,26 @@ def test_a_drive_protocol_checks_its_dfo_values_before_any_drive():
         DriveProtocol(dfo={"samples": 0})
     with pytest.raises(ValueError, match="select"):
         DriveProtocol(dfo={"select": "best"})
+
+
+def test_the_progress_lines_say_how_many_runs_and_how_long():
+    from ibc_tutorial.experiments.agents.replicate import run_plan, time_left
+    from ibc_tutorial.utils import plural
+
+    assert (
+        plural(1, "episode") == "1 episode" and plural(3, "run") == "3 runs" and plural(0, "run") == "0 runs"
+    )
+    assert run_plan(15, 15, 2) == "15 training runs to do of 15, 2 at a time"
+    assert run_plan(1, 15, 2) == "1 training run to do of 15, 1 at a time"
+    assert time_left(600.0, 2, 6) == "10.0 min elapsed, about 20 min left"  # 5 min per run, 4 runs left
+    assert time_left(600.0, 6, 6) == "10.0 min elapsed, none left"
+    assert time_left(20.0, 1, 2) == "0.3 min elapsed, under a minute left"
+
+
+def test_a_finished_replication_run_again_says_nothing_was_left_to_do(tiny_replication, tmp_path, capsys):
+    out = tmp_path / "rep"
+    shutil.copytree(tiny_replication, out)
+    assert cli.main(["replicate", "--preset", "tiny", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "nothing left to do: all 3 training runs of this replication were already finished" in printed
+    assert "training run to do" not in printed and "run 1 of" not in printed

@@ -283,9 +283,18 @@ def _evaluate_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--device", default="cpu", help=DEVICE_HELP)
 
 
-def _study_arguments(p: argparse.ArgumentParser, presets: tuple, study: str, runs: str) -> None:
-    """What both studies' commands share: --preset, --out, --force, --threads and --workers."""
-    p.add_argument("--preset", default="laptop", choices=presets, help="settings (default: %(default)s)")
+def _study_arguments(
+    p: argparse.ArgumentParser, presets: tuple, study: str, runs: str, purposes: dict | None = None
+) -> None:
+    """What both studies' commands share: --preset, --out, --force, --threads and --workers; ``purposes``:
+    each preset's line for --help (what it is for, how long it takes)."""
+    listed = "".join(f"; {name}: {purposes[name]}" for name in presets if name in (purposes or {}))
+    p.add_argument(
+        "--preset",
+        default="laptop",
+        choices=presets,
+        help="settings (default: %(default)s)" + listed.replace("%", "%%"),
+    )
     p.add_argument(
         "--out",
         required=True,
@@ -302,9 +311,9 @@ def _study_arguments(p: argparse.ArgumentParser, presets: tuple, study: str, run
 
 
 def _replicate_arguments(p: argparse.ArgumentParser) -> None:
-    from ibc_tutorial.experiments.agents.presets import PRESETS  # deferred: loads torch
+    from ibc_tutorial.experiments.agents.presets import PRESETS, PURPOSES  # deferred: loads torch
 
-    _study_arguments(p, tuple(PRESETS), "replication", runs="training runs")
+    _study_arguments(p, tuple(PRESETS), "replication", runs="training runs", purposes=PURPOSES)
     p.add_argument(
         "--set", action="append", default=[], metavar="FIELD=VALUE", dest="overrides", help=SET_HELP
     )
@@ -317,9 +326,9 @@ def _replicate_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _replicate_steering_arguments(p: argparse.ArgumentParser) -> None:
-    from ibc_tutorial.experiments.steering.presets import PRESETS  # deferred: loads torch
+    from ibc_tutorial.experiments.steering.presets import PRESETS, PURPOSES  # deferred: loads torch
 
-    _study_arguments(p, tuple(PRESETS), "study", runs="runs")
+    _study_arguments(p, tuple(PRESETS), "study", runs="runs", purposes=PURPOSES)
     p.add_argument(
         "--set",
         action="append",

@@ -50,6 +50,11 @@ def progress(
     return tqdm(iterable, total=total, desc=desc, disable=not show, leave=False)
 
 
+def plural(n: int, word: str) -> str:
+    """``n`` and ``word``, with an s unless ``n`` is 1: "1 run", "3 runs"."""
+    return f"{n} {word}" + ("" if n == 1 else "s")
+
+
 # --------------------------------------------------------------------------- argument checks
 def check_int(name: str, value, *, minimum: int | None = None, maximum: int | None = None) -> int:
     """Return ``value`` as an int, or raise ValueError naming ``name`` and the expected range."""

@@ -17,7 +17,7 @@ import time
 
 import torch
 
-from ibc_tutorial.utils import atomic_write_bytes, check_choice, check_device, check_int
+from ibc_tutorial.utils import atomic_write_bytes, check_choice, check_device, check_int, plural
 
 
 def _threads(args: argparse.Namespace) -> int:
@@ -40,9 +40,9 @@ def collect(args: argparse.Namespace) -> int:
     inf = sum(e["red_light_infractions"] for e in eps)
     ends = sum(e["end"] != "completed" for e in eps)
     print(
-        f"{len(log)} samples in {len(eps)} episodes of {config.town}: {dist / 1000:.1f} km, "
-        f"{inf} red-light infractions, {ends} episodes ended early; "
-        f"{seconds:.1f} s; written to {path}"
+        f"{plural(len(log), 'sample')} in {plural(len(eps), 'episode')} of {config.town}: "
+        f"{dist / 1000:.1f} km, {plural(inf, 'red-light infraction')}, "
+        f"{plural(ends, 'episode')} ended early; {seconds:.1f} s; written to {path}"
     )
     return 0
 
@@ -129,7 +129,8 @@ def evaluate(args: argparse.Namespace) -> int:
             energy_steer = ended_crossing_energies(agent, args.town, rows, steps=steps, **protocol)
     print(
         f"{ckpt['method']} agent (epoch {ckpt['epoch']}) in {args.town}, {episodes} "
-        f"{'routeless' if routeless else 'routed'} episodes of {steps} steps from seed {seed}, "
+        f"{'routeless' if routeless else 'routed'} {'episode' if episodes == 1 else 'episodes'} of {steps} "
+        f"steps from seed {seed}, "
         f"policy seed {policy_seed}:"
     )
     print(f"{'episode':>8} {'seed':>6} {'steps':>6} {'distance m':>11} {'infractions':>12} {'score':>8}  end")

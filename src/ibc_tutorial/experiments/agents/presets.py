@@ -414,6 +414,15 @@ TINY = Preset(
 """A seconds-long preset for the tests and the chapters' live demonstrations."""
 
 PRESETS = {p.name: p for p in (PAPER, LAPTOP, PREVIOUS_LAPTOP, TWO_ANSWERS, TINY)}
+PURPOSES = {
+    "paper": "the DA-IBC paper's settings (sec. 4.2), for reference: days of compute on a CPU",
+    "laptop": "chapters 08-09's replication: about 60 min on 2 cores (--workers 2 --threads 1)",
+    "previous-laptop": "the paper's 10 routes, 8 epochs, 5 agents per method: about 40 min on 2 cores",
+    "two-answers": "chapter 12's study (stem twins): about 55 min on 2 cores",
+    "tiny": "a smoke test of the whole pipeline: under a minute",
+}
+"""What each preset is for and how long its replication takes (``replicate --help``): the wall times of
+the shipped folders' provenance, rounded up."""
 """All named presets."""
 
 

@@ -73,7 +73,7 @@ from ibc_tutorial.experiments.agents.train import train_agent
 from ibc_tutorial.experiments.agents.training_run import TrainingData, inspect_run
 from ibc_tutorial.experiments.runs import RESULTS, differing, read_json_dict, write_json, write_npz
 from ibc_tutorial.parallel import imap_unordered
-from ibc_tutorial.utils import check_device, check_int
+from ibc_tutorial.utils import check_device, check_int, plural
 
 FIGURE_METHODS = ("bc", "da-ibc")
 """The agents of the first seed kept for the Fig. 5/6 analogues (their ``final.pt`` is kept too)."""
@@ -257,6 +257,19 @@ def run_one(
     return ev
 
 
+def run_plan(todo: int, total: int, workers: int) -> str:
+    """The line that opens the training: how many runs are left of how many, and how many at a time."""
+    return f"{plural(todo, 'training run')} to do of {total}, {min(workers, todo)} at a time"
+
+
+def time_left(elapsed: float, done: int, todo: int) -> str:
+    """Elapsed time and an estimate of the time left, from the mean time per finished run so far."""
+    left = elapsed / done * (todo - done) if done else float("nan")
+    return f"{elapsed / 60:.1f} min elapsed, " + (
+        "none left" if done >= todo else f"about {max(left / 60, 0.1):.0f} min left"
+    ).replace("about 0 min", "under a minute")
+
+
 def expert_row(out: Path, preset: Preset, log=print) -> None:
     """The PID expert on the same starts as the agents (``runs/expert/``), unless already there."""
     d = expert_dir(out)
@@ -334,13 +347,24 @@ def _work(
 
     # 2-3. the runs, seed by seed (in ``workers`` processes: the first seed's runs are submitted first)
     todo = FOLDER.todo(out, planned(preset))
+    total = len(planned(preset))
+    if log:
+        log(
+            run_plan(len(todo), total, workers)
+            if todo
+            else f"nothing left to do: all {total} training runs of this replication were already finished"
+        )
+    started, finished = time.perf_counter(), []
 
     def after_run(ev: dict) -> None:
+        finished.append(ev)
         if log:
+            elapsed = time.perf_counter() - started
             log(
-                f"{ev['method']} seed {ev['seed']}: final town02 score {ev['summary']['score_mean']:.1f} ± "
-                f"{ev['summary']['score_std']:.1f} ({ev['train_seconds']:.0f} s training, "
-                f"{ev['eval_seconds']:.0f} s evaluation)"
+                f"run {total - len(todo) + len(finished)} of {total}, {ev['method']} seed {ev['seed']}: "
+                f"final town02 score {ev['summary']['score_mean']:.1f} ± {ev['summary']['score_std']:.1f} "
+                f"({ev['train_seconds']:.0f} s training, {ev['eval_seconds']:.0f} s evaluation); "
+                + time_left(elapsed, len(finished), len(todo))
             )
         save(False)
 

@@ -158,6 +158,12 @@ TINY = SteeringPreset(
 """A seconds-long preset for the tests."""
 
 PRESETS = {p.name: p for p in (LAPTOP, TINY)}
+PURPOSES = {
+    "laptop": "chapter 10's study: about 20 min on 2 cores (--workers 2 --threads 1)",
+    "tiny": "a smoke test of the whole study: under a minute",
+}
+"""What each preset is for and how long its study takes (``replicate-steering --help``), from the shipped
+folder's provenance, rounded up."""
 """All named presets."""
 
 
