@@ -13,6 +13,9 @@ import torch
 NOT_ATTEMPTED = "not attempted"
 CORRECT = "correct"
 HINT = "hint"
+MARKS = {CORRECT: "✓", HINT: "→", NOT_ATTEMPTED: "○"}
+"""The mark before each answer in a notebook: text glyphs that the common fonts (DejaVu, Liberation) have,
+so they render without an emoji font."""
 
 
 class NotAttempted(Exception):
@@ -32,7 +35,7 @@ class Feedback:
         return f"[{self.status}] {self.message}"
 
     def _repr_markdown_(self) -> str:
-        mark = {CORRECT: "✅", HINT: "💡", NOT_ATTEMPTED: "⬜"}.get(self.status, "")
+        mark = MARKS.get(self.status, "")
         return f"{mark} **{self.status}**: {self.message}"
 
     @property
