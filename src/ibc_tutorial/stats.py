@@ -37,12 +37,15 @@ LEVEL = 0.95
 """Coverage of the intervals: 95 %, the 2.5th to the 97.5th percentile of the resampled statistic."""
 HOLDS, DOES_NOT_HOLD, CANNOT_TELL = "holds", "does not hold", "cannot tell at this scale"
 """The three verdicts of ``verdict``."""
+EQUIVALENT = "equivalent within ±δ"
+"""The fourth verdict: the difference is established to lie within ±δ (``ibc_tutorial.equivalence``)."""
 _CHUNK = 1 << 22
 """Largest number of drawn (resample, agent, episode) cells held at once (32 MB of indices)."""
 
 
 # --------------------------------------------------------------------------- arguments
-def _rng(seed) -> np.random.Generator:
+def resampling_generator(seed) -> np.random.Generator:
+    """``seed`` itself if it is a ``np.random.Generator``, else a new one seeded with it (an int >= 0)."""
     if isinstance(seed, np.random.Generator):
         return seed
     return np.random.default_rng(check_int("seed", seed, minimum=0))
@@ -65,7 +68,8 @@ def check_scores(name: str, scores) -> np.ndarray:
     return x
 
 
-def _check_level(level) -> float:
+def check_level(level) -> float:
+    """``level`` as a coverage strictly between 0 and 1."""
     level = check_probability("level", level)
     if not 0.0 < level < 1.0:
         raise ValueError(f"level must be strictly between 0 and 1, got {level!r}")
@@ -130,7 +134,7 @@ def bootstrap_means(scores, n_resamples: int = DEFAULT_RESAMPLES, seed=0) -> np.
     """
     x = check_scores("scores", scores)
     n_resamples = check_int("n_resamples", n_resamples, minimum=1)
-    rng = _rng(seed)
+    rng = resampling_generator(seed)
     a, e = x.shape
     out = [
         x[agents[..., None], episodes].mean(axis=(1, 2))
@@ -139,7 +143,8 @@ def bootstrap_means(scores, n_resamples: int = DEFAULT_RESAMPLES, seed=0) -> np.
     return np.concatenate(out)  # (R,)
 
 
-def _interval(estimate: float, replicates: np.ndarray, level: float) -> Interval:
+def percentile_interval(estimate: float, replicates: np.ndarray, level: float) -> Interval:
+    """``estimate`` with the (1 - level) / 2 and (1 + level) / 2 quantiles of its (R,) ``replicates``."""
     lo, hi = np.percentile(replicates, [50 * (1 - level), 50 * (1 + level)])
     return Interval(float(estimate), float(lo), float(hi), level, len(replicates))
 
@@ -147,8 +152,8 @@ def _interval(estimate: float, replicates: np.ndarray, level: float) -> Interval
 def mean_interval(scores, *, n_resamples: int = DEFAULT_RESAMPLES, seed=0, level: float = LEVEL) -> Interval:
     """The mean of one method's (A, E) scores with its percentile interval (``bootstrap_means``)."""
     x = check_scores("scores", scores)
-    level = _check_level(level)
-    return _interval(x.mean(), bootstrap_means(x, n_resamples, _rng(seed)), level)
+    level = check_level(level)
+    return percentile_interval(x.mean(), bootstrap_means(x, n_resamples, resampling_generator(seed)), level)
 
 
 def difference_interval(
@@ -161,12 +166,19 @@ def difference_interval(
     methods met the same starts, but the pairing is not used: a hard start lowers both methods'
     scores, so ignoring it errs on the wide side.
     """
+    level = check_level(level)
+    estimate, reps = difference_replicates(scores_a, scores_b, n_resamples=n_resamples, seed=seed)
+    return percentile_interval(estimate, reps, level)
+
+
+def difference_replicates(scores_a, scores_b, *, n_resamples: int = DEFAULT_RESAMPLES, seed=0):
+    """(mean(A) - mean(B), its (R,) resamples) of ``difference_interval``: each method's two-level
+    bootstrap drawn independently from one generator."""
     a = check_scores("scores_a", scores_a)
     b = check_scores("scores_b", scores_b)
-    level = _check_level(level)
-    rng = _rng(seed)
+    rng = resampling_generator(seed)
     reps = bootstrap_means(a, n_resamples, rng) - bootstrap_means(b, n_resamples, rng)  # (R,)
-    return _interval(a.mean() - b.mean(), reps, level)
+    return float(a.mean() - b.mean()), reps
 
 
 def ratio_interval(
@@ -191,15 +203,15 @@ def ratio_interval(
         )
     if not (np.isfinite(ex).all() and (ex > 0).all()):
         raise ValueError("expert must hold finite scores > 0 in every episode")
-    level = _check_level(level)
+    level = check_level(level)
     n_resamples = check_int("n_resamples", n_resamples, minimum=1)
-    rng = _rng(seed)
+    rng = resampling_generator(seed)
     a, e = x.shape
     reps = [
         x[agents[..., None], episodes].mean(axis=(1, 2)) / ex[episodes].mean(axis=(1, 2))
         for agents, episodes in _draws(a, e, n_resamples, rng)
     ]
-    return _interval(x.mean() / ex.mean(), np.concatenate(reps), level)
+    return percentile_interval(x.mean() / ex.mean(), np.concatenate(reps), level)
 
 
 def _ratio_replicates(num: np.ndarray, den: np.ndarray, n_resamples: int, rng) -> np.ndarray:
@@ -219,7 +231,7 @@ def _resampled_shares(tables, transform, n_resamples: int, seed) -> tuple[list, 
     drawn in turn from one generator. Resamples in which any method drew denominators summing to 0 are
     left out of every method's; at least one must remain."""
     n_resamples = check_int("n_resamples", n_resamples, minimum=1)
-    rng = _rng(seed)
+    rng = resampling_generator(seed)
     reps = [_ratio_replicates(num, den, n_resamples, rng) for num, den in tables]
     keep = np.logical_and.reduce([np.isfinite(r) for r in reps])  # (R,)
     if not keep.any():
@@ -263,9 +275,9 @@ def ratio_of_sums_interval(
     are left out (``n_resamples`` of the result counts those kept); at least one must remain.
     """
     num, den = _check_ratio_tables("numerators", numerators, "denominators", denominators)
-    level = _check_level(level)
+    level = check_level(level)
     (share,), (reps,) = _resampled_shares([(num, den)], transform, n_resamples, seed)
-    return _interval(float(share), np.asarray(reps, dtype=float), level)
+    return percentile_interval(float(share), np.asarray(reps, dtype=float), level)
 
 
 def ratio_of_sums_difference(
@@ -284,11 +296,23 @@ def ratio_of_sums_difference(
     Each resample draws the two-level bootstrap of each method independently (from one generator),
     as ``difference_interval`` does for means, and subtracts the transformed shares; resamples in
     which either method drew denominators summing to 0 are left out."""
+    level = check_level(level)
+    estimate, reps = ratio_of_sums_difference_replicates(
+        numerators_a, denominators_a, numerators_b, denominators_b, transform=transform,
+        n_resamples=n_resamples, seed=seed,
+    )  # fmt: skip
+    return percentile_interval(estimate, reps, level)
+
+
+def ratio_of_sums_difference_replicates(
+    numerators_a, denominators_a, numerators_b, denominators_b, *, transform=None,
+    n_resamples: int = DEFAULT_RESAMPLES, seed=0,
+):  # fmt: skip
+    """(f(share A) - f(share B), its (R',) resamples) of ``ratio_of_sums_difference``."""
     na, da = _check_ratio_tables("numerators_a", numerators_a, "denominators_a", denominators_a)
     nb, db = _check_ratio_tables("numerators_b", numerators_b, "denominators_b", denominators_b)
-    level = _check_level(level)
     (sa, sb), (ra, rb) = _resampled_shares([(na, da), (nb, db)], transform, n_resamples, seed)
-    return _interval(float(sa - sb), np.asarray(ra - rb, dtype=float), level)
+    return float(sa - sb), np.asarray(ra - rb, dtype=float)
 
 
 # --------------------------------------------------------------------------- few seeds: Welch's t
@@ -332,7 +356,7 @@ def welch_interval(values_a, values_b, *, level: float = LEVEL) -> Interval:
     for name, x in (("values_a", a), ("values_b", b)):
         if len(x) < 2 or not np.isfinite(x).all():
             raise ValueError(f"{name} must hold at least 2 finite values, got {x.tolist()}")
-    level = _check_level(level)
+    level = check_level(level)
     d = float(a.mean() - b.mean())
     va, vb = a.var(ddof=1) / len(a), b.var(ddof=1) / len(b)  # squared standard errors
     se = math.sqrt(va + vb)
@@ -385,13 +409,27 @@ class Judgement:
     threshold: float
     """The claim is "the quantity is above this"."""
     verdict: str
-    """"holds", "does not hold" or "cannot tell at this scale"."""
+    """"holds", "does not hold", "cannot tell at this scale", or ``EQUIVALENT`` if an equivalence test was
+    made (``ibc_tutorial.equivalence``)."""
+    delta: float | None = None
+    """δ of the equivalence test (the smallest difference that matters), None if none was made."""
+    equivalence_interval: Interval | None = None
+    """The (1 - 2 α) interval of the difference the equivalence test reads (90 % at α = 0.05)."""
+    p_equivalent: float | None = None
+    """The equivalence test's p-value: the larger of its two one-sided p-values."""
 
     def __str__(self) -> str:
         i = self.interval
-        return (
+        text = (
             f"{self.claim}: {self.verdict} (estimate {i.estimate:.2f}, {i.level:.0%} interval "
-            f"[{i.low:.2f}, {i.high:.2f}], threshold {self.threshold:g})"
+            f"[{i.low:.2f}, {i.high:.2f}], threshold {self.threshold:g}"
+        )
+        e = self.equivalence_interval
+        if self.delta is None or e is None or self.p_equivalent is None:
+            return text + ")"
+        return (
+            f"{text}; ±δ = ±{self.delta:.2f}: {e.level:.0%} interval [{e.low:.2f}, {e.high:.2f}], "
+            f"TOST p = {self.p_equivalent:.3f})"
         )
 
 
@@ -484,8 +522,8 @@ def exit_spread_test(
     """
     min_visits = check_int("min_visits", min_visits, minimum=1)
     n_permutations = check_int("n_permutations", n_permutations, minimum=1)
-    level = _check_level(level)
-    rng = _rng(seed)
+    level = check_level(level)
+    rng = resampling_generator(seed)
     ca, cb = exit_counts(visits_a), exit_counts(visits_b)
     shared = sorted(
         ap

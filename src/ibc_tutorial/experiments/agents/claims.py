@@ -3,14 +3,16 @@
 The paper's results section makes five claims about its BC, IBC and DA-IBC agents trained in
 town01 and driven in the unseen town02 (``CLAIMS``). ``judge_claims(folder)`` judges each on a
 finished replication folder (``ibc-tutorial replicate --out FOLDER``), reading nothing but the
-folder, with the rule of ``ibc_tutorial.stats``: a claim is "holds" if the 95 % interval of the
-quantity it is about lies on its side of the threshold, "does not hold" if it lies on the other,
-"cannot tell at this scale" if it contains the threshold; a claim of several parts holds only if
-every part does (``combine``).
+folder, with four verdicts (``ibc_tutorial.equivalence``): a claim "holds" if the 95 % interval of the
+quantity it is about lies on its side of 0, "does not hold" if it lies on the other, is "equivalent within
+±δ" if the two one-sided tests (TOST, Schuirmann 1987) show the quantity within ±δ, and "cannot tell at
+this scale" otherwise. Each claim's δ, the smallest difference it cares about, is stated here before any
+data are read (``DELTA_RULES``). A claim of several parts holds only if every part does (``combine``).
 
-- claims 1-3 compare two methods by the two-level (agents, episodes) bootstrap interval of the
-  difference of their means (``stats.compare``): claim 1 at the first evaluation during training
-  (``metrics.jsonl``), claims 2 and 3 on the table's starts and on the held-out starts;
+- claims 1-3 compare two methods by the difference of their means, with the crossed bootstrap of agents
+  and starts (``crossed_bootstrap``: every agent drove the same starts, so the starts are a level of the
+  bootstrap): claim 1 at the first evaluation during training (``metrics.jsonl``), claims 2 and 3 on the
+  table's starts and on the held-out starts;
 - claims 4 and 5 read the stem analysis of the folder (``stems/analysis/``: ``ibc-tutorial stems analyse
   --folder FOLDER --out FOLDER/stems``, on the table's episodes of every agent, which ``replicate`` records):
   claim 4 (the Fig. 5 analogue) compares the share of the minority exit, min(p, 1 - p) of the left share p
@@ -33,6 +35,7 @@ seeds and starts they share (chapter 08's ablations: each a replication whose ``
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import NamedTuple
@@ -40,6 +43,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ibc_tutorial import stats
+from ibc_tutorial.equivalence import four_verdicts, judge_difference, tost
 from ibc_tutorial.experiments.agents.presets import Preset
 from ibc_tutorial.experiments.agents.replication_folder import (
     EVALUATIONS,
@@ -70,24 +74,46 @@ STEM_ANALYSIS = "stems/analysis"
 """Where in a replication folder the stem analysis's per-agent files are (``stem_analysis.run_analysis``)."""
 STEM_COMMAND = "ibc-tutorial stems analyse --folder {folder} --out {folder}/stems"
 """The command that makes them."""
+SCORE_SHARE_DELTA = 0.1
+"""δ of claims 1 and 2 as a share of the expert: a tenth of the expert's mean score (claim 1, per step of
+the table's episodes times the steps of the first evaluation) or of its mean distance on the same starts
+(claim 2)."""
+RED_LIGHT_DELTA = math.log(0.9) / math.log(0.7)
+"""δ of claim 3: the red lights per episode that cost a tenth of the score (0.7 ** δ = 0.9): 0.30."""
+MINORITY_DELTA = 0.05
+"""δ of claim 4: a tenth of 0.5, the minority share of an even choice between two exits."""
+RANGE_DELTA = 0.05
+"""δ of claim 5: one step of the 41-value steering grid the 3-nat range is read on (2 / 40)."""
+DELTA_RULES = {
+    1: f"{SCORE_SHARE_DELTA:.0%} of the expert's mean score, scaled to the first evaluation's episode length",
+    2: f"{SCORE_SHARE_DELTA:.0%} of the expert's mean distance on the same starts",
+    3: f"{RED_LIGHT_DELTA:.2f} red lights per episode, which cost a tenth of the score (0.7^δ = 0.9)",
+    4: f"{MINORITY_DELTA:.2f} of the crossings, a tenth of an even choice's minority share (0.5)",
+    5: f"{RANGE_DELTA:.2f} in steering, one step of the 41-value grid the energy is read on",
+}
+"""Each claim's δ in words: what "equivalent within ±δ" means for it, stated before the data are read."""
 RANGE_KEY = "range_extent"
 """Claim 5's reading of a state's energy: the extent of the steering within 3 nats of its minimum
 (``driving.energy_profiles.low_range``)."""
 
 
 # --------------------------------------------------------------------------- the pieces
+VERDICTS = (stats.HOLDS, stats.DOES_NOT_HOLD, stats.EQUIVALENT, stats.CANNOT_TELL)
+"""The four verdicts a claim or a part gets."""
+
+
 def combine(*verdicts: str) -> str:
-    """A claim made of several parts holds if every part does, does not hold if one part does not, else cannot
-    tell."""
+    """A claim made of several parts holds if every part does, does not hold if one part does not, is
+    equivalent within ±δ if every part is, else cannot tell."""
     for v in verdicts:
-        if v not in (stats.HOLDS, stats.DOES_NOT_HOLD, stats.CANNOT_TELL):
-            raise ValueError(
-                f"verdicts must be {stats.HOLDS!r}, {stats.DOES_NOT_HOLD!r} or {stats.CANNOT_TELL!r}, "
-                f"got {v!r}"
-            )
-    if verdicts and all(v == stats.HOLDS for v in verdicts):
-        return stats.HOLDS
-    return stats.DOES_NOT_HOLD if stats.DOES_NOT_HOLD in verdicts else stats.CANNOT_TELL
+        if v not in VERDICTS:
+            raise ValueError(f"verdicts must be one of {', '.join(map(repr, VERDICTS))}, got {v!r}")
+    if stats.DOES_NOT_HOLD in verdicts:
+        return stats.DOES_NOT_HOLD
+    for whole in (stats.HOLDS, stats.EQUIVALENT):
+        if verdicts and all(v == whole for v in verdicts):
+            return whole
+    return stats.CANNOT_TELL
 
 
 def stem_files(folder) -> dict[str, dict]:
@@ -177,7 +203,7 @@ def first_eval_scores(folder, method: str, preset: Preset) -> np.ndarray:
     """(agents, episodes) scores of the first evaluation during training (epoch ``preset.eval_every``), from
     each
     agent's ``metrics.jsonl``; ValueError naming the file if its first entry is not that evaluation."""
-    rows = []
+    rows, starts = [], set()
     for seed in preset.seeds:
         d = run_dir(folder, method, seed)
         first = read_metrics(d)  # ValueError naming a damaged file
@@ -187,9 +213,10 @@ def first_eval_scores(folder, method: str, preset: Preset) -> np.ndarray:
                 "and its episodes: the run is not one of this replication's"
             )
         rows.append([float(e["score"]) for e in first[0]["episodes"]])
-    if len({len(r) for r in rows}) != 1:
-        raise ValueError(f"the {method} agents of {folder} have first evaluations of different lengths")
-    return np.array(rows)  # (A, E)
+        starts.add(tuple(e.get("seed") for e in first[0]["episodes"]))
+    if len(starts) != 1:
+        raise ValueError(f"the {method} agents of {folder} have first evaluations from other starts")
+    return np.array(rows)  # (A, E), episode j of every agent from the same start
 
 
 # --------------------------------------------------------------------------- the verdicts
@@ -202,7 +229,7 @@ class ClaimVerdict:
     claim: str
     """The claim in words."""
     verdict: str
-    """``stats.HOLDS``, ``stats.DOES_NOT_HOLD`` or ``stats.CANNOT_TELL``."""
+    """One of ``VERDICTS``."""
     parts: tuple[stats.Judgement, ...]
     """The parts it combines, each with its interval."""
     missing: tuple[str, ...] = ()
@@ -272,31 +299,41 @@ def judge_claims(folder) -> ClaimVerdicts:
     folder, res, preset = _check_folder(folder)
     evaluations = [ev for ev in EVALUATIONS if ev == "final" or preset.heldout_episodes > 0]
 
-    def on_each_start_set(above: str, below: str, key: str, claim: str, unit: str) -> tuple:
-        """``above``'s mean ``key`` (in ``unit``) against ``below``'s, one comparison per set of starts."""
-        return tuple(
-            stats.compare(  # (agents, episodes) values of each method
-                episode_table(folder, above, key, ev).values,
-                episode_table(folder, below, key, ev).values,
-                f"{claim} ({STARTS[ev]}, {unit})",
-            )
-            for ev in evaluations
-        )
+    expert = {ev: episode_table(folder, "expert", "distance_m", ev).values[0] for ev in evaluations}  # (E,)
+
+    def on_each_start_set(above: str, below: str, key: str, claim: str, unit: str, delta) -> tuple:
+        """``above``'s mean ``key`` (in ``unit``) against ``below``'s, one comparison per set of starts;
+        ``delta(ev)``: the claim's δ on that set."""
+        parts = []
+        for ev in evaluations:
+            a, b = episode_table(folder, above, key, ev), episode_table(folder, below, key, ev)
+            if a.starts != b.starts:
+                raise ValueError(f"{folder}: {above} and {below} were evaluated from other starts ({ev})")
+            parts.append(judge_difference(a.values, b.values, f"{claim} ({STARTS[ev]}, {unit})", delta(ev)))
+        return tuple(parts)
 
     claims: dict[int, ClaimVerdict] = {}
 
-    # claim 1 (Fig. 4): BC's mean score above each energy-based method's at the first evaluation
+    # claim 1 (Fig. 4): BC's mean score above each energy-based method's at the first evaluation (its starts:
+    # the first ones of the table's, the same for every agent); δ: a tenth of the expert's score per step
     first = {m: first_eval_scores(folder, m, preset) for m in CLAIM_METHODS}  # (A, E_eval) each
+    expert_score = episode_table(folder, "expert", "score").values.mean()
+    delta1 = SCORE_SHARE_DELTA * expert_score * preset.eval_steps / preset.final_steps
     parts1 = tuple(
-        stats.compare(first["bc"], first[m], f"BC > {m.upper()} at the first evaluation")
+        judge_difference(first["bc"], first[m], f"BC > {m.upper()} at the first evaluation", delta1)
         for m in ("ibc", "da-ibc")
     )
-    # claim 2 (the table): DA-IBC's mean distance above IBC's, on each set of starts
-    parts2 = on_each_start_set("da-ibc", "ibc", "distance_m", "DA-IBC drives farther than IBC", "m")
+    # claim 2 (the table): DA-IBC's mean distance above IBC's, on each set of starts (the expert's distance
+    # is its score: it runs no red light)
+    parts2 = on_each_start_set(
+        "da-ibc", "ibc", "distance_m", "DA-IBC drives farther than IBC", "m",
+        lambda ev: SCORE_SHARE_DELTA * expert[ev].mean(),
+    )  # fmt: skip
     # claim 3 (the table): DA-IBC's mean red lights run per episode above BC's, on each set of starts
     parts3 = on_each_start_set(
-        "da-ibc", "bc", "red_light_infractions", "DA-IBC runs more red lights than BC", "per episode"
-    )
+        "da-ibc", "bc", "red_light_infractions", "DA-IBC runs more red lights than BC", "per episode",
+        lambda ev: RED_LIGHT_DELTA,
+    )  # fmt: skip
     for k, parts in ((1, parts1), (2, parts2), (3, parts3)):
         claims[k] = ClaimVerdict(k, CLAIMS[k], combine(*(j.verdict for j in parts)), parts)
 
@@ -316,8 +353,8 @@ def stem_claims(files: dict[str, dict], where, make: str) -> dict[int, ClaimVerd
     empty = [m for m, (_, c) in tables.items() if c.sum() == 0]
     if len(tables) == 2 and not empty:
         (la, ca), (lb, cb) = tables["da-ibc"], tables["bc"]
-        d4 = stats.ratio_of_sums_difference(la, ca, lb, cb, transform=minority)
-        parts4 = (stats.judge("minority exit at a stem: DA-IBC's share - BC's", d4),)
+        est, reps = stats.ratio_of_sums_difference_replicates(la, ca, lb, cb, transform=minority)
+        parts4 = (_judged("minority exit at a stem: DA-IBC's share - BC's", est, reps, MINORITY_DELTA),)
         claims[4] = ClaimVerdict(4, CLAIMS[4], parts4[0].verdict, parts4)
     else:
         gone = [no_stems.format(m) for m, h in have.items() if not h]
@@ -326,8 +363,9 @@ def stem_claims(files: dict[str, dict], where, make: str) -> dict[int, ClaimVerd
     # claim 5 (Fig. 6): DA-IBC's low-energy steering is wider at a stem's decision than at a red stop
     diffs = range_differences(files) if have["da-ibc"] else np.zeros(0)
     if len(diffs) >= 2:
-        d5 = stats.mean_interval(diffs[:, None])  # (A, 1): the bootstrap over agents
-        parts5 = (stats.judge("3-nat steering range: stem decision states - red stops (DA-IBC)", d5),)
+        reps = stats.bootstrap_means(diffs[:, None])  # (A, 1): the bootstrap over agents
+        claim5 = "3-nat steering range: stem decision states - red stops (DA-IBC)"
+        parts5 = (_judged(claim5, float(diffs.mean()), reps, RANGE_DELTA),)
         claims[5] = ClaimVerdict(5, CLAIMS[5], parts5[0].verdict, parts5)
     else:
         why = (
@@ -335,6 +373,13 @@ def stem_claims(files: dict[str, dict], where, make: str) -> dict[int, ClaimVerd
         )
         claims[5] = ClaimVerdict(5, CLAIMS[5], stats.CANNOT_TELL, (), missing=(why,))
     return claims
+
+
+def _judged(claim: str, estimate: float, replicates: np.ndarray, delta: float) -> stats.Judgement:
+    """The four-verdict ``Judgement`` of "the quantity is above 0" from its bootstrap resamples."""
+    interval = stats.percentile_interval(estimate, replicates, stats.LEVEL)
+    eq = tost(estimate, replicates, delta)
+    return stats.Judgement(claim, interval, 0.0, four_verdicts(interval, eq), eq.delta, eq.interval, eq.p)
 
 
 def judge_stem_claims(analysis) -> dict[int, ClaimVerdict]:
