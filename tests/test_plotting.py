@@ -312,6 +312,23 @@ def test_town_figures():
     plt.close(fig)
 
 
+def test_free_driving_small_multiples():
+    from ibc_tutorial.driving import get_town
+
+    xy = np.array([[10.0, 10.0], [50.0, 10.0], [50.0, 60.0]])
+    tracks = {"bc": [xy] * 3, "da-ibc": [xy] * 2}
+    fig = agents.plot_free_driving(
+        get_town("town02"), tracks, panel_titles={"bc": ["a", "b", "c"]}, columns=2
+    )
+    shown = [ax for ax in fig.axes if ax.get_visible()]
+    assert len(shown) == 5 and [ax.get_title() for ax in shown[:3]] == ["a", "b", "c"]  # one episode per map
+    assert all(ax.get_legend() is None for ax in fig.axes) and shown[3].get_title() == "episode 0"
+    assert [f._suptitle.get_text() for f in fig.subfigs] == ["BC (Beta)", "DA-IBC"]
+    assert_labelled(fig)
+    with pytest.raises(ValueError, match="trajectories"):
+        agents.plot_free_driving(get_town("town02"), {"bc": []})
+
+
 def test_agents_figures():
     assert agents.plot_agent_architecture().axes[0].get_title()
     plt.close("all")
@@ -328,9 +345,12 @@ def test_agents_figures():
     assert_labelled(fig)
     steer, accel = np.linspace(-1, 1, 5), np.linspace(-1, 1, 4)
     fig = agents.plot_energy_landscapes(
-        [("p", np.ones((4, 5)) + accel[:, None], np.zeros((3, 2)), None)], steer, accel
+        [("p", np.ones((4, 5)) + accel[:, None], np.array([[0.0, -1.0], [0.1, -1.0], [0.0, 0.0]]), None)],
+        steer,
+        accel,
     )
     assert common.STEER_LABEL in fig.axes[1].get_xlabel()
+    assert not fig.axes[1].collections[-1].get_clip_on()  # draws at full braking (-1) are not cut
     assert_labelled(fig)
     counts = {
         "bc": {3: {"left": 1, "straight": 2, "right": 0}},
@@ -478,5 +498,11 @@ def test_route_figures_draw_and_check_their_input():
         {"2 m": {"left": steer**2, "no command": steer}}, steer, ylabel="E", title="T"
     )
     assert len(fig.axes) == 1 and len(fig.axes[0].lines) == 3  # two curves and the zero line
+    assert fig.axes[0].get_legend() is None and len(fig.legends) == 1  # one legend, off the curves
+    four = {f"{d} m": {"left": steer**2, "right": steer**3} for d in (1, 2, 3, 4)}
+    fig = routes.plot_command_curves(four, steer, ylabel="E", title="T")
+    assert len(fig.axes) == 4 and len({ax.get_position().y0 for ax in fig.axes}) == 2  # two rows of two
+    assert [t.get_text() for t in fig.legends[0].get_texts()] == ["left", "right"]
+    assert_labelled(fig)
     with pytest.raises(ValueError, match="one value per steering value"):
         routes.plot_command_curves({"2 m": {"left": steer[:3]}}, steer, ylabel="E", title="T")

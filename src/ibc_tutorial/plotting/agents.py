@@ -157,8 +157,54 @@ def plot_trajectories(
             ax.plot(xy[:, 0], xy[:, 1], color=color, lw=1.8, alpha=0.85, label=f"episode {k}")
             ax.plot(xy[0, 0], xy[0, 1], "o", color=color, ms=7, mec="k")
             ax.plot(xy[-1, 0], xy[-1, 1], "X", color=color, ms=8, mec="k")
-        ax.legend(fontsize=8, loc="upper right")
+        if len(tracks) > 1:  # off the map, to its right
+            ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
     return finish(fig, True, title=suptitle + " (dot: start, cross: end)")
+
+
+def plot_free_driving(
+    town,
+    trajectories: dict,
+    *,
+    panel_titles: dict | None = None,
+    titles: dict | None = None,
+    suptitle: str = "Free driving in town02",
+    columns: int = 5,
+):
+    """Small multiples: for each entry of ``trajectories`` ({name: [xy (T, 2), ...]}) a block of small maps,
+    one episode per map, in rows of ``columns``, its path in the method's colour (dot: start, cross: end).
+
+    ``titles``: {name: the block's title}; ``panel_titles``: {name: [one title per episode]} (default
+    "episode k"). One path per map: ten episodes on one map cannot be told apart at a column's width."""
+    n = check_panels("trajectories", trajectories)
+    columns = int(check_positive("columns", columns))
+    rows = {name: -(-len(tracks) // columns) for name, tracks in trajectories.items()}  # ceil
+    if min(len(t) for t in trajectories.values()) == 0:
+        raise ValueError("trajectories must hold at least one episode per entry")
+    fig = plt.figure(
+        figsize=(2.1 * columns, 2.25 * sum(rows.values()) + 0.55 * n + 0.4), layout="constrained"
+    )
+    blocks = fig.subfigures(n, 1, height_ratios=[r + 0.3 for r in rows.values()], squeeze=False)[:, 0]
+    for block, (name, tracks) in zip(blocks, trajectories.items(), strict=True):
+        axes = block.subplots(rows[name], columns, squeeze=False)
+        color = METHOD_COLORS.get(name, "C1")
+        names = (panel_titles or {}).get(name) or [f"episode {k}" for k in range(len(tracks))]
+        for k, ax in enumerate(axes.ravel()):
+            if k >= len(tracks):
+                ax.set_visible(False)
+                continue
+            plot_town(town, ax=ax, title=names[k], markers=False)
+            xy = as_array(tracks[k])  # (T, 2)
+            ax.plot(xy[:, 0], xy[:, 1], color=color, lw=1.6)
+            ax.plot(xy[0, 0], xy[0, 1], "o", color=color, ms=6, mec="k")
+            ax.plot(xy[-1, 0], xy[-1, 1], "X", color="w", ms=7, mec="k")
+            ax.title.set_fontsize(8)
+            ax.tick_params(labelsize=6)
+            ax.set_xlabel("x (m, east)" if k // columns == rows[name] - 1 else "", fontsize=7)
+            ax.set_ylabel("y (m, north)" if k % columns == 0 else "", fontsize=7)
+        block.suptitle((titles or {}).get(name, METHOD_LABELS.get(name, name)), fontsize=10)
+    fig.suptitle(suptitle + " (one episode per map; dot: start, cross: end)")
+    return fig
 
 
 def plot_energy_landscapes(panels: list, steer, accel, *, suptitle: str = "Energy landscapes of DA-IBC"):
@@ -181,7 +227,7 @@ def plot_energy_landscapes(panels: list, steer, accel, *, suptitle: str = "Energ
         e = as_array(e)  # (A, S)
         cs = ax_e.contourf(steer, accel, e - e.min(), levels=20, cmap="viridis")
         fig.colorbar(cs, ax=ax_e, label="E(x, y) - min E")
-        ax_e.axvline(0.0, color="w", ls="--", lw=1, label="zero steering")
+        ax_e.axvline(0.0, color="w", ls="--", lw=1)
         p = as_array(points)  # (K, 2)
         ax_e.scatter(
             p[:, 0],
@@ -190,9 +236,12 @@ def plot_energy_landscapes(panels: list, steer, accel, *, suptitle: str = "Energ
             s=28,
             edgecolors="white",
             linewidths=0.8,
-            label=f"{len(p)} DFO inferences",
+            label=f"{len(p)} DFO inferences (white dashes: zero steering)",
+            clip_on=False,  # a draw at the box's edge (full braking: -1) is drawn whole, over the frame
+            zorder=5,
         )
-        label_axes(ax_e, f"y_1: {STEER_LABEL}", f"y_2: {ACCEL_LABEL}", title, legend=True, loc="lower right")
+        label_axes(ax_e, f"y_1: {STEER_LABEL}", f"y_2: {ACCEL_LABEL}", title)
+        ax_e.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.2), frameon=False)
     return finish(fig, True, title=suptitle)
 
 

@@ -106,11 +106,18 @@ def plot_command_curves(panels: dict, x, *, ylabel: str, title: str, clip: float
 
     ``panels``: ``{panel title: {command or label: (G,) values}}`` over ``x`` (G,) steering values; a
     command's curve takes its colour (``COMMAND_COLORS``), any other label (e.g. "no command (routeless)")
-    is drawn dashed grey. ``clip``: values drawn at most this (energies), None for none."""
+    is drawn dashed grey. ``clip``: values drawn at most this (energies), None for none. Two panels per row,
+    one legend for all of them below the panels (off the curves)."""
     n = check_panels("panels", panels)
     x = as_array(x, float).ravel()
-    fig, axes = plt.subplots(1, n, figsize=(3.6 * n, 3.3), squeeze=False, sharey=True)
-    for ax, (name, curves) in zip(axes[0], panels.items(), strict=True):
+    cols = min(2, n)
+    rows = -(-n // cols)  # ceil
+    fig, axes = plt.subplots(
+        rows, cols, figsize=(4.6 * cols, 3.0 * rows + 0.5), squeeze=False, sharex=True, sharey=True
+    )
+    for ax in axes.ravel()[n:]:
+        ax.set_visible(False)
+    for ax, (name, curves) in zip(axes.ravel(), panels.items(), strict=False):
         for label, v in curves.items():
             v = as_array(v, float).ravel()
             if v.shape != x.shape:
@@ -126,5 +133,12 @@ def plot_command_curves(panels: dict, x, *, ylabel: str, title: str, clip: float
         ax.axvline(0, color="0.3", lw=0.8, ls=":")
         if clip is not None:
             ax.set_ylim(0, clip)
-        label_axes(ax, STEER_LABEL, ylabel, name, legend=True, fontsize=7)
-    return finish(fig, True, title=title)
+        k = list(panels).index(name)
+        last_row = k + cols >= n  # no panel below it
+        label_axes(ax, STEER_LABEL if last_row else "", ylabel if k % cols == 0 else "", name)
+        ax.tick_params(labelbottom=last_row)
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    fig.suptitle(title)
+    fig.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=9, frameon=False)
+    fig.tight_layout(rect=(0, 0.4 / (3.0 * rows + 0.5), 1, 1))
+    return fig
