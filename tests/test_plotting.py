@@ -11,7 +11,7 @@ import torch
 
 from ibc_tutorial import plotting
 from ibc_tutorial.optimizers.dfo import DFOConfig
-from ibc_tutorial.plotting import agents, common, ingredients, multimodality, town
+from ibc_tutorial.plotting import agents, common, ingredients, multimodality, replication, town
 from ibc_tutorial.toy import SideRoadWorld, TreeWorld
 
 PACKAGE = Path(plotting.__file__).parent
@@ -317,7 +317,7 @@ def test_free_driving_small_multiples():
 
     xy = np.array([[10.0, 10.0], [50.0, 10.0], [50.0, 60.0]])
     tracks = {"bc": [xy] * 3, "da-ibc": [xy] * 2}
-    fig = agents.plot_free_driving(
+    fig = replication.plot_free_driving(
         get_town("town02"), tracks, panel_titles={"bc": ["a", "b", "c"]}, columns=2
     )
     shown = [ax for ax in fig.axes if ax.get_visible()]
@@ -326,7 +326,7 @@ def test_free_driving_small_multiples():
     assert [f._suptitle.get_text() for f in fig.subfigs] == ["BC (Beta)", "DA-IBC"]
     assert_labelled(fig)
     with pytest.raises(ValueError, match="trajectories"):
-        agents.plot_free_driving(get_town("town02"), {"bc": []})
+        replication.plot_free_driving(get_town("town02"), {"bc": []})
 
 
 def test_agents_figures():
@@ -506,3 +506,18 @@ def test_route_figures_draw_and_check_their_input():
     assert_labelled(fig)
     with pytest.raises(ValueError, match="one value per steering value"):
         routes.plot_command_curves({"2 m": {"left": steer[:3]}}, steer, ylabel="E", title="T")
+
+
+def test_share_by_start():
+    from ibc_tutorial.stats import Interval
+
+    shares = {"bc": [0.5, 1.0, 0.7], "da-ibc": [1.1, 0.9, 1.2]}
+    iv = {m: {"agents only": Interval(1.0, 0.9, 1.1), "crossed": Interval(1.0, 0.8, 1.2)} for m in shares}
+    fig = replication.plot_share_by_start(shares, [1000, 1001, 1002], iv, title="T")
+    left, right = fig.axes
+    assert [t.get_text() for t in left.get_xticklabels()] == ["1000", "1001", "1002"]
+    assert [t.get_text() for t in right.get_yticklabels()] == ["BC (Beta)", "DA-IBC"]
+    assert [t.get_text() for t in right.get_legend().get_texts()] == ["agents only", "crossed"]
+    assert_labelled(fig)
+    with pytest.raises(ValueError, match="one share per start"):
+        replication.plot_share_by_start({"bc": [0.5]}, [1000, 1001], iv, title="T")

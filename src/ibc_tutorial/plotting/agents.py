@@ -162,51 +162,6 @@ def plot_trajectories(
     return finish(fig, True, title=suptitle + " (dot: start, cross: end)")
 
 
-def plot_free_driving(
-    town,
-    trajectories: dict,
-    *,
-    panel_titles: dict | None = None,
-    titles: dict | None = None,
-    suptitle: str = "Free driving in town02",
-    columns: int = 5,
-):
-    """Small multiples: for each entry of ``trajectories`` ({name: [xy (T, 2), ...]}) a block of small maps,
-    one episode per map, in rows of ``columns``, its path in the method's colour (dot: start, cross: end).
-
-    ``titles``: {name: the block's title}; ``panel_titles``: {name: [one title per episode]} (default
-    "episode k"). One path per map: ten episodes on one map cannot be told apart at a column's width."""
-    n = check_panels("trajectories", trajectories)
-    columns = int(check_positive("columns", columns))
-    rows = {name: -(-len(tracks) // columns) for name, tracks in trajectories.items()}  # ceil
-    if min(len(t) for t in trajectories.values()) == 0:
-        raise ValueError("trajectories must hold at least one episode per entry")
-    fig = plt.figure(
-        figsize=(2.1 * columns, 2.25 * sum(rows.values()) + 0.55 * n + 0.4), layout="constrained"
-    )
-    blocks = fig.subfigures(n, 1, height_ratios=[r + 0.3 for r in rows.values()], squeeze=False)[:, 0]
-    for block, (name, tracks) in zip(blocks, trajectories.items(), strict=True):
-        axes = block.subplots(rows[name], columns, squeeze=False)
-        color = METHOD_COLORS.get(name, "C1")
-        names = (panel_titles or {}).get(name) or [f"episode {k}" for k in range(len(tracks))]
-        for k, ax in enumerate(axes.ravel()):
-            if k >= len(tracks):
-                ax.set_visible(False)
-                continue
-            plot_town(town, ax=ax, title=names[k], markers=False)
-            xy = as_array(tracks[k])  # (T, 2)
-            ax.plot(xy[:, 0], xy[:, 1], color=color, lw=1.6)
-            ax.plot(xy[0, 0], xy[0, 1], "o", color=color, ms=6, mec="k")
-            ax.plot(xy[-1, 0], xy[-1, 1], "X", color="w", ms=7, mec="k")
-            ax.title.set_fontsize(8)
-            ax.tick_params(labelsize=6)
-            ax.set_xlabel("x (m, east)" if k // columns == rows[name] - 1 else "", fontsize=7)
-            ax.set_ylabel("y (m, north)" if k % columns == 0 else "", fontsize=7)
-        block.suptitle((titles or {}).get(name, METHOD_LABELS.get(name, name)), fontsize=10)
-    fig.suptitle(suptitle + " (one episode per map; dot: start, cross: end)")
-    return fig
-
-
 def plot_energy_landscapes(panels: list, steer, accel, *, suptitle: str = "Energy landscapes of DA-IBC"):
     """Per panel (title, E (A, S) over accel x steer, points (K, 2), bev (5, S, S) or None): the BEV and E
     with the points."""
