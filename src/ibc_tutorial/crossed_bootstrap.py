@@ -31,6 +31,7 @@ from ibc_tutorial.stats import (
     DEFAULT_RESAMPLES,
     LEVEL,
     Interval,
+    check_expert,
     check_level,
     check_scores,
     percentile_interval,
@@ -87,18 +88,6 @@ def crossed_mean_interval(
     return percentile_interval(x.mean(), reps, level)
 
 
-def _check_expert(expert, n_starts: int) -> np.ndarray:
-    ex = np.asarray(expert, dtype=float)
-    if ex.ndim != 1 or len(ex) != n_starts:
-        raise ValueError(
-            f"expert must be a 1-D array of {n_starts} episode scores (one per column of scores), "
-            f"got shape {ex.shape}"
-        )
-    if not (np.isfinite(ex).all() and (ex > 0).all()):
-        raise ValueError("expert must hold finite scores > 0 in every episode")
-    return ex
-
-
 def crossed_ratio_interval(
     scores,
     expert,
@@ -113,7 +102,7 @@ def crossed_ratio_interval(
     ``scores`` (A, E), ``expert`` (E,) with every score > 0. Each resample draws agents and starts, and
     the expert's mean is over the same drawn starts (as ``stats.ratio_interval`` does)."""
     x = check_scores("scores", scores)
-    ex = _check_expert(expert, x.shape[1])
+    ex = check_expert(expert, x.shape[1])
     level = check_level(level)
     n_resamples = check_int("n_resamples", n_resamples, minimum=1)
     rng = resampling_generator(seed)
@@ -166,4 +155,4 @@ def crossed_difference_interval(
 def share_per_start(scores, expert) -> np.ndarray:
     """(E,) the method's mean over its agents at each start over the expert's score there."""
     x = check_scores("scores", scores)
-    return x.mean(axis=0) / _check_expert(expert, x.shape[1])  # (E,)
+    return x.mean(axis=0) / check_expert(expert, x.shape[1])  # (E,)

@@ -68,6 +68,19 @@ def check_scores(name: str, scores) -> np.ndarray:
     return x
 
 
+def check_expert(expert, n_starts: int) -> np.ndarray:
+    """``expert`` as a (E,) array of E = ``n_starts`` finite scores > 0: the expert's score at each start."""
+    ex = np.asarray(expert, dtype=float)
+    if ex.ndim != 1 or len(ex) != n_starts:
+        raise ValueError(
+            f"expert must be a 1-D array of {n_starts} episode scores (one per column of scores), "
+            f"got shape {ex.shape}"
+        )
+    if not (np.isfinite(ex).all() and (ex > 0).all()):
+        raise ValueError("expert must hold finite scores > 0 in every episode")
+    return ex
+
+
 def check_level(level) -> float:
     """``level`` as a coverage strictly between 0 and 1."""
     level = check_probability("level", level)
@@ -195,14 +208,7 @@ def ratio_interval(
     bootstrap then resamples its episodes only.
     """
     x = check_scores("scores", scores)
-    ex = np.asarray(expert, dtype=float)
-    if ex.ndim != 1 or len(ex) != x.shape[1]:
-        raise ValueError(
-            f"expert must be a 1-D array of {x.shape[1]} episode scores (one per column of scores), "
-            f"got shape {ex.shape}"
-        )
-    if not (np.isfinite(ex).all() and (ex > 0).all()):
-        raise ValueError("expert must hold finite scores > 0 in every episode")
+    ex = check_expert(expert, x.shape[1])
     level = check_level(level)
     n_resamples = check_int("n_resamples", n_resamples, minimum=1)
     rng = resampling_generator(seed)
