@@ -30,6 +30,8 @@ from ibc_tutorial.driving.stems import EXITS, stem_approaches
 from ibc_tutorial.driving.towns import TOWNS, get_town
 from ibc_tutorial.utils import check_choice, check_fraction, check_int, check_positive, progress
 
+GIVEN_ROUTE_STREAM = 1_000_033
+"""Mixed into the seed of an episode's generator when ``collect`` is given its routes."""
 TWIN_STREAM = 1_000_003
 """Mixed into the seed of the stem twins' generators, so that they never share a stream with a route."""
 MAX_TWIN_STEPS = 300
@@ -275,19 +277,32 @@ def make_expert(sim: DrivingSim, config: CollectConfig) -> Expert:
     )
 
 
-def collect(config: CollectConfig = CollectConfig(), show_progress: bool | None = None) -> DemoLog:
-    """Drive the expert over the episodes of ``config`` (``episode_plan``) and return the log."""
+def collect(
+    config: CollectConfig = CollectConfig(), show_progress: bool | None = None, routes: list | None = None
+) -> DemoLog:
+    """Drive the expert over the episodes of ``config`` (``episode_plan``) and return the log.
+
+    ``routes``: ``config.routes`` routes to drive instead of the random ones (e.g.
+    ``command_balance.balanced_routes``); each episode's lights and noise then come from its own stream."""
     c = config
+    if routes is not None and (len(routes) != c.routes or not all(isinstance(r, Route) for r in routes)):
+        raise ValueError(f"routes must be a list of {c.routes} Route (config.routes), got {routes!r:.80}")
     sim = DrivingSim(c.town)
     expert = make_expert(sim, c)
     steps = episode_steps(c)
     n = n_episodes(c)
     rec = Recorder(sim)
-    routes, ended = [], []
+    records, ended = [], []
     bar = progress(total=n, desc=f"collecting {c.town}", enabled=show_progress)
     for k in range(n):
-        plan = episode_plan(sim, c, k)
         twin = k >= c.routes
+        if routes is not None and not twin:
+            r = routes[k]
+            plan = EpisodePlan(
+                np.random.default_rng([c.seed, GIVEN_ROUTE_STREAM, k]), r, None, {"turns": list(r.turns)}
+            )
+        else:
+            plan = episode_plan(sim, c, k)
 
         def record(action, executed, k=k):
             rec.record(k, action, executed, expert.current_lane)
@@ -306,9 +321,9 @@ def collect(config: CollectConfig = CollectConfig(), show_progress: bool | None 
             )
         )
         lane, s = sim.start
-        routes.append({"start_lane": int(lane), "start_s": float(s), **plan.record})
+        records.append({"start_lane": int(lane), "start_s": float(s), **plan.record})
         bar.update(1)
     bar.close()
     # what was collected and how; no wall time (the command prints it): identical collections, identical logs
-    meta = {"config": asdict(c), "expert": asdict(expert.config), "routes": routes, "episodes": ended}
+    meta = {"config": asdict(c), "expert": asdict(expert.config), "routes": records, "episodes": ended}
     return rec.log(meta)
