@@ -32,7 +32,7 @@ def two_gaussians(
     return {"obs": torch.zeros(n, 1), "actions": actions.clamp(-1.0, 1.0)}
 
 
-def train_flow(seed: int = 0, *, n: int = 2000, steps: int = 1000, width: int = 64) -> FlowPolicy:
+def train_flow(seed: int = 0, *, n: int = 2000, steps: int = 600, width: int = 64) -> FlowPolicy:
     """A ``FlowPolicy`` (two layers of ``width``) trained from ``seed`` on ``two_gaussians(n)`` by ``steps``
     Adam steps at learning rate 3e-3 on minibatches of 128."""
     seed = check_int("seed", seed, minimum=0)
