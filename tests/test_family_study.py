@@ -111,3 +111,36 @@ def test_bad_settings_name_the_field():
 def test_the_command_line_checks_its_seeds(tmp_path, capsys):
     assert main(["families", "--out", str(tmp_path / "f"), "--seeds", "a,b"]) == 2
     assert "--seeds" in capsys.readouterr().err
+
+
+def test_the_figures_of_chapter_13_draw_from_a_tiny_study(tmp_path):
+    import matplotlib.pyplot as plt
+
+    from ibc_tutorial.plotting import families as figs
+
+    res = family_study.run_study(tmp_path / "families", tiny_settings(), command="test")
+    town = {
+        "study": {
+            "methods": {
+                "bc": {"minority": [0.01, 0.0, 0.05], "network_evaluations_per_decision": {"head": 1}},
+                "flow": {"minority": [0.33, 0.2, 0.48], "network_evaluations_per_decision": {"head": 64}},
+            }
+        }
+    }
+    for fig in (figs.plot_coverage_cost(res, town), figs.plot_coverage_cost(res), figs.plot_tree_loop(res)):
+        assert fig.axes
+    assert figs.plot_flow_steps(res).axes
+    plt.close("all")
+
+
+def test_the_live_example_trains_and_samples_at_a_tiny_size():
+    from ibc_tutorial.experiments import flow_toy
+
+    data = flow_toy.two_gaussians(100, torch.Generator().manual_seed(0))
+    assert data["obs"].shape == (100, 1) and (data["actions"].abs() <= 1).all()
+    assert (data["actions"] > 0).any() and (data["actions"] < 0).any()  # both answers
+    policy = flow_toy.train_flow(0, n=100, steps=5, width=8)
+    samples = flow_toy.samples_by_k(policy, (1, 3), n=7)
+    assert set(samples) == {1, 3} and samples[3].shape == (7,)
+    with pytest.raises(ValueError, match="centre"):
+        flow_toy.two_gaussians(10, torch.Generator(), centre=0)
