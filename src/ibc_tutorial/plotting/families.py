@@ -80,7 +80,12 @@ def plot_flow_histogram(samples, k: int, modes=(-0.6, 0.6)):
     fig, ax = plt.subplots(figsize=(5.5, 3.0))
     draw_flow_histogram(ax, as_array(samples), modes)
     ax.set_ylim(0, 0.5)
-    label_axes(ax, "action", "share of samples", f"Flow samples with K = {k} Euler step{'s' * (k > 1)}")
+    label_axes(
+        ax,
+        "action (steering units)",
+        "share of samples",
+        f"Flow samples with K = {k} Euler step{'s' * (k > 1)}",
+    )
     fig.tight_layout()
     return fig
 
