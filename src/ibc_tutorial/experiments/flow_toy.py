@@ -1,12 +1,12 @@
 """Chapter 13's live example: a flow policy learns a 1-D target with two answers, and acts by K Euler steps.
 
 The target is the tree's choice in one dimension: one observation (a constant 0), and the expert's action
-drawn half the time from N(−``centre``, ``spread``²) and half the time from N(+``centre``, ``spread``²)
-(``two_gaussians``). A ``FlowPolicy`` is trained on it by conditional flow matching (``train_flow``) and
-draws samples with K Euler steps (``samples_by_k``). With K = 1 the single step from t = 0 lands every
-sample on y_0 + v(y_0, 0) = E[y_1]: the velocity at t = 0 is E[y_1] − y_0 whatever y_0 is, so one step is
-the regression's average, the answer between the two modes. More steps follow the curved field and split
-the samples between the two modes.
+drawn half the time near minus ``centre`` and half the time near ``centre``, with Gaussian noise of
+standard deviation ``spread`` (``two_gaussians``). A ``FlowPolicy`` is trained on it by conditional flow
+matching (``train_flow``) and draws samples with K Euler steps (``samples_by_k``). With K = 1 the single
+step from t = 0 lands every sample on y_0 + v(y_0, 0) = E[y_1]: the velocity at t = 0 is E[y_1] − y_0
+whatever y_0 is, so one step is the regression's average, the answer between the two modes. More steps
+follow the curved field and split the samples between the two modes.
 """
 
 from __future__ import annotations
@@ -22,8 +22,8 @@ from ibc_tutorial.utils import check_int, check_positive
 def two_gaussians(
     n: int, generator: torch.Generator, centre: float = 0.6, spread: float = 0.08
 ) -> dict[str, torch.Tensor]:
-    """``n`` demonstrations {"obs": (n, 1) zeros, "actions": (n, 1)}: ±``centre`` (half each, at random)
-    plus N(0, ``spread``²) noise."""
+    """``n`` demonstrations {"obs": (n, 1) zeros, "actions": (n, 1)}: ``centre`` or minus ``centre`` (half
+    each, at random) plus N(0, ``spread`` squared) noise."""
     n = check_int("n", n, minimum=1)
     check_positive("centre", centre)
     check_positive("spread", spread)
