@@ -148,6 +148,8 @@ def check_paths(command: str, args: argparse.Namespace) -> None:
         if not Path(args.folder, "runs").is_dir():
             raise UserError(f"--folder must be a replication folder with runs/, got {args.folder}")
         check_output_dir("--out", args.out)
+    elif command == "families":
+        check_output_dir("--out", args.out)
     elif command == "two-answers":
         check_output_dir("--out", args.out)
         if args.baseline is not None and not Path(args.baseline, "runs").is_dir():
@@ -404,6 +406,24 @@ def _two_answers_arguments(p: argparse.ArgumentParser) -> None:
     )
 
 
+def _families_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--out", required=True, help="folder of the study (resumed if interrupted)")
+    p.add_argument(
+        "--seeds", default="20,21,22,23,24", help="seeds of the reported results (default: %(default)s)"
+    )
+    p.add_argument(
+        "--tune-seeds",
+        default="0,1,2,3,4",
+        help="seeds the flow's and R-NCE's settings are chosen on, never reported (default: %(default)s)",
+    )
+    p.add_argument("--threads", type=int, default=1, help="torch threads per process (default: %(default)s)")
+    p.add_argument(
+        "--workers", type=int, default=1, help="training runs in parallel processes (default: %(default)s)"
+    )
+    p.add_argument("--force", action="store_true", help="start over: delete the study already in --out")
+    p.add_argument("--note", default=None, help="a note for the provenance (e.g. what else the machine ran)")
+
+
 def _routes_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--folder", default="book/results/laptop", help="replication folder with runs/")
     p.add_argument(
@@ -483,6 +503,12 @@ SUBCOMMANDS: dict[str, tuple[str, object, str]] = {
         "chapter 12's study: agents trained where a stem is a state with two answers, and read there "
         "(about an hour on 2 cores with --workers 2 --threads 1)",
     ),
+    "families": (
+        "families",
+        _families_arguments,
+        "chapter 13's study: seven policy families at the junction and the tree, and their cost per decision "
+        "(about 15 minutes on one core)",
+    ),
     "routes": (
         "routes",
         _routes_arguments,
@@ -543,6 +569,7 @@ def main(argv: list[str] | None = None) -> int:
             "replicate-steering",
             "sweep-steering",
             "two-answers",
+            "families",
         )
         print(
             f"{prog}: interrupted; "

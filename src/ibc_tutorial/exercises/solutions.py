@@ -356,3 +356,24 @@ def ch12_exit_summary(counts):
     right = sum(c[1] for c in counts)
     both = sum(c[0] > 0 and c[1] > 0 for c in counts)
     return {"minority": min(left, right) / (left + right), "both": both}
+
+
+def ch13_euler_sample(velocity, y0, n_steps):
+    """K Euler steps of dy/dt = v(y, t) from t = 0 to 1: y <- y + v(y, k / K) / K, nothing clipped."""
+    y = y0
+    for k in range(n_steps):
+        y = y + velocity(y, k / n_steps) / n_steps
+    return y
+
+
+def ch13_flow_pair(y0, y1, t):
+    """The straight path's point at t, y_t = (1 - t) y0 + t y1 (one t per row), and its velocity y1 - y0."""
+    t = t[:, None]  # (N, 1)
+    return (1 - t) * y0 + t * y1, y1 - y0
+
+
+def ch13_ranking_logits(pos_energy, neg_energy, pos_log_q, neg_log_q):
+    """Ranking NCE's logits, -E - log q for the expert (first) and the N counter-examples: (B, 1 + N)."""
+    energy = torch.cat([pos_energy[:, None], neg_energy], dim=1)
+    log_q = torch.cat([pos_log_q[:, None], neg_log_q], dim=1)
+    return -energy - log_q

@@ -207,12 +207,23 @@ def mode_masses(
     the three columns are turning left, going straight and turning right (``world.mode_names``);
     the expert takes each one third of the time. Returns (B, 3) masses (each row sums to at most 1).
     """
-    check_positive("radius", radius)
-    grid = action_grid(check_int("grid_n", grid_n, minimum=2), 2)  # (G, 2)
-    p = torch.softmax(-grid_energies(model, model.embed(obs), grid), dim=1)  # (B, G)
     modes, _ = world.modes(obs)  # (B, 3, 2)
-    near = (grid[None, :, None, :] - modes[:, None, :, :]).norm(dim=-1) <= radius  # (B, G, 3)
-    return (p[:, :, None] * near).sum(dim=1)  # (B, 3)
+    return masses_near(model, obs, modes, grid_n=grid_n, radius=radius)
+
+
+@torch.no_grad()
+def masses_near(
+    model: EnergyModel, obs: torch.Tensor, modes: torch.Tensor, *, grid_n: int = 51, radius: float = 0.15
+) -> torch.Tensor:
+    """Probability p_θ(y|x) = softmax(−E(x, ·)) puts within ``radius`` of each of ``modes`` (B, K, D), with
+    p_θ normalised over a grid of ``grid_n`` points per action dimension of the box: (B, K), each row
+    summing to at most 1 when the modes lie farther apart than 2 × ``radius`` (any world, any D)."""
+    check_positive("radius", radius)
+    check_tensor("modes", modes, ndim=3)
+    grid = action_grid(check_int("grid_n", grid_n, minimum=2), modes.shape[-1])  # (G, D)
+    p = torch.softmax(-grid_energies(model, model.embed(obs), grid), dim=1)  # (B, G)
+    near = (grid[None, :, None, :] - modes[:, None, :, :]).norm(dim=-1) <= radius  # (B, G, K)
+    return (p[:, :, None] * near).sum(dim=1)  # (B, K)
 
 
 @torch.no_grad()

@@ -20,6 +20,11 @@ Gaussians), "beta" (the DA-IBC paper's BC, eq. 1), "ibc" (InfoNCE, uniform count
 same counter-examples with ranking NCE: exp(−E) ∝ p) and "flow" (conditional flow matching).
 ``run_family`` trains and measures one (family, seed); ``compare`` maps it over families and seeds
 in worker processes (``parallel.parallel_map``); ``summarize`` reduces the runs per family.
+
+What does not depend on the world is shared with the tree's study (``experiments.family_tree``): the
+networks (``make_policy``, on any world with ``obs_dim`` and ``action_dim``), their objectives and training
+(``train_family``), their draws (``draw_actions``), the mass near given modes (``masses_near``) and the
+Bhattacharyya coefficient over any number of modes.
 """
 
 from __future__ import annotations
@@ -30,7 +35,7 @@ from dataclasses import dataclass, field
 import torch
 
 from ibc_tutorial.experiments.counter_examples import CounterExampleConfig, make_datasets, train_config
-from ibc_tutorial.experiments.counter_examples import mode_masses as energy_mode_masses
+from ibc_tutorial.experiments.counter_examples import masses_near as energy_masses_near
 from ibc_tutorial.negatives import ExpertSampler, UniformSampler
 from ibc_tutorial.objectives import flow_matching_objective, info_nce_objective, likelihood_objective
 from ibc_tutorial.parallel import parallel_map
@@ -121,16 +126,18 @@ def true_mode_masses(world: JunctionWorld, radius: float) -> torch.Tensor:
 
 
 def bhattacharyya(masses: torch.Tensor, truth: torch.Tensor) -> float:
-    """BC = Σ_k √(m_k t_k) over the three modes and the rest (1 − Σ m, 1 − Σ t): in [0, 1], 1 when equal."""
-    check_tensor("masses", masses, shape=(3,))
-    check_tensor("truth", truth, shape=(3,))
+    """BC = Σ_k √(m_k t_k) over the K modes and the rest (1 − Σ m, 1 − Σ t): in [0, 1], 1 when equal.
+    ``masses`` and ``truth`` are (K,), K >= 1 (three at the junction, two at the tree)."""
+    check_tensor("truth", truth, ndim=1)
+    check_tensor("masses", masses, shape=tuple(truth.shape))
     m = torch.cat([masses, (1 - masses.sum()).clamp_min(0)[None]])
     t = torch.cat([truth, (1 - truth.sum()).clamp_min(0)[None]])
     return float((m * t).sqrt().sum())
 
 
-def make_policy(family: str, world: JunctionWorld, config: FamilyConfig, seed: int) -> torch.nn.Module:
-    """The untrained network of ``family`` on an ``MLPEncoder``, its weights drawn from ``seed``."""
+def make_policy(family: str, world, config: FamilyConfig, seed: int) -> torch.nn.Module:
+    """The untrained network of ``family`` on an ``MLPEncoder``, its weights drawn from ``seed``; ``world``
+    gives the sizes (``obs_dim``, ``action_dim``: the junction world or a toy world)."""
     check_choice("family", family, FAMILIES)
     torch.manual_seed(check_int("seed", seed, minimum=0))
     w = config.width
@@ -170,26 +177,63 @@ def junction_observations(world: JunctionWorld, config: FamilyConfig) -> torch.T
     return torch.cat(obs)[: config.n_junctions]
 
 
+def train_family(family: str, world, data: dict, config: FamilyConfig, seed: int) -> torch.nn.Module:
+    """``family``'s network (``make_policy``) trained on ``data`` ({"obs": (M, obs_dim), "actions": (M, D)})
+    by its objective with ``config.train`` and ``seed`` (initial weights and minibatches alike)."""
+    policy = make_policy(family, world, config, seed)
+    train_cfg = TrainConfig(**{**config.train.__dict__, "seed": seed})
+    train(policy, objective_for(family, policy, config), data, train_cfg)
+    return policy
+
+
 @torch.no_grad()
-def mode_masses(
-    family: str, policy, obs: torch.Tensor, world: JunctionWorld, config: FamilyConfig, seed: int
+def draw_actions(
+    family: str, policy, obs: torch.Tensor, n: int, generator: torch.Generator, n_steps: int | None = None
 ) -> torch.Tensor:
-    """(B, 3): each observation's mass on the left, straight and right modes (module docstring)."""
+    """(B, N, D): ``n`` actions of a non-energy family per observation, as it acts: the MDN's and the
+    Beta's "sample" mode, the flow's samples (``n_steps`` Euler steps, default its config's K), the
+    regression's one action repeated."""
+    check_choice("family", family, tuple(f for f in FAMILIES if f not in ENERGY_FAMILIES))
+    n = check_int("n", n, minimum=1)
+    policy.eval()
+    b = len(obs)
+    if family == "flow":
+        return policy.sample(obs, n, n_steps, generator=generator)  # (B, N, D)
+    if family == "mae":
+        return policy.act(obs)[:, None, :].expand(b, n, -1)  # (B, N, D): one action
+    y = policy.act(obs.repeat_interleave(n, dim=0), mode="sample", generator=generator)  # (B N, D)
+    return y.reshape(b, n, -1)
+
+
+@torch.no_grad()
+def masses_near(
+    family: str, policy, obs: torch.Tensor, modes: torch.Tensor, config: FamilyConfig, seed: int, **draw
+) -> torch.Tensor:
+    """(B, K): each observation's mass within ``config.radius`` of each of ``modes`` (B, K, D): the energy
+    models' softmax(−E) on a grid (``counter_examples.masses_near``), the others' share of
+    ``config.samples`` draws (``draw_actions``, seeded by ``seed``; ``draw``: its ``n_steps``)."""
     check_choice("family", family, FAMILIES)
     policy.eval()
     if family in ENERGY_FAMILIES:
-        return energy_mode_masses(policy, obs, world, grid_n=config.grid_n, radius=config.radius)
-    g = torch.Generator().manual_seed(seed)
-    b, s = len(obs), config.samples
-    if family == "flow":
-        y = policy.sample(obs, s, generator=g)  # (B, S, 2)
-    elif family == "mae":
-        y = policy.act(obs)[:, None, :]  # (B, 1, 2): one action
-    else:
-        y = policy.act(obs.repeat_interleave(s, dim=0), mode="sample", generator=g).reshape(b, s, 2)
+        return energy_masses_near(policy, obs, modes, grid_n=config.grid_n, radius=config.radius)
+    y = draw_actions(family, policy, obs, config.samples, torch.Generator().manual_seed(seed), **draw)
+    near = (y[:, :, None, :] - modes[:, None, :, :]).norm(dim=-1) <= config.radius  # (B, S, K)
+    return near.float().mean(dim=1)  # (B, K)
+
+
+def mode_masses(
+    family: str, policy, obs: torch.Tensor, world: JunctionWorld, config: FamilyConfig, seed: int, **draw
+) -> torch.Tensor:
+    """(B, 3): each junction observation's mass on the left, straight and right modes (module docstring)."""
     modes, _ = world.modes(obs)  # (B, 3, 2)
-    near = (y[:, :, None, :] - modes[:, None, :, :]).norm(dim=-1) <= config.radius  # (B, S, 3)
-    return near.float().mean(dim=1)  # (B, 3)
+    return masses_near(family, policy, obs, modes, config, seed, **draw)
+
+
+def junction_data(world: JunctionWorld, config: FamilyConfig) -> dict:
+    """The training set every family learns from: {"obs": (M, 4), "actions": (M, 2)} (chapter 04's data)."""
+    data_config = CounterExampleConfig(n_train=config.n_train, data_seed=config.data_seed)
+    train_set, _ = make_datasets(world, data_config)
+    return {"obs": train_set["obs"], "actions": train_set["actions"]}
 
 
 def run_family(family: str, seed: int, config: FamilyConfig | None = None) -> FamilyRun:
@@ -197,12 +241,7 @@ def run_family(family: str, seed: int, config: FamilyConfig | None = None) -> Fa
     ``parallel_map``: depends on nothing but its arguments)."""
     config = FamilyConfig() if config is None else config
     world = JunctionWorld()
-    data_config = CounterExampleConfig(n_train=config.n_train, data_seed=config.data_seed)
-    train_set, _ = make_datasets(world, data_config)
-    policy = make_policy(family, world, config, seed)
-    train_cfg = TrainConfig(**{**config.train.__dict__, "seed": seed})
-    data = {"obs": train_set["obs"], "actions": train_set["actions"]}
-    train(policy, objective_for(family, policy, config), data, train_cfg)
+    policy = train_family(family, world, junction_data(world, config), config, seed)
     masses = mode_masses(family, policy, junction_observations(world, config), world, config, seed).mean(0)
     truth = true_mode_masses(world, config.radius)
     return FamilyRun(family, seed, [float(m) for m in masses], bhattacharyya(masses, truth))

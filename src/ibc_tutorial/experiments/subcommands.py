@@ -262,6 +262,31 @@ def two_answers(args: argparse.Namespace) -> int:
     return 0
 
 
+def families(args: argparse.Namespace) -> int:
+    """``ibc-tutorial families``: chapter 13's study (``experiments.family_study``), resumable."""
+    from ibc_tutorial.experiments import family_study
+
+    def seeds(name: str, text: str) -> tuple[int, ...]:
+        try:
+            return tuple(int(s) for s in str(text).split(",") if s.strip())
+        except ValueError:
+            raise ValueError(f"{name} must be integers separated by commas, got {text!r}") from None
+
+    settings = family_study.FamiliesSettings(
+        tune_seeds=seeds("--tune-seeds", args.tune_seeds), report_seeds=seeds("--seeds", args.seeds)
+    )
+    family_study.run_study(
+        args.out,
+        settings,
+        workers=check_int("--workers", args.workers, minimum=1),
+        threads=_threads(args) or 1,
+        command=getattr(args, "command_line", ""),
+        force=bool(args.force),
+        note=args.note,
+    )
+    return 0
+
+
 def routes(args: argparse.Namespace) -> int:
     """``ibc-tutorial routes``: every agent of ``--folder`` and the expert on the routes (resumable)."""
     from ibc_tutorial.experiments.agents.route_study import run_route_drives

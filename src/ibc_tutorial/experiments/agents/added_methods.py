@@ -42,10 +42,9 @@ from ibc_tutorial.experiments.agents.replication_folder import (
 )
 from ibc_tutorial.experiments.agents.training_run import inspect_run
 from ibc_tutorial.experiments.runs import (
-    PROVENANCE,
-    PROVENANCE_MD,
     RESULTS,
     Run,
+    add_note,
     git_commit,
     machine,
     now,
@@ -53,7 +52,7 @@ from ibc_tutorial.experiments.runs import (
     write_json,
 )
 from ibc_tutorial.parallel import imap_unordered
-from ibc_tutorial.utils import atomic_write_bytes, check_device, check_int
+from ibc_tutorial.utils import check_device, check_int
 
 __all__ = [
     "ADDED",
@@ -127,22 +126,6 @@ def _check_runs(folder: Path, preset: Preset, methods: tuple[str, ...]) -> None:
         inspect_run(run_dir(folder, m, s), m, preset, s, sha, data)
 
 
-def _note(folder: Path, text: str) -> None:
-    """Append ``text`` to the folder's provenance notes (``provenance.json`` and ``PROVENANCE.md``), which
-    ``runs.Provenance`` keeps across the replication's own invocations."""
-    prov_file = folder / PROVENANCE
-    if prov_file.exists():
-        prov = read_json_dict(prov_file, "delete it and re-run the replication")
-        notes = list(prov["notes"]) if isinstance(prov.get("notes"), list) else []
-        prov["notes"] = notes + [text]
-        write_json(prov_file, prov)
-    md = folder / PROVENANCE_MD
-    if md.exists():
-        body = md.read_text().rstrip("\n")
-        body += ("\n" if "\nNotes:\n" in body else "\n\nNotes:\n\n") + f"- {text}\n"
-        atomic_write_bytes(md, body.encode())
-
-
 def add_methods(
     folder,
     methods,
@@ -210,7 +193,7 @@ def add_methods(
         save()
     invocation["finished"] = now()
     save()
-    _note(
+    add_note(
         folder,
         f"methods added ({', '.join(methods)}; {len(invocation['runs_done'])} runs, {len(todo)} trained now, "
         f"{invocation['seconds'] / 60:.1f} min): `{command or 'add_methods'}` at {invocation['commit']}, "

@@ -218,3 +218,20 @@ class Provenance:
         if notes:
             lines += ["", "Notes:", ""] + [f"- {n}" for n in notes]
         atomic_write_bytes(out / PROVENANCE_MD, ("\n".join(lines) + "\n").encode())
+
+
+def add_note(folder, text: str) -> None:
+    """Append ``text`` to the folder's provenance notes (``provenance.json`` and ``PROVENANCE.md``), which
+    ``Provenance`` keeps across a resumable command's invocations."""
+    folder = Path(folder)
+    prov_file = folder / PROVENANCE
+    if prov_file.exists():
+        prov = read_json_dict(prov_file, "delete it and re-run the command that made it")
+        notes = list(prov["notes"]) if isinstance(prov.get("notes"), list) else []
+        prov["notes"] = notes + [text]
+        write_json(prov_file, prov)
+    md = folder / PROVENANCE_MD
+    if md.exists():
+        body = md.read_text().rstrip("\n")
+        body += ("\n" if "\nNotes:\n" in body else "\n\nNotes:\n\n") + f"- {text}\n"
+        atomic_write_bytes(md, body.encode())
