@@ -67,3 +67,24 @@ def test_bad_arguments_are_refused():
     with pytest.raises(ValueError, match="seed"):
         balanced_routes(TOWN01, [100], seed=-1)
     assert np.isfinite(reach_m(1))
+
+
+def test_a_replication_with_balanced_routes_collects_on_them():
+    """``replicate --set balanced_routes=true``: the demonstrations are driven on ``balanced_routes`` of the
+    preset's collection; without it, on the collection's own random routes."""
+    from dataclasses import replace
+
+    from ibc_tutorial.experiments.agents.presets import PRESETS
+    from ibc_tutorial.experiments.agents.replicate import collect_demonstrations
+
+    tiny = replace(PRESETS["tiny"], commands=True)
+    config = tiny.collect_config()
+    balanced = balanced_routes(get_town(config.town), episode_steps(config), seed=config.seed)
+    log = collect_demonstrations(replace(tiny, balanced_routes=True), show_progress=False)
+    assert [r["turns"] for r in log.meta["routes"][: config.routes]] == [list(r.turns) for r in balanced]
+    plain = collect_demonstrations(tiny, show_progress=False)
+    sim = DrivingSim(config.town)
+    drawn = [list(episode_plan(sim, config, k).route.turns) for k in range(config.routes)]
+    assert [r["turns"] for r in plain.meta["routes"][: config.routes]] == drawn
+    with pytest.raises(ValueError, match="balanced_routes must be True or False"):
+        replace(tiny, balanced_routes=1)

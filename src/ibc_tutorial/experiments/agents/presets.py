@@ -212,6 +212,11 @@ class Preset(StoredSettings):
     MLP, are trained on the demonstrations' commands and evaluated on the town02 routes
     (``driving.route_following``; chapter 11). False: routeless, the DA-IBC paper's agents (a preset stored
     before this field existed is routeless)."""
+    balanced_routes: bool = False
+    """True: the town01 demonstration routes are chosen so that every route command, "straight" included,
+    is commanded about equally often (``driving.command_balance.balanced_routes``: at each junction the
+    legal exit commanded least so far); False: random routes, on which "straight" is commanded about half
+    as often as each turn (a preset stored before this field existed has random routes)."""
     route_episodes: int = 1
     """With ``commands``: drives of every town02 route in the final evaluation (light phases seeded apart)."""
     route_max_steps: int = 0
@@ -247,8 +252,9 @@ class Preset(StoredSettings):
             "flow_samples",
         ):
             check_int(f, getattr(self, f), minimum=1)
-        if not isinstance(self.commands, bool):
-            raise ValueError(f"commands must be True or False, got {self.commands!r}")
+        for f in ("commands", "balanced_routes"):
+            if not isinstance(getattr(self, f), bool):
+                raise ValueError(f"{f} must be True or False, got {getattr(self, f)!r}")
         check_int("route_episodes", self.route_episodes, minimum=1)
         check_int("route_max_steps", self.route_max_steps, minimum=0)
         for f in ("routeless_episodes", "heldout_episodes"):

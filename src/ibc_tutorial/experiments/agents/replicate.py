@@ -41,9 +41,11 @@ from pathlib import Path
 
 import torch
 
-from ibc_tutorial.driving.collect import collect
+from ibc_tutorial.driving.collect import collect, episode_steps
+from ibc_tutorial.driving.command_balance import balanced_routes
 from ibc_tutorial.driving.dataset import DemoLog
 from ibc_tutorial.driving.route_following import ROUTES
+from ibc_tutorial.driving.towns import get_town
 from ibc_tutorial.experiments.agents.checkpoints import load_agent
 from ibc_tutorial.experiments.agents.evaluate import (
     EVAL_SEED,
@@ -325,6 +327,16 @@ def replicate(
     return FOLDER.run(out, provenance, results, collect, work, log)
 
 
+def collect_demonstrations(preset: Preset, show_progress: bool | None = None) -> DemoLog:
+    """The expert's town01 demonstrations of ``preset`` (step 1): on random routes, or, with
+    ``preset.balanced_routes``, on routes that command every turn about equally often."""
+    config = preset.collect_config()
+    routes = None  # random routes: the collection's own draw
+    if preset.balanced_routes:
+        routes = balanced_routes(get_town(config.town), episode_steps(config), seed=config.seed)
+    return collect(config, show_progress=show_progress, routes=routes)
+
+
 def _work(
     out: Path,
     preset: Preset,
@@ -339,7 +351,7 @@ def _work(
     # 1. the demonstrations
     data = out / DATA
     if not data.exists():
-        demo = collect(preset.collect_config(), show_progress=show_progress)
+        demo = collect_demonstrations(preset, show_progress)
         demo.save(data)
         if log:
             log(f"collected {len(demo)} samples in town01")
