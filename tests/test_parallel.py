@@ -175,3 +175,41 @@ def test_imap_unordered_raises_a_calls_error_as_it_is(workers):
     with pytest.raises(ValueError, match="two is not allowed"):
         list(parallel.imap_unordered(calls, workers=workers))
     assert sorted(parallel.imap_unordered([functools.partial(fail_on_two, 1)], workers=workers)) == [1]
+
+
+def _bar_line() -> tuple[str | None, bool]:
+    """In a worker: its slot and whether a bar asked for is shown (``utils.progress``)."""
+    import os
+
+    from ibc_tutorial.utils import WORKER_SLOT_ENV, progress
+
+    bar = progress(range(3), enabled=True)
+    shown = not bar.disable
+    bar.close()
+    return os.environ.get(WORKER_SLOT_ENV), shown and not progress(range(3)).disable
+
+
+def test_each_worker_has_its_own_line_for_a_bar_a_call_asks_for():
+    """Two workers number themselves 0 and 1 (the lines their bars take); a bar shows in a worker only if the
+    call asks for it (``enabled=True``), never by default."""
+    import functools
+
+    from ibc_tutorial.parallel import parallel_calls, shutdown
+
+    shutdown()  # a fresh pool: its workers numbered from 0
+    try:
+        out = parallel_calls([functools.partial(_bar_line) for _ in range(8)], workers=2)
+    finally:
+        shutdown()
+    assert {slot for slot, _ in out} <= {"0", "1"} and all(slot is not None for slot, _ in out)
+    assert not any(default_shown for _, default_shown in out)
+
+
+def test_replicate_run_options_show_worker_bars_only_when_asked_or_on_a_terminal(monkeypatch):
+    from ibc_tutorial.experiments.agents.replicate import run_options
+
+    assert run_options(1, print, None) == {"log": print, "show_progress": None}
+    assert run_options(2, print, True) == {"show_progress": True}
+    assert run_options(2, print, False) == {"show_progress": False}
+    monkeypatch.setenv("TQDM_DISABLE", "1")  # the tests: no bars
+    assert run_options(2, print, None) == {"show_progress": False}

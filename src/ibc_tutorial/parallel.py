@@ -50,7 +50,7 @@ from typing import Any, TypeVar
 import numpy as np
 import torch
 
-from ibc_tutorial.utils import QUIET_ENV, check_int
+from ibc_tutorial.utils import QUIET_ENV, WORKER_SLOT_ENV, check_int
 
 T = TypeVar("T")
 
@@ -87,9 +87,13 @@ def _settings() -> dict[str, Any]:
     }
 
 
-def _init_worker(threads: int = 1) -> None:
+def _init_worker(threads: int = 1, slots=None) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the caller's to handle (it stops the workers)
-    os.environ[QUIET_ENV] = "1"  # no progress bars: a worker's would interleave with the caller's output
+    os.environ[QUIET_ENV] = "1"  # no progress bars unless a call asks for one (``utils.progress``)
+    if slots is not None:  # the next free slot: this worker's line for a bar a call asks for
+        with slots.get_lock():
+            os.environ[WORKER_SLOT_ENV] = str(slots.value)
+            slots.value += 1
     torch.set_num_threads(max(1, int(threads)))
 
 
@@ -277,7 +281,10 @@ def _pool(workers: int, threads: int = 1) -> ProcessPoolExecutor:
         shutdown()
     if _POOL is None:
         ctx = multiprocessing.get_context("spawn")  # never fork: see the module docstring
-        _POOL = ProcessPoolExecutor(workers, mp_context=ctx, initializer=_init_worker, initargs=(threads,))
+        slots = ctx.Value("i", 0)  # numbers the workers: each one's line for a progress bar
+        _POOL = ProcessPoolExecutor(
+            workers, mp_context=ctx, initializer=_init_worker, initargs=(threads, slots)
+        )
         _POOL_SHAPE = (workers, threads)
     return _POOL
 

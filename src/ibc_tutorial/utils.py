@@ -18,6 +18,11 @@ QUIET_ENV = "TQDM_DISABLE"
 silence progress bars, so that stored notebook outputs do not depend on timing."""
 
 
+WORKER_SLOT_ENV = "IBC_TUTORIAL_WORKER_SLOT"
+"""Set in each worker process of ``parallel`` to its slot (0, 1, ...): the line its progress bar takes on
+the terminal, so that two workers' bars stand on two lines instead of overwriting each other."""
+
+
 def seed_everything(seed: int) -> torch.Generator:
     """Seed Python, NumPy and torch, make torch deterministic, and return a seeded generator.
 
@@ -45,9 +50,12 @@ def progress(
     iterable: Iterable | None = None, *, total: int | None = None, desc: str = "", enabled: bool | None = None
 ):
     """A tqdm progress bar for readers; a silent pass-through when ``TQDM_DISABLE=1`` (see
-    ``quiet``) or ``enabled`` is False."""
+    ``quiet``) or ``enabled`` is False. In a worker process (whose ``TQDM_DISABLE`` is set) a bar shows only
+    if ``enabled`` is True, on the worker's own line (``WORKER_SLOT_ENV``)."""
     show = (not quiet()) if enabled is None else enabled
-    return tqdm(iterable, total=total, desc=desc, disable=not show, leave=False)
+    slot = os.environ.get(WORKER_SLOT_ENV)  # in a worker process: its own line
+    position = int(slot) if slot is not None else None
+    return tqdm(iterable, total=total, desc=desc, disable=not show, leave=False, position=position)
 
 
 def plural(n: int, word: str) -> str:

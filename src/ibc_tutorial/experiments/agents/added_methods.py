@@ -30,7 +30,7 @@ import torch
 
 from ibc_tutorial.driving.dataset import DemoLog
 from ibc_tutorial.experiments.agents.presets import ALL_METHODS, Preset
-from ibc_tutorial.experiments.agents.replicate import run_one
+from ibc_tutorial.experiments.agents.replicate import run_one, run_options
 from ibc_tutorial.experiments.agents.replication_folder import (
     ADDED,
     DATA,
@@ -174,7 +174,7 @@ def add_methods(
     todo = [
         (m, s) for m, s in added_runs(preset, methods) if not (run_dir(folder, m, s) / FINAL_EVAL).exists()
     ]
-    here = {"log": log, "show_progress": show_progress} if workers == 1 else {}  # a worker's are quiet
+    here = run_options(workers, log, show_progress)
     runs = imap_unordered(
         [
             functools.partial(run_one, m, s, str(folder), preset.to_dict(), device=device, **here)

@@ -35,6 +35,7 @@ demonstrations, the expert's row and every random draw stay on the CPU (see ``tr
 from __future__ import annotations
 
 import functools
+import sys
 import time
 from dataclasses import asdict
 from pathlib import Path
@@ -75,7 +76,7 @@ from ibc_tutorial.experiments.agents.train import train_agent
 from ibc_tutorial.experiments.agents.training_run import TrainingData, inspect_run
 from ibc_tutorial.experiments.runs import RESULTS, differing, read_json_dict, write_json, write_npz
 from ibc_tutorial.parallel import imap_unordered
-from ibc_tutorial.utils import check_device, check_int, plural
+from ibc_tutorial.utils import check_device, check_int, plural, quiet
 
 FIGURE_METHODS = ("bc", "da-ibc")
 """The agents of the first seed kept for the Fig. 5/6 analogues (their ``final.pt`` is kept too)."""
@@ -259,6 +260,16 @@ def run_one(
     return ev
 
 
+def run_options(workers: int, log, show_progress: bool | None) -> dict:
+    """``run_one``'s ``log`` and ``show_progress`` for runs in ``workers`` processes: here, the caller's; in
+    workers, their evaluation lines printed, and a training bar on each worker's own line when the caller
+    would show one (``show_progress``, or None: on a terminal and not ``TQDM_DISABLE``)."""
+    if workers == 1:
+        return {"log": log, "show_progress": show_progress}
+    bars = (not quiet() and sys.stderr.isatty()) if show_progress is None else bool(show_progress)
+    return {"show_progress": bars}
+
+
 def run_plan(todo: int, total: int, workers: int) -> str:
     """The line that opens the training: how many runs are left of how many, and how many at a time."""
     return f"{plural(todo, 'training run')} to do of {total}, {min(workers, todo)} at a time"
@@ -397,7 +408,7 @@ def _work(
         save(False)
 
     figures_if_ready()
-    here = {"log": log, "show_progress": show_progress} if workers == 1 else {}  # a worker's are quiet
+    here = run_options(workers, log, show_progress)
     runs = imap_unordered(  # submitted now; with one worker, each run when its result is asked for
         [
             functools.partial(run_one, r.method, r.seed, str(out), preset.to_dict(), device=device, **here)
