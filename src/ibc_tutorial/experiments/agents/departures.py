@@ -2,11 +2,12 @@
 
 Each ablation is a replication of the 10-route preset ``previous-laptop`` with ``--set`` overrides
 (``ibc-tutorial replicate --preset previous-laptop --set ... --out book/results/ablations/FOLDER``), whose
-``PROVENANCE.md`` records the command. ``ABLATIONS`` lists them, each with the folder it is compared with: the
-two folders differ in the setting the row names (the schedule row in two settings, changed together). ``departure_rows`` checks that every folder's stored settings are
-``previous-laptop`` with the row's overrides, then compares the two folders' town02 scores method by method
-(``claims.compare_folders``: the mean score with the row's first setting minus the second's, on the seeds and starts
-both hold, with its 95 % two-level bootstrap interval over agents and episodes).
+``PROVENANCE.md`` records the command. ``ABLATIONS`` lists them, each with
+the folder it is compared with: the two folders differ in the setting the row names (the schedule row in
+two settings, changed together). ``departure_rows`` checks that every folder's stored settings are
+``previous-laptop`` with the row's overrides, then compares the two folders' town02 scores method by
+method (``claims.compare_folders``: the mean score with the row's first setting minus the second's, on the
+seeds and starts both hold, with its 95 % two-level bootstrap interval over agents and episodes).
 """
 
 from __future__ import annotations
@@ -92,7 +93,8 @@ ABLATIONS = (
 def ablation_command(ablation: Ablation) -> str:
     """The ``replicate`` command that makes ``ablation``'s folder (its overrides of ``previous-laptop``)."""
     sets = " ".join(f"--set {o}" for o in ablation.overrides)
-    return f"ibc-tutorial replicate --preset previous-laptop {sets} --out book/results/ablations/{ablation.folder}"
+    out = f"book/results/ablations/{ablation.folder}"
+    return f"ibc-tutorial replicate --preset previous-laptop {sets} --out {out}"
 
 
 def check_ablation(results, ablation: Ablation) -> None:
@@ -151,7 +153,8 @@ def departure_table(rows: list[DepartureRow]) -> str:
     """The rows as a Markdown table (the setting, the laptop preset's, the folder, the effect on each
     method's score), then each folder's command in a code block, wrapped to ``WRAP`` characters."""
     lines = [
-        "| first setting vs second: score difference, 95 % interval | laptop preset | folder | BC | IBC | DA-IBC |",
+        "| first setting vs second: score difference, 95 % interval | laptop preset | folder "
+        "| BC | IBC | DA-IBC |",
         "| --- | --- | --- | --- | --- | --- |",
     ]
     for r in rows:

@@ -29,7 +29,7 @@ WHERE = ("at a stem", "at another approach", "outside a junction")
 
 
 def stem_approaches(town: str) -> set:
-    """Ids of the approaches of ``town`` that are stems: a junction approach whose exits are left and right."""
+    """Ids of the stems of ``town``: the junction approaches whose only exits are left and right."""
     return {a.id for a in get_town(town).approaches if a.is_junction and set(a.exits) == {"left", "right"}}
 
 
