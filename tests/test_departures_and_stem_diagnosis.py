@@ -74,7 +74,7 @@ def test_stem_crossings_sort_every_crossing_from_a_stem_and_every_end():
     assert set(c.steering) == set(KINDS) and all(v.shape[1] == 2 for v in c.steering.values())
     assert c.ends["at a stem"] == len(c.steering["ended"]) == 3
     ended = ended_energies(TEN_ROUTES, "ibc", range(5), -0.45, 0.55)
-    assert len(ended) == 3 and all(e.energies.shape[1] == len(e.steer) for e in ended)
+    assert len(ended) == 3 and all(e.energies.shape[1] == len(e.steer_grid) for e in ended)
     assert all(np.isclose(e.energies.min(), 0) for e in ended)  # nats above each state's minimum
 
 

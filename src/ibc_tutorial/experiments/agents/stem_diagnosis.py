@@ -86,7 +86,7 @@ class EndedCrossing:
     """``"IBC seed 0, start 1007"``: the agent and the episode's start."""
     energies: np.ndarray
     """(T, G) energy at each state (the lowest over acceleration), in nats above the state's minimum."""
-    steer: np.ndarray
+    steer_grid: np.ndarray
     """(G,) the steering values of the grid."""
     lowest: tuple[float, float]
     """The least and the most of the lowest-energy steering over the states."""
