@@ -13,6 +13,7 @@ seeds and starts both hold, with its 95 % two-level bootstrap interval over agen
 from __future__ import annotations
 
 from dataclasses import dataclass
+from html import escape
 from pathlib import Path
 
 from ibc_tutorial.experiments.agents.claims import FolderComparison, compare_folders
@@ -150,17 +151,32 @@ def effect_text(c: FolderComparison | None) -> str:
 
 
 def departure_table(rows: list[DepartureRow]) -> str:
-    """The rows as a Markdown table (the setting, the laptop preset's, the folder, the effect on each
-    method's score), then each folder's command in a code block, wrapped to ``WRAP`` characters."""
-    lines = [
-        "| first setting vs second: score difference, 95 % interval | laptop preset | folder "
-        "| BC | IBC | DA-IBC |",
-        "| --- | --- | --- | --- | --- | --- |",
+    """The rows as an HTML table (the setting, the laptop preset's, the folder, the effect on each method's
+    score), then each folder's command, wrapped to ``WRAP`` characters, in a ``<pre>`` block: HTML, which
+    Jupyter and the web edition both render."""
+    head = [
+        "first setting vs second: score difference, 95 % interval",
+        "laptop preset",
+        "folder",
+        "BC",
+        "IBC",
     ]
+    cells = [f"<th>{escape(h)}</th>" for h in (*head, "DA-IBC")]
+    lines = ["<table>", f"<thead><tr>{''.join(cells)}</tr></thead>", "<tbody>"]
     for r in rows:
-        effects = " | ".join(effect_text(r.methods.get(m)) for m in ("bc", "ibc", "da-ibc"))
-        lines.append(f"| {r.ablation.departure} | {r.ablation.laptop} | `{r.ablation.folder}` | {effects} |")
-    lines += ["", "```"] + [wrap_command(r.command) for r in rows] + ["```"]
+        effects = [effect_text(r.methods.get(m)) for m in ("bc", "ibc", "da-ibc")]
+        row = [
+            escape(r.ablation.departure),
+            escape(r.ablation.laptop),
+            f"<code>{escape(r.ablation.folder)}</code>",
+        ]
+        row += [escape(e) for e in effects]
+        lines.append("<tr>" + "".join(f"<td>{c}</td>" for c in row) + "</tr>")
+    lines += [
+        "</tbody>",
+        "</table>",
+        "<pre>" + escape("\n".join(wrap_command(r.command) for r in rows)) + "</pre>",
+    ]
     return "\n".join(lines)
 
 
