@@ -22,6 +22,7 @@ units, and returns the ``Figure``; import it from the module of its part of the 
   per command, an agent's output under each command.
 - ``plotting.two_answers`` (12): the label gaps at the forks, the Fig. 6 analogue at a held-out fork,
   steering profiles at every fork, exits at the stems per agent, two valleys on the stem approaches.
+- ``plotting.stems`` (12): the minority exit at the stems under each change tried.
 
 Steering is drawn in the book's convention: −1 turns left, +1 turns right
 (``common.STEER_LABEL``); positions in a right-handed world frame (y > 0 to the left).
