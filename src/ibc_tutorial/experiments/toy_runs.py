@@ -141,22 +141,31 @@ def fit_regression(demos: Demonstrations, seed: int = 0, *, steps: int = 1000) -
 
 
 def fit_regressions(
-    demos: Demonstrations, seeds: Sequence[int], *, steps: int = 1000
+    demos: Demonstrations,
+    seeds: Sequence[int],
+    *,
+    steps: int = 1000,
+    batch_size: int = 64,
+    loss_kind: str = "mae",
 ) -> list[RegressionPolicy]:
     """``[fit_regression(demos, seed, steps=steps) for seed in seeds]``, the runs side by side as one
-    stacked model (``stacked_training.train_stacked``): the same up to float64 round-off."""
+    stacked model (``stacked_training.train_stacked``): the same up to float64 round-off.
+
+    ``batch_size`` and ``loss_kind`` ("mae" or "mse") change what every run does (chapter 01 trains with
+    minibatches of 128, MAE and MSE); the defaults are ``fit_regression``'s.
+    """
     _check_demos(demos)
     models = []
     for seed in seeds:
         torch.manual_seed(check_int("seed", seed, minimum=0))  # the initial weights, as fit_regression's
-        models.append(_regression(demos))
-    config = TrainConfig(steps=steps, batch_size=64, lr=3e-3)
+        models.append(_regression(demos, loss_kind))
+    config = TrainConfig(steps=steps, batch_size=batch_size, lr=3e-3)
     train_stacked(models, likelihood_objective, demos.training_data(), config, seeds)
     return models
 
 
-def _regression(demos: Demonstrations) -> RegressionPolicy:
-    return RegressionPolicy.for_vectors(demos.obs.shape[1], 1, hidden=64, layers=2, loss_kind="mae")
+def _regression(demos: Demonstrations, loss_kind: str = "mae") -> RegressionPolicy:
+    return RegressionPolicy.for_vectors(demos.obs.shape[1], 1, hidden=64, layers=2, loss_kind=loss_kind)
 
 
 def fit_ebm(
