@@ -21,7 +21,10 @@ the arithmetic (chapter 02's MDN) ends elsewhere either way, as it does on anoth
 Inside ``torch.vmap`` no code may branch on a tensor's values, so the losses' checks of their
 inputs' values (finite, inside [-1, 1]) are switched off there (``utils.without_value_checks``);
 ``train_stacked`` runs the objective once, with the checks, on the whole training data first.
-``benchmarks/bench_stacked.py`` measures the time against one run per seed.
+``benchmarks/bench_stacked.py`` measures the time against one run per seed: for five seeds, 1.3 to 2.2
+times as fast for chapter 02's policies and chapter 03's grid energy models, where a step is mostly
+overhead, but 0.7 times for an energy model trained with InfoNCE at 32 counter-examples, where a step is
+arithmetic on (B, 33, H) tensors that the batched form does no faster.
 """
 
 from __future__ import annotations

@@ -16,7 +16,9 @@ as one after another in the notebook's own process:
 Their sweeps over seeds (``train_explicit_stacked``, ``fit_regressions``, ``fit_ebms``) train the
 seeds' networks side by side as one stacked model (``ibc_tutorial.stacked_training``): the same
 initial weights and minibatches as the runs one by one, the same results up to float64 round-off,
-in about half the time.
+1.3 to 2.2 times as fast for five seeds (``benchmarks/bench_stacked.py``). An energy model trained with
+InfoNCE is the exception: with 33 candidates per sample its stacked model is slower than one run per
+seed, so chapter 03 trains those one run per seed (``fit_ebm``); the grid objectives gain.
 """
 
 from __future__ import annotations
@@ -117,8 +119,8 @@ def train_explicit_stacked(
     (``stacked_training.train_stacked``): ``[(policy, loss curve)]`` in the order of ``policies``.
 
     ``policies[i]`` (untrained, e.g. from ``explicit_policies``) is trained as ``train_explicit`` trains
-    it, its minibatches drawn with ``seeds[i]``: the same result up to float64 round-off, in about half
-    the time for five seeds (``benchmarks/bench_stacked.py``).
+    it, its minibatches drawn with ``seeds[i]``: the same result up to float64 round-off, 1.3 (the
+    classifier) to 2.2 (the regression) times as fast for five seeds (``benchmarks/bench_stacked.py``).
     """
     _check_demos(demos)
     if not isinstance(config, TrainConfig):
@@ -217,7 +219,9 @@ def fit_ebms(
 ) -> list[tuple[EnergyModel, TrainResult]]:
     """``[fit_ebm(data, obs_dim, objective, seed, ...) for seed in seeds]``, the runs side by side as one
     stacked model (``stacked_training.train_stacked``): the same up to float64 round-off. ``objective``
-    must build a ``training.DrawnObjective`` (InfoNCE and the grid objectives of ``objectives`` do)."""
+    must build a ``training.DrawnObjective`` (InfoNCE and the grid objectives of ``objectives`` do). The grid
+    objectives gain (1.3 times as fast for five seeds); InfoNCE with many counter-examples loses (0.7 times
+    at 32: ``benchmarks/bench_stacked.py``), so chapter 03 trains those with ``fit_ebm``."""
     obs_dim = check_int("obs_dim", obs_dim, minimum=1)
     width = check_int("width", width, minimum=1)
     if not callable(objective):
