@@ -83,3 +83,47 @@ def test_fit_ebm_the_same_in_a_worker_process(demos):
         toy_runs.fit_ebm(demos.training_data(), 1, "info_nce")
     with pytest.raises(ValueError, match="width"):
         toy_runs.fit_ebm(demos.training_data(), 1, objective, width=0)
+
+
+def weights_apart(a, b) -> float:
+    with torch.no_grad():
+        return max(float((p - q).abs().max()) for p, q in zip(a.parameters(), b.parameters(), strict=True))
+
+
+def test_the_sweeps_train_what_the_single_runs_train():
+    """train_explicit_stacked, fit_regressions and fit_ebms: each seed's network as its single run's, up to
+    round-off (the weights agree to 1e-9 after a few steps; the same initial weights exactly)."""
+    seeds = (0, 3)
+    dtype = torch.get_default_dtype()
+    torch.set_default_dtype(torch.float64)  # as the chapters train
+    try:
+        demos = TreeWorld().expert_demonstrations(4, seed=0)
+        d = demos.obs.shape[1]
+        alone = [toy_runs.train_explicit(demos, s, ("classifier", "MDN"), config=SHORT) for s in seeds]
+        untrained = [toy_runs.explicit_policies(demos, s, ("classifier", "MDN")) for s in seeds]
+        assert same_weights(
+            untrained[1]["MDN"], toy_runs.explicit_policies(demos, 3, ("classifier", "MDN"))["MDN"]
+        )
+        for name in ("classifier", "MDN"):
+            swept = toy_runs.train_explicit_stacked(demos, [u[name] for u in untrained], seeds, config=SHORT)
+            for (p, curve), one in zip(swept, alone, strict=True):
+                assert weights_apart(p, one[name][0]) < 1e-9 and curve.steps == one[name][1].steps
+        for p, s in zip(toy_runs.fit_regressions(demos, seeds, steps=3), seeds, strict=True):
+            assert weights_apart(p, toy_runs.fit_regression(demos, s, steps=3)) < 1e-9
+        objective = partial(info_nce_objective, sampler=UniformSampler(-1.0, 1.0), n_neg=4)
+        data = demos.training_data()
+        for (m, _), s in zip(
+            toy_runs.fit_ebms(data, d, objective, seeds, steps=5, width=8), seeds, strict=True
+        ):
+            assert (
+                m.hidden == 8
+                and weights_apart(m, toy_runs.fit_ebm(data, d, objective, s, steps=5, width=8)[0]) < 1e-9
+            )
+    finally:
+        torch.set_default_dtype(dtype)
+    with pytest.raises(ValueError, match="demos"):
+        toy_runs.fit_regressions(demos.obs, seeds)
+    with pytest.raises(ValueError, match="seed"):
+        toy_runs.fit_regressions(demos, (0, -1))
+    with pytest.raises(ValueError, match="objective"):
+        toy_runs.fit_ebms(demos.training_data(), 1, "info_nce", seeds)

@@ -33,7 +33,7 @@ from ibc_tutorial.losses import (
     temporal_smoothing,
 )
 from ibc_tutorial.negatives import NegativeSampler
-from ibc_tutorial.training import Objective
+from ibc_tutorial.training import DrawnObjective, Objective
 from ibc_tutorial.utils import check_int, check_positive, check_tensor
 
 
@@ -48,10 +48,10 @@ def likelihood_objective(
     if not callable(getattr(policy, "loss", None)):
         raise ValueError(f"policy must have a loss(obs, actions) method, got {type(policy).__name__}")
 
-    def objective(batch: dict[str, torch.Tensor], generator: torch.Generator) -> torch.Tensor:
+    def loss(batch: dict[str, torch.Tensor], drawn: dict) -> torch.Tensor:
         return policy.loss(batch[obs_key], batch[action_key])
 
-    return objective
+    return DrawnObjective(loss)  # no random draws
 
 
 def info_nce_objective(
@@ -95,9 +95,11 @@ def info_nce_objective(
             f"{type(sampler).__name__}"
         )
 
-    def objective(batch: dict[str, torch.Tensor], generator: torch.Generator) -> torch.Tensor:
-        actions = batch[action_key]  # (B, D)
-        negatives = sampler(actions, n_neg, generator)  # (B, N, D)
+    def draw(batch: dict[str, torch.Tensor], generator: torch.Generator) -> dict[str, torch.Tensor]:
+        return {"negatives": sampler(batch[action_key], n_neg, generator)}  # (B, N, D)
+
+    def loss(batch: dict[str, torch.Tensor], drawn: dict[str, torch.Tensor]) -> torch.Tensor:
+        actions, negatives = batch[action_key], drawn["negatives"]  # (B, D), (B, N, D)
         candidates = torch.cat([actions[:, None, :], negatives], dim=1)  # (B, 1 + N, D), expert first
         energies = model.energy(batch[obs_key], candidates)  # (B, 1 + N)
         weights = batch[weight_key] if weight_key is not None else None
@@ -106,7 +108,7 @@ def info_nce_objective(
         log_q = sampler.log_prob(candidates, actions)  # (B, 1 + N): log q of the proposal, expert first
         return ranking_nce(energies[:, 0], energies[:, 1:], log_q[:, 0], log_q[:, 1:], weights)
 
-    return objective
+    return DrawnObjective(loss, draw)
 
 
 def flow_matching_objective(
@@ -180,7 +182,7 @@ def grid_objective(
             targets = soft_targets(candidates, actions, temperature)  # (B, 1 + G), eq. 5
         return grid_cross_entropy(energies, targets)  # eq. 3
 
-    def objective(batch: dict[str, torch.Tensor], generator: torch.Generator) -> torch.Tensor:
+    def grid_loss(batch: dict[str, torch.Tensor], drawn: dict) -> torch.Tensor:
         e_t = energies_of(batch[obs_key], batch[action_key])
         loss = cross_entropy(e_t, batch[action_key])
         if smoothing == 0:
@@ -189,7 +191,7 @@ def grid_objective(
         loss = 0.5 * (loss + cross_entropy(e_next, batch[next_action_key]))  # mean over both frames
         return loss + temporal_smoothing(e_t[:, 1:], e_next[:, 1:], smoothing)  # eq. 4, ground truth masked
 
-    return objective
+    return DrawnObjective(grid_loss)  # no random draws: the grid is fixed
 
 
 def consecutive_pairs(

@@ -34,6 +34,36 @@ Objective = Callable[[Any, torch.Generator], torch.Tensor]
 """
 
 
+class DrawnObjective:
+    """An objective in two parts: ``objective(batch, generator) = loss(batch, draw(batch, generator))``.
+
+    ``draw(batch, generator) -> dict of tensors`` makes the objective's random draws (an energy model's
+    counter-examples), ``loss(batch, drawn) -> scalar`` is deterministic. Called whole, it is an
+    ``Objective`` like any other; split, ``stacked_training.train_stacked`` draws each seed's with that
+    seed's generator and computes the loss of every seed in one ``torch.vmap`` call.
+
+    Args:
+        loss: ``loss(batch, drawn) -> scalar``, no random draw inside.
+        draw: ``draw(batch, generator) -> dict``, or None for an objective without random draws.
+    """
+
+    def __init__(
+        self,
+        loss: Callable[[Any, dict[str, torch.Tensor]], torch.Tensor],
+        draw: Callable[[Any, torch.Generator], dict[str, torch.Tensor]] | None = None,
+    ):
+        if not callable(loss) or (draw is not None and not callable(draw)):
+            raise ValueError("loss must be callable, and draw callable or None")
+        self.loss, self.draw = loss, draw
+
+    def draws(self, batch, generator: torch.Generator) -> dict[str, torch.Tensor]:
+        """The random draws for ``batch`` ({} without ``draw``)."""
+        return {} if self.draw is None else self.draw(batch, generator)
+
+    def __call__(self, batch, generator: torch.Generator) -> torch.Tensor:
+        return self.loss(batch, self.draws(batch, generator))
+
+
 @runtime_checkable
 class Minibatches(Protocol):
     """Training data as the loop sees it: M samples, fetched a minibatch at a time."""
@@ -117,6 +147,25 @@ def draw_minibatch(
     return torch.multinomial(probs, batch_size, replacement=True, generator=generator)  # (B,)
 
 
+def learning_rate(config: TrainConfig, step: int) -> float:
+    """The step size of gradient step ``step`` (0-based) of a run with ``config`` (its ``lr_schedule``)."""
+    if config.lr_schedule == "cosine":
+        return config.lr * 0.5 * (1.0 + math.cos(math.pi * step / config.steps))
+    return config.lr
+
+
+def check_config(config: TrainConfig) -> TrainConfig:
+    """ValueError naming the field unless ``config`` is a ``TrainConfig`` a run can start from."""
+    if not isinstance(config, TrainConfig):
+        raise ValueError(f"config must be a TrainConfig, got {type(config).__name__}")
+    check_int("config.steps", config.steps, minimum=1)
+    check_int("config.batch_size", config.batch_size, minimum=1)
+    check_int("config.log_every", config.log_every, minimum=1)
+    check_positive("config.lr", config.lr)
+    check_choice("config.lr_schedule", config.lr_schedule, LR_SCHEDULES)
+    return config
+
+
 def as_minibatches(data) -> Minibatches:
     """``data`` as ``Minibatches``: a dict of tensors is wrapped in ``TensorData``, anything else must have
     ``batch``."""
@@ -152,12 +201,7 @@ class Trainer:
         *,
         sample_probs: torch.Tensor | None = None,
     ):
-        config = TrainConfig() if config is None else config  # a fresh one each run: it is mutable
-        check_int("config.steps", config.steps, minimum=1)
-        check_int("config.batch_size", config.batch_size, minimum=1)
-        check_int("config.log_every", config.log_every, minimum=1)
-        check_positive("config.lr", config.lr)
-        check_choice("config.lr_schedule", config.lr_schedule, LR_SCHEDULES)
+        config = check_config(TrainConfig() if config is None else config)  # a fresh one each run: mutable
         if not callable(objective):
             raise ValueError(f"objective must be callable, got {type(objective).__name__}")
         self.data = as_minibatches(data)
@@ -175,10 +219,7 @@ class Trainer:
 
     def learning_rate(self, step: int) -> float:
         """The step size of gradient step ``step`` (0-based) under ``config.lr_schedule``."""
-        c = self.config
-        if c.lr_schedule == "cosine":
-            return c.lr * 0.5 * (1.0 + math.cos(math.pi * step / c.steps))
-        return c.lr
+        return learning_rate(self.config, step)
 
     def state_dict(self) -> dict:
         """Everything needed to continue exactly: model, Adam, generator, step, running loss (plain data)."""

@@ -7,6 +7,7 @@ import os
 import random
 import tempfile
 from collections.abc import Iterable
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -129,6 +130,27 @@ def check_choice(name: str, value, choices: Iterable) -> str:
     return value
 
 
+_VALUE_CHECKS = [True]  # a list, so that the context manager below can switch it in place
+
+
+def value_checks_on() -> bool:
+    """Whether the checks that read a tensor's values (finite, inside a range) run: yes, except inside
+    ``without_value_checks``."""
+    return _VALUE_CHECKS[-1]
+
+
+@contextmanager
+def without_value_checks():
+    """Inside, ``check_tensor`` and the losses skip the checks that read a tensor's values (finite,
+    inside [-1, 1], positive): ``torch.vmap`` cannot branch on a value. Shapes are still checked. The
+    caller checks the values once before (``stacked_training.train_stacked`` checks its data)."""
+    _VALUE_CHECKS.append(False)
+    try:
+        yield
+    finally:
+        _VALUE_CHECKS.pop()
+
+
 def check_tensor(
     name: str, x, *, ndim: int | None = None, shape: tuple | None = None, finite: bool = True
 ) -> torch.Tensor:
@@ -143,7 +165,7 @@ def check_tensor(
         if x.ndim != len(shape) or any(s is not None and s != d for s, d in zip(shape, x.shape, strict=True)):
             want = "(" + ", ".join("*" if s is None else str(s) for s in shape) + ")"
             raise ValueError(f"{name} must have shape {want}, got {tuple(x.shape)}")
-    if finite and x.is_floating_point() and not torch.isfinite(x).all():
+    if finite and value_checks_on() and x.is_floating_point() and not torch.isfinite(x).all():
         raise ValueError(f"{name} must be finite, got NaN or inf")
     return x
 
