@@ -457,8 +457,9 @@ def check_commit(fn) -> Feedback:
 
 
 # --------------------------------------------------------------------------- 5. head passes per decision
-HEAD_PASS_CASES = [(16384, 5, 16, 4), (1024, 3, 8, 10), (256, 2, 32, 1)]
-"""(dfo_samples, dfo_iters, flow_samples, flow_steps): the town's defaults first, then two others."""
+HEAD_PASS_CASES = [(512, 3, 16, 4), (16384, 5, 16, 4), (1024, 3, 8, 10), (256, 2, 32, 1)]
+"""(dfo_samples, dfo_iters, flow_samples, flow_steps): the settings of chapter 12's two-answers study
+(``book/results/two-answers``), the presets' defaults, then two others."""
 
 
 def _head_passes_ref(n_dfo: int, iters: int, n_flow: int, steps: int) -> tuple[int, int]:
@@ -510,10 +511,12 @@ def check_head_passes(fn) -> Feedback:
                 return hint("the pair is (dfo, flow): DFO's count first.")
             part = "DFO's" if dfo != ref_dfo else "the flow's"
             return hint(f"for {case} {part} count is not right: count the head evaluations of one decision.")
-        dfo, flow = _head_passes_ref(*HEAD_PASS_CASES[0])
+        n, iters, m, k = HEAD_PASS_CASES[0]
+        dfo, flow = _head_passes_ref(n, iters, m, k)
         return correct(
-            f"With the town's settings DFO evaluates its head {dfo} times per decision, the flow {flow} "
-            f"times: {dfo // flow} times fewer head passes, for the same one encoder pass."
+            f"With the settings of the chapter's agents (DFO: {n} samples, {iters} iterations; the flow: {m} "
+            f"samples, {k} steps) DFO evaluates its head {dfo} times per decision, the flow {flow} times: "
+            f"the ratio of {dfo // flow} that the chapter prints, for the same one encoder pass."
         )
 
     return run_check(check, "`head_passes`")
