@@ -293,3 +293,15 @@ def test_expert_log_q_solution_is_the_samplers(seed, b, k, d, sigma):
     candidates = actions[:, None, :] + torch.randn(b, k, d, generator=g, dtype=torch.float64)
     ref = ExpertSampler(sigma).log_prob(candidates, actions)
     assert torch.allclose(ch12_expert_log_q(candidates, actions, sigma), ref, rtol=1e-9, atol=1e-9)
+
+
+def test_head_passes_first_case_is_the_chapters_study():
+    """The praise quotes the first case as the chapter's agents' settings: their stored head counts agree."""
+    import json
+    from pathlib import Path
+
+    summary = Path(__file__).parents[1] / "book/results/two-answers/analysis/summary.json"
+    methods = json.loads(summary.read_text())["study"]["methods"]
+    dfo, flow = ch12_head_passes(*ch12.HEAD_PASS_CASES[0])
+    assert methods["da-ibc"]["network_evaluations_per_decision"]["head"] == dfo
+    assert methods["flow"]["network_evaluations_per_decision"]["head"] == flow
