@@ -3,20 +3,36 @@ typical mistakes -> a hint naming the mistake, code that raises -> a hint (never
 
 The reference solutions are ``ibc_tutorial.exercises.solutions.ch12_*``."""
 
+import math
+
 import numpy as np
 import pytest
+import torch
 from hypothesis import given
 from hypothesis import strategies as st
 
 from ibc_tutorial.driving.energy_profiles import boltzmann_sides, valleys
 from ibc_tutorial.exercises import ch12
-from ibc_tutorial.exercises.solutions import ch12_exit_summary, ch12_fork, ch12_two_sided
+from ibc_tutorial.exercises.solutions import (
+    ch12_commit,
+    ch12_exit_summary,
+    ch12_expert_log_q,
+    ch12_fork,
+    ch12_head_passes,
+    ch12_two_sided,
+)
+from ibc_tutorial.experiments.agents.agent import nearest_previous_steer
+from ibc_tutorial.experiments.agents.presets import Preset
+from ibc_tutorial.negatives import ExpertSampler
 from ibc_tutorial.stats import minority
 
 CHECKS = [
     (ch12.check_fork, ch12_fork),
     (ch12.check_two_sided, ch12_two_sided),
     (ch12.check_exit_summary, ch12_exit_summary),
+    (ch12.check_commit, ch12_commit),
+    (ch12.check_head_passes, ch12_head_passes),
+    (ch12.check_expert_log_q, ch12_expert_log_q),
 ]
 
 
@@ -179,3 +195,113 @@ def test_exit_summary_solution_matches_the_library_and_its_bounds(counts):
     assert 0.0 <= out["minority"] <= 0.5
     assert 0 <= out["both"] <= len(counts)
     assert out["minority"] > 0 or out["both"] == 0  # an agent that took both exits makes a minority
+
+
+# --------------------------------------------------------------------------- 4. commit
+def _pick(samples, score):
+    return samples[torch.arange(len(samples)), score.argmin(dim=1)]
+
+
+@pytest.mark.parametrize(
+    "mistake, words",
+    [
+        (lambda s, p: _pick(s, s[..., 0].abs()), "not the one nearest straight"),
+        (lambda s, p: s.mean(dim=1), "mean of the samples"),
+        (lambda s, p: _pick(s, -(s[..., 0] - p[:, None]).abs()), "not the farthest"),
+        (lambda s, p: _pick(s, (s - p[:, None, None]).norm(dim=-1)), "acceleration is not part"),
+        (lambda s, p: _pick(s, (s.sum(-1) - p[:, None]).abs()), "first component"),
+        (lambda s, p: s[:, 0], "keep one of the N samples whole"),
+        (lambda s, p: s[:, 0, 0], "shape (4, 2)"),
+    ],
+)
+def test_commit_mistakes(mistake, words):
+    fb = ch12.check_commit(mistake)
+    assert fb.status == "hint" and words in fb.message, fb.message
+
+
+@given(st.integers(0, 10_000), st.integers(1, 6), st.integers(1, 12))
+def test_commit_solution_is_the_agents_rule(seed, b, n):
+    g = torch.Generator().manual_seed(seed)
+    samples, previous = torch.randn(b, n, 2, generator=g), torch.randn(b, generator=g)
+    assert torch.equal(ch12_commit(samples, previous), nearest_previous_steer(samples, previous))
+
+
+# --------------------------------------------------------------------------- 5. head passes
+@pytest.mark.parametrize(
+    "mistake, words",
+    [
+        (lambda n, i, m, k: (n, m * k), "evaluates the energy at all N samples"),
+        (lambda n, i, m, k: (n + i, m * k), "iterations multiply"),
+        (lambda n, i, m, k: (n * i + 1, m * k + 1), "encoder runs once"),
+        (lambda n, i, m, k: (n * i, m), "evaluates the velocity at all N"),
+        (lambda n, i, m, k: (n * i, k), "not one"),
+        (lambda n, i, m, k: (n * i, m + k), "steps multiply"),
+        (lambda n, i, m, k: (n * i, m * (k + 1)), "drawing the noise takes none"),
+        (lambda n, i, m, k: (m * k, n * i), "DFO's count first"),
+        (lambda n, i, m, k: (float(n * i), m * k), "whole numbers"),
+        (lambda n, i, m, k: n * i, "a pair"),
+    ],
+)
+def test_head_passes_mistakes(mistake, words):
+    fb = ch12.check_head_passes(mistake)
+    assert fb.status == "hint" and words in fb.message, fb.message
+
+
+@given(st.integers(1, 4096), st.integers(1, 10), st.integers(1, 64), st.integers(1, 20))
+def test_head_passes_solution_is_the_presets_accounting(n, i, m, k):
+    preset = Preset(name="t", dfo_samples=n, dfo_iters=i, flow_samples=m, flow_steps=k)
+    heads = (preset.network_evaluations("da-ibc")["head"], preset.network_evaluations("flow")["head"])
+    assert ch12_head_passes(n, i, m, k) == heads
+
+
+# --------------------------------------------------------------------------- 6. the proposal's log q
+def _comp(y, a, sigma, var=False):
+    s2 = sigma if var else sigma**2
+    sq = (y[:, :, None, :] - a[None, None, :, :]).square().sum(-1)
+    return -0.5 * sq / s2 - 0.5 * y.shape[-1] * math.log(2 * math.pi * s2)  # (B, K, M)
+
+
+def _own(y, a, sigma):
+    idx = torch.arange(len(y))
+    return _comp(y, a, sigma)[idx, :, idx]
+
+
+@pytest.mark.parametrize(
+    "mistake, words",
+    [
+        (_own, "not only around its own row"),
+        (lambda y, a, s: torch.logsumexp(_comp(y, a, s), dim=-1), "weight 1/M"),
+        (
+            lambda y, a, s: ch12_expert_log_q(y, a, s) + 0.5 * y.shape[-1] * math.log(2 * math.pi * s**2),
+            "normalising constant",
+        ),
+        (lambda y, a, s: torch.logsumexp(_comp(y, a, s, var=True), dim=-1) - math.log(len(a)), "variance is"),
+        (lambda y, a, s: ch12_expert_log_q(y, a, s).exp(), "not q"),
+        (lambda y, a, s: ch12_expert_log_q(y, a, s) + 1.0, "not the mixture's"),
+        (lambda y, a, s: ch12_expert_log_q(y, a, s)[:, 0], "shape"),
+    ],
+)
+def test_expert_log_q_mistakes(mistake, words):
+    fb = ch12.check_expert_log_q(mistake)
+    assert fb.status == "hint" and words in fb.message, fb.message
+
+
+@given(st.integers(0, 10_000), st.integers(1, 5), st.integers(1, 4), st.integers(1, 3), st.floats(0.05, 2.0))
+def test_expert_log_q_solution_is_the_samplers(seed, b, k, d, sigma):
+    g = torch.Generator().manual_seed(seed)
+    actions = torch.rand(b, d, generator=g, dtype=torch.float64) * 2 - 1
+    candidates = actions[:, None, :] + torch.randn(b, k, d, generator=g, dtype=torch.float64)
+    ref = ExpertSampler(sigma).log_prob(candidates, actions)
+    assert torch.allclose(ch12_expert_log_q(candidates, actions, sigma), ref, rtol=1e-9, atol=1e-9)
+
+
+def test_head_passes_first_case_is_the_chapters_study():
+    """The praise quotes the first case as the chapter's agents' settings: their stored head counts agree."""
+    import json
+    from pathlib import Path
+
+    summary = Path(__file__).parents[1] / "book/results/two-answers/analysis/summary.json"
+    methods = json.loads(summary.read_text())["study"]["methods"]
+    dfo, flow = ch12_head_passes(*ch12.HEAD_PASS_CASES[0])
+    assert methods["da-ibc"]["network_evaluations_per_decision"]["head"] == dfo
+    assert methods["flow"]["network_evaluations_per_decision"]["head"] == flow

@@ -10,6 +10,14 @@
   ``fn(counts) -> {"minority": share, "both": n_agents}`` with ``counts`` a list of (left, right) per
   agent: the pooled minority share (``stats.minority`` of the pooled left share) and the agents that
   took both exits.
+- ``check_commit(fn)``: the flow agent's commitment rule (``agents.agent.nearest_previous_steer``),
+  ``fn(samples (B, N, 2), previous_steer (B,)) -> (B, 2)``: of N sampled actions, the one whose steering is
+  nearest the previous steering (ties: the first).
+- ``check_head_passes(fn)``: what one decision costs in head passes (``Preset.network_evaluations``),
+  ``fn(dfo_samples, dfo_iters, flow_samples, flow_steps) -> (dfo, flow)``: N x N_iters and N x K.
+- ``check_expert_log_q(fn)``: the log-density of DA-IBC's counter-example proposal that ranking NCE
+  subtracts (``negatives.ExpertSampler.log_prob``, unclipped), ``fn(candidates (B, K, D), actions (M, D),
+  sigma) -> (B, K)``: log (1/M) Σ_m N(y; a_m, σ² I).
 
 Each compares the reader's function with the library's rule on chosen cases and, when they differ, tests
 the usual mistakes one by one to name the one made, without giving the answer away.
@@ -17,12 +25,25 @@ the usual mistakes one by one to name the one made, without giving the answer aw
 
 from __future__ import annotations
 
+import math
 import numbers
 
 import numpy as np
+import torch
 
 from ibc_tutorial.driving.energy_profiles import BARRIER, DEPTH, boltzmann_sides, valleys
-from ibc_tutorial.exercises.core import Feedback, close, correct, hint, number_answer, run_check
+from ibc_tutorial.exercises.core import (
+    Feedback,
+    close,
+    correct,
+    hint,
+    mistake_hint,
+    number_answer,
+    run_check,
+    tensor_answer,
+)
+from ibc_tutorial.negatives import ExpertSampler
+from ibc_tutorial.policies.flow import network_evaluations as flow_network_evaluations
 from ibc_tutorial.stats import minority
 
 
@@ -353,3 +374,226 @@ def check_exit_summary(fn) -> Feedback:
         )
 
     return run_check(check, "`exit_summary`")
+
+
+# --------------------------------------------------------------------------- 4. the flow agent's commitment
+def _commit_case(seed: int, b: int, n: int) -> tuple[torch.Tensor, torch.Tensor]:
+    g = torch.Generator().manual_seed(seed)
+    steer = torch.cat(
+        [
+            -0.6 + 0.15 * torch.randn(b, n // 2, generator=g),
+            0.6 + 0.15 * torch.randn(b, n - n // 2, generator=g),
+        ],
+        dim=1,
+    )  # (B, N): two clusters, one per exit
+    accel = 0.3 + 0.2 * torch.randn(b, n, generator=g)  # (B, N)
+    previous = torch.tensor([0.5, -0.45, 0.05, -0.1][:b]) if b <= 4 else 0.4 * torch.randn(b, generator=g)
+    return torch.stack([steer, accel], dim=-1), previous  # (B, N, 2), (B,)
+
+
+COMMIT_CASES = [_commit_case(0, 4, 16), _commit_case(1, 4, 7), _commit_case(2, 9, 32)]
+
+
+def _pick(samples: torch.Tensor, score: torch.Tensor) -> torch.Tensor:
+    """The sample of lowest ``score`` (B, N) per row: (B, 2)."""
+    return samples[torch.arange(len(samples)), score.argmin(dim=1)]
+
+
+def _commit_mistakes(samples: torch.Tensor, previous: torch.Tensor) -> list[tuple[torch.Tensor, str]]:
+    s = samples[..., 0]  # (B, N)
+    mean = samples.mean(dim=1)  # (B, 2)
+    return [
+        (
+            _pick(samples, s.abs()),
+            "the steering nearest the *previous* steering, not the one nearest straight.",
+        ),
+        (
+            mean,
+            "the mean of the samples lies between the two exits, straight into the wall: keep one sample.",
+        ),
+        (
+            _pick(samples, -(s - previous[:, None]).abs()),
+            "the nearest steering (the smallest gap), not the farthest.",
+        ),
+        (
+            _pick(samples, (samples - previous[:, None, None]).norm(dim=-1)),
+            "only the steering against the previous steering: the acceleration is not part of the distance.",
+        ),
+        (
+            _pick(samples, (samples.sum(-1) - previous[:, None]).abs()),
+            "only the steering (the first component) against the previous steering.",
+        ),
+    ]
+
+
+def check_commit(fn) -> Feedback:
+    """Check ``fn(samples, previous_steer)``: per row, the sample whose steering is nearest the previous
+    steering (``nearest_previous_steer``)."""
+
+    def check() -> Feedback:
+        for samples, previous in COMMIT_CASES:
+            b = len(samples)
+            out = tensor_answer(
+                fn(samples.clone(), previous.clone()), "commit", (b, 2), " (one action per row)"
+            )
+            if isinstance(out, Feedback):
+                return out
+            if close(out, _pick(samples, (samples[..., 0] - previous[:, None]).abs()), rtol=0, atol=1e-7):
+                continue
+            found = mistake_hint(out, _commit_mistakes(samples, previous), rtol=0, atol=1e-6)
+            if found is not None:
+                return found
+            return hint(
+                "for some rows your action is not the sample whose steering is nearest the previous "
+                "steering: keep one of the N samples whole (steering and acceleration), chosen by "
+                "|steer − previous|."
+            )
+        return correct(
+            "That is how the town flow agent commits: at a stem its samples can fall in two clusters, one "
+            "per exit, and the previous steering picks the side the car has begun to take."
+        )
+
+    return run_check(check, "`commit`")
+
+
+# --------------------------------------------------------------------------- 5. head passes per decision
+HEAD_PASS_CASES = [(512, 3, 16, 4), (16384, 5, 16, 4), (1024, 3, 8, 10), (256, 2, 32, 1)]
+"""(dfo_samples, dfo_iters, flow_samples, flow_steps): the settings of chapter 12's two-answers study
+(``book/results/two-answers``), the presets' defaults, then two others."""
+
+
+def _head_passes_ref(n_dfo: int, iters: int, n_flow: int, steps: int) -> tuple[int, int]:
+    return n_dfo * iters, flow_network_evaluations(n_flow, steps)["head"]
+
+
+def _head_pass_mistakes(n_dfo, iters, n_flow, steps) -> list[tuple[str, tuple[int, int] | None, int | None]]:
+    """(words, DFO count, flow count) of each usual mistake; None where that part is not the mistake."""
+    return [
+        ("DFO: each of its N_iters iterations evaluates the energy at all N samples.", (n_dfo, None), None),
+        ("DFO: the iterations multiply the samples, they do not add to them.", (n_dfo + iters, None), None),
+        (
+            "count head passes only: the encoder runs once per decision, apart from the head.",
+            (n_dfo * iters + 1, None),
+            n_flow * steps + 1,
+        ),
+        ("the flow: each of its K Euler steps evaluates the velocity at all N samples.", None, n_flow),
+        ("the flow: all N samples need the velocity at every Euler step, not one.", None, steps),
+        ("the flow: the steps multiply the samples, they do not add to them.", None, n_flow + steps),
+        (
+            "the flow: K Euler steps take K velocity evaluations per sample; drawing the noise takes none.",
+            None,
+            n_flow * (steps + 1),
+        ),
+    ]
+
+
+def check_head_passes(fn) -> Feedback:
+    """Check ``fn(dfo_samples, dfo_iters, flow_samples, flow_steps)``: ``(N x N_iters, N x K)``."""
+
+    def check() -> Feedback:
+        for case in HEAD_PASS_CASES:
+            out = fn(*case)
+            if not isinstance(out, (tuple, list)) or len(out) != 2:
+                return hint(f"head_passes must return a pair (dfo, flow), got {type(out).__name__} {out!r}.")
+            for v in out:
+                if isinstance(v, (bool, np.bool_)) or not isinstance(v, numbers.Integral):
+                    return hint(f"head passes are counted in whole numbers (ints), got {type(v).__name__}.")
+            dfo, flow = int(out[0]), int(out[1])
+            ref_dfo, ref_flow = _head_passes_ref(*case)
+            if (dfo, flow) == (ref_dfo, ref_flow):
+                continue
+            for words, wrong_dfo, wrong_flow in _head_pass_mistakes(*case):
+                if (wrong_dfo is not None and dfo == wrong_dfo[0]) or (
+                    wrong_flow is not None and flow == wrong_flow
+                ):
+                    return hint(words)
+            if (dfo, flow) == (ref_flow, ref_dfo):
+                return hint("the pair is (dfo, flow): DFO's count first.")
+            part = "DFO's" if dfo != ref_dfo else "the flow's"
+            return hint(f"for {case} {part} count is not right: count the head evaluations of one decision.")
+        n, iters, m, k = HEAD_PASS_CASES[0]
+        dfo, flow = _head_passes_ref(n, iters, m, k)
+        return correct(
+            f"With the settings of the chapter's agents (DFO: {n} samples, {iters} iterations; the flow: {m} "
+            f"samples, {k} steps) DFO evaluates its head {dfo} times per decision, the flow {flow} times: "
+            f"the ratio of {dfo // flow} that the chapter prints, for the same one encoder pass."
+        )
+
+    return run_check(check, "`head_passes`")
+
+
+# --------------------------------------------------------------------------- 6. the proposal's log-density
+def _log_q_case(seed: int, b: int, k: int, d: int, sigma: float) -> tuple[torch.Tensor, torch.Tensor, float]:
+    g = torch.Generator().manual_seed(seed)
+    actions = torch.rand(b, d, generator=g, dtype=torch.float64) * 2 - 1  # (M, D), M = B
+    near = actions[:, None, :] + sigma * torch.randn(b, k, d, generator=g, dtype=torch.float64)
+    return near, actions, sigma  # (B, K, D), (M, D), σ
+
+
+LOG_Q_CASES = [_log_q_case(0, 5, 6, 2, 0.2), _log_q_case(1, 3, 4, 1, 0.5), _log_q_case(2, 4, 3, 3, 0.1)]
+
+
+def _log_q_ref(
+    y: torch.Tensor, a: torch.Tensor, sigma: float, *, const=True, mean=True, var=False, own=False
+) -> torch.Tensor:
+    s2 = sigma if var else sigma**2
+    sq = (y[:, :, None, :] - a[None, None, :, :]).square().sum(-1)  # (B, K, M)
+    log_comp = -0.5 * sq / s2
+    if const:
+        log_comp = log_comp - y.shape[-1] * (0.5 * math.log(2 * math.pi * s2))
+    if own:  # each row's own expert action only
+        idx = torch.arange(len(y))
+        return log_comp[idx, :, idx]
+    return torch.logsumexp(log_comp, dim=-1) - (math.log(a.shape[0]) if mean else 0.0)  # (B, K)
+
+
+def check_expert_log_q(fn) -> Feedback:
+    """Check ``fn(candidates, actions, sigma)``: ``ExpertSampler(sigma).log_prob(candidates, actions)``."""
+
+    def check() -> Feedback:
+        for y, a, sigma in LOG_Q_CASES:
+            shape = tuple(y.shape[:2])
+            out = tensor_answer(
+                fn(y.clone(), a.clone(), sigma), "expert_log_q", shape, " (one per candidate)"
+            )
+            if isinstance(out, Feedback):
+                return out
+            ref = ExpertSampler(sigma).log_prob(y, a)
+            if close(out, ref, rtol=1e-5, atol=1e-5):
+                continue
+            found = mistake_hint(
+                out,
+                [
+                    (
+                        _log_q_ref(y, a, sigma, own=True),
+                        "every candidate's density under the whole mixture: "
+                        "the sampler draws each counter-example around one of the minibatch's M expert "
+                        "actions, not only around its own row's.",
+                    ),
+                    (
+                        _log_q_ref(y, a, sigma, mean=False),
+                        "the mixture's weights: each of the M Gaussians has weight 1/M.",
+                    ),
+                    (
+                        _log_q_ref(y, a, sigma, const=False),
+                        "the Gaussian's normalising constant, "
+                        "−(D/2) log(2πσ²): ranking NCE needs q's density, not just its shape.",
+                    ),
+                    (_log_q_ref(y, a, sigma, var=True), "σ is the standard deviation: the variance is σ²."),
+                    (_log_q_ref(y, a, sigma).exp(), "the log: ranking NCE subtracts log q, not q."),
+                ],
+                rtol=1e-5,
+                atol=1e-5,
+            )
+            if found is not None:
+                return found
+            return hint(
+                "your log-densities are not the mixture's: log q(y) = log (1/M) Σ_m N(y; a_m, σ² I), summed "
+                "over the M expert actions in a numerically safe way (torch.logsumexp)."
+            )
+        return correct(
+            "That is the log q ranking NCE subtracts from each logit, the expert's as well as the "
+            "counter-examples' (losses.ranking_nce): the same mixture for every row of a minibatch."
+        )
+
+    return run_check(check, "`expert_log_q`")

@@ -377,3 +377,22 @@ def ch13_ranking_logits(pos_energy, neg_energy, pos_log_q, neg_log_q):
     energy = torch.cat([pos_energy[:, None], neg_energy], dim=1)
     log_q = torch.cat([pos_log_q[:, None], neg_log_q], dim=1)
     return -energy - log_q
+
+
+def ch12_commit(samples, previous_steer):
+    """Of N sampled actions (B, N, 2), per row the one whose steering is nearest ``previous_steer`` (B,)."""
+    gap = (samples[..., 0] - previous_steer[:, None]).abs()  # (B, N)
+    return samples[torch.arange(len(samples)), gap.argmin(dim=1)]  # (B, 2): ties, the first
+
+
+def ch12_head_passes(dfo_samples, dfo_iters, flow_samples, flow_steps):
+    """Head evaluations per decision: DFO's N x N_iters energies, the flow's N x K velocities."""
+    return dfo_samples * dfo_iters, flow_samples * flow_steps
+
+
+def ch12_expert_log_q(candidates, actions, sigma):
+    """log q(y) = log (1/M) Σ_m N(y; a_m, σ² I) at candidates (B, K, D), the expert actions (M, D)."""
+    d = candidates.shape[-1]
+    sq = (candidates[:, :, None, :] - actions[None, None, :, :]).square().sum(-1)  # (B, K, M)
+    log_comp = -0.5 * sq / sigma**2 - 0.5 * d * math.log(2 * math.pi * sigma**2)  # (B, K, M)
+    return torch.logsumexp(log_comp, dim=-1) - math.log(len(actions))  # (B, K)
