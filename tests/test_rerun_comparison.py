@@ -1,0 +1,47 @@
+"""Two runs of one replication compared (chapter 09's re-run under the older CPU's kernels)."""
+
+from pathlib import Path
+
+import numpy as np
+
+from ibc_tutorial import stats
+from ibc_tutorial.experiments.agents.replication_folder import episode_table, load_results
+from ibc_tutorial.experiments.agents.rerun_comparison import (
+    expert_shares,
+    format_expert_shares,
+    visit_count_tests,
+)
+
+RESULTS = Path(__file__).resolve().parents[1] / "book" / "results"
+NATIVE, EMULATED = RESULTS / "previous-laptop", RESULTS / "previous-laptop-emulated"
+
+
+def test_expert_shares_are_each_runs_ratio_over_the_second_runs_expert():
+    shares = expert_shares(NATIVE, EMULATED, ("bc", "da-ibc"), "heldout")
+    expert = episode_table(EMULATED, "expert", "score", "heldout").values[0]
+    for folder, got in ((NATIVE, shares.first), (EMULATED, shares.second)):
+        want = stats.ratio_interval(episode_table(folder, "da-ibc", "score", "heldout").values, expert)
+        assert got["da-ibc"] == want
+    assert list(shares.first) == ["bc", "da-ibc"] and shares.same_expert  # the expert uses no torch
+    text = format_expert_shares(shares, "held-out starts").splitlines()
+    assert text[0] == "share of the expert's mean score, held-out starts:"
+    assert text[2].startswith("  bc ") and str(shares.second["bc"]) in text[2]
+    assert text[-1] == "  the expert's episodes are the same in both runs"
+
+
+def test_a_folder_against_itself_has_the_same_shares():
+    shares = expert_shares(NATIVE, NATIVE, ("ibc",))
+    assert shares.first == shares.second and shares.same_expert
+
+
+def test_visit_count_tests_pool_every_agents_visits_per_method():
+    tests = visit_count_tests({"native": NATIVE, "emulated": EMULATED})
+    assert list(tests) == ["native", "emulated"]
+    free = load_results(EMULATED)["results"]["free_driving"]
+    visits = {m: [x for e in free[m]["episodes"] for x in e["visits"]] for m in ("bc", "da-ibc")}
+    want = stats.exit_spread_test(visits["da-ibc"], visits["bc"])
+    assert tests["emulated"].verdict == want.verdict and np.isclose(
+        tests["emulated"].p_greater, want.p_greater
+    )
+    swapped = visit_count_tests({"native": NATIVE}, a="bc", b="da-ibc")["native"]
+    assert swapped.p_greater != tests["native"].p_greater  # the order of the methods matters
