@@ -5,10 +5,13 @@ from pathlib import Path
 import numpy as np
 
 from ibc_tutorial import stats
+from ibc_tutorial.experiments.agents.claims import compare_verdicts, judge_claims
 from ibc_tutorial.experiments.agents.replication_folder import episode_table, load_results
 from ibc_tutorial.experiments.agents.rerun_comparison import (
     expert_shares,
+    format_agreement,
     format_expert_shares,
+    format_visit_count_tests,
     visit_count_tests,
 )
 
@@ -45,3 +48,23 @@ def test_visit_count_tests_pool_every_agents_visits_per_method():
     )
     swapped = visit_count_tests({"native": NATIVE}, a="bc", b="da-ibc")["native"]
     assert swapped.p_greater != tests["native"].p_greater  # the order of the methods matters
+
+
+def test_format_visit_count_tests_one_line_per_run():
+    tests = visit_count_tests({"native": NATIVE, "emulated": EMULATED})
+    lines = format_visit_count_tests(tests).splitlines()
+    assert len(lines) == 2 and lines[1].startswith("the visit-count test, emulated: ")
+    assert f"p = {tests['native'].p_greater:.4f}" in lines[0]
+
+
+def test_format_agreement_details_claim_3_and_says_why_a_claim_was_not_judged():
+    first, second = judge_claims(NATIVE), judge_claims(EMULATED)
+    lines = format_agreement(compare_verdicts(first, second), first, second).splitlines()
+    heads = [line for line in lines if not line.startswith("     ")]
+    assert [h.split(".")[0] for h in heads] == ["1", "2", "3", "4", "5"]
+    missing = [k for k in range(1, 6) if second[k].missing]
+    assert all("not judged on the re-run" in heads[k - 1] for k in missing)
+    parts = len(first.claims[3].parts) + len(second.claims[3].parts)
+    assert len(lines) == 5 + parts  # only claim 3 detailed: the judged verdicts agree
+    none = format_agreement(compare_verdicts(first, second), first, second, detail=())
+    assert len(none.splitlines()) == 5

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ibc_tutorial import stats
+from ibc_tutorial.experiments.agents.claims import CLAIMS
 from ibc_tutorial.experiments.agents.replication_folder import episode_table, load_results
 
 
@@ -67,3 +68,40 @@ def visit_count_tests(folders: dict, a: str = "da-ibc", b: str = "bc") -> dict[s
         visits = {m: [x for e in free[m]["episodes"] for x in e["visits"]] for m in (a, b)}
         tests[run] = stats.exit_spread_test(visits[a], visits[b])
     return tests
+
+
+def format_visit_count_tests(tests: dict[str, stats.ExitTest]) -> str:
+    """One line per run: the visit-count test's verdict, its p-value and how many approaches it shared."""
+    return "\n".join(
+        f"the visit-count test, {run:8s}: {t.verdict} "
+        f"(p = {t.p_greater:.4f}, {t.approaches} shared approaches)"
+        for run, t in tests.items()
+    )
+
+
+def format_agreement(agreement: dict, first, second, detail=(3,), labels=("native", "emulated")) -> str:
+    """``claims.compare_verdicts``'s ``agreement`` of two judged folders as chapter 09 prints it.
+
+    One line per claim: both verdicts and whether they agree, or the first's verdict and why the
+    second run could not judge it (its ``missing`` reason, cut to 60 characters). For a judged claim
+    whose verdicts differ, or whose number is in ``detail``, every part's judgement in both runs follows.
+    """
+    lines = []
+    for k, a in agreement.items():
+        if second[k].missing:
+            lines.append(
+                f"{k}. {CLAIMS[k]}: {labels[0]} {a.first}; not judged on the re-run: "
+                f"{second[k].missing[0][:60]}..."
+            )
+            continue
+        lines.append(
+            f"{k}. {CLAIMS[k]}: {labels[0]} {a.first}, {labels[1]} {a.second}: "
+            f"{'same' if a.same else 'DIFFERENT'}"
+        )
+        if not a.same or k in detail:
+            lines += [
+                f"     {run:8s} {part}"
+                for run, j in zip(labels, (first, second), strict=True)
+                for part in j.claims[k].parts
+            ]
+    return "\n".join(lines)
