@@ -5,13 +5,15 @@ from pathlib import Path
 import numpy as np
 
 from ibc_tutorial import stats
-from ibc_tutorial.experiments.agents.claims import compare_verdicts, judge_claims
+from ibc_tutorial.experiments.agents.claims import compare_verdicts, judge_claims, stem_counts, stem_files
 from ibc_tutorial.experiments.agents.replication_folder import episode_table, load_results
 from ibc_tutorial.experiments.agents.rerun_comparison import (
     expert_shares,
     format_agreement,
     format_expert_shares,
+    format_stem_counts,
     format_visit_count_tests,
+    stem_counts_by_run,
     visit_count_tests,
 )
 
@@ -68,3 +70,13 @@ def test_format_agreement_details_claim_3_and_says_why_a_claim_was_not_judged():
     assert len(lines) == 5 + parts  # only claim 3 detailed: the judged verdicts agree
     none = format_agreement(compare_verdicts(first, second), first, second, detail=())
     assert len(none.splitlines()) == 5
+
+
+def test_stem_counts_by_run_and_its_table_on_the_shipped_stems():
+    files = stem_files(RESULTS / "laptop")
+    counts = stem_counts_by_run({"native": files, "again": files}, ("bc", "da-ibc"))
+    assert counts["da-ibc"]["native"] == stem_counts(files, "da-ibc") == counts["da-ibc"]["again"]
+    lines = format_stem_counts(counts).splitlines()
+    assert lines[0] == "" and len(lines) == 3 + 2 and lines[2].split() == ["native", "again"] * 3
+    bc = counts["bc"]["native"]
+    assert lines[3].split()[0] == "bc" and f"{bc.left}/{bc.crossings}" in lines[3]

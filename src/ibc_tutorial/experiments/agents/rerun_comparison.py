@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ibc_tutorial import stats
-from ibc_tutorial.experiments.agents.claims import CLAIMS
+from ibc_tutorial.experiments.agents.claims import CLAIMS, stem_counts
 from ibc_tutorial.experiments.agents.replication_folder import episode_table, load_results
 
 
@@ -104,4 +104,32 @@ def format_agreement(agreement: dict, first, second, detail=(3,), labels=("nativ
                 for run, j in zip(labels, (first, second), strict=True)
                 for part in j.claims[k].parts
             ]
+    return "\n".join(lines)
+
+
+def stem_counts_by_run(runs: dict[str, dict], methods) -> dict[str, dict]:
+    """method -> {run -> ``claims.stem_counts``}: each method's exits and stem ends in each run's files.
+
+    ``runs``: run name -> stem-analysis files (``claims.stem_files``, one per agent and the expert).
+    """
+    return {m: {run: stem_counts(files, m) for run, files in runs.items()} for m in methods}
+
+
+def format_stem_counts(counts: dict[str, dict]) -> str:
+    """``stem_counts_by_run``'s two runs side by side: minority exit, left of crossings, stem ends."""
+    lines = [
+        f"\n{'':8s} {'minority exit at the stems (95 %)':>36s}   "
+        f"{'left/crossings':>19s}   {'ended at a stem':>16s}"
+    ]
+    first_run, second_run = next(iter(counts.values()))
+    lines.append(
+        f"{'':8s} {first_run:>17s} {second_run:>18s}   "
+        f"{first_run:>9s} {second_run:>9s}   {first_run:>7s} {second_run:>8s}"
+    )
+    for m, by_run in counts.items():
+        a, b = by_run[first_run], by_run[second_run]
+        lines.append(
+            f"{m:8s} {str(a.minority):>17s} {str(b.minority):>18s}   {f'{a.left}/{a.crossings}':>9s} "
+            f"{f'{b.left}/{b.crossings}':>9s}   {a.ended_at_stem:7d} {b.ended_at_stem:8d}"
+        )
     return "\n".join(lines)
