@@ -64,3 +64,37 @@ def reading(agent, obs: dict, command: str | None, n_grid: int = GRID) -> dict:
         "argmin_steer": r["argmin_steer"],
         "left_mass": r["left_mass"],
     }
+
+
+def readings_by_command(agents: dict, states, commands=("left", "right", "follow")) -> dict:
+    """Every agent's ``reading`` at every state, under each command (a routeless agent: no command).
+
+    ``agents``: ``(method, seed)`` -> an agent told commands, ``(method, seed, "routeless")`` -> one
+    that is not; ``states``: a list of ``(observation, where)``. Returns ``(method, seed, k, command)``
+    -> the reading at ``states[k]``, with ``command`` ``"none"`` for a routeless agent.
+    """
+    readings = {}
+    for (m, s, *routeless), agent in agents.items():
+        for k, (obs, _) in enumerate(states):
+            o = {"bev": obs["bev"], "state": obs["state"]}
+            for c in (None,) if routeless else commands:
+                readings[m, s, k, c or "none"] = reading(agent, o, c)
+    return readings
+
+
+def format_readings_table(readings: dict, methods, seeds, distances, label: dict) -> str:
+    """Chapter 11's table: per method and state, each command's agents with two valleys and mean left mass."""
+    columns = ("left", "right", "follow", "none")
+    lines = [
+        f"{'method':>7} {'state':>6} "
+        + " ".join(f"{c:>22}" for c in ("left", "right", "follow", "none (routeless)"))
+    ]
+    for m in methods:
+        for k, d in enumerate(distances):
+            cells = []
+            for c in columns:
+                v = [readings[m, s, k, c]["valleys"] for s in seeds]
+                lm = np.mean([readings[m, s, k, c]["left_mass"] for s in seeds])
+                cells.append(f"{sum(x >= 2 for x in v)}/{len(v)} two; left {lm:4.2f}")
+            lines.append(f"{label[m]:>7} {d:5.0f}m " + " ".join(f"{x:>22}" for x in cells))
+    return "\n".join(lines)

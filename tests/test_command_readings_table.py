@@ -1,0 +1,34 @@
+"""Chapter 11's readings under each command: which readings are taken, and the table printed from them."""
+
+from ibc_tutorial.experiments.agents import command_readings
+from ibc_tutorial.experiments.agents.command_readings import format_readings_table, readings_by_command
+
+
+def test_readings_by_command_reads_each_command_for_told_agents_and_none_for_routeless(monkeypatch):
+    calls = []
+    monkeypatch.setattr(
+        command_readings, "reading", lambda a, o, c: calls.append((a, c)) or {"agent": a, "c": c}
+    )
+    states = [({"bev": 0, "state": 1, "extra": 2}, {}), ({"bev": 3, "state": 4}, {})]
+    got = readings_by_command({("ibc", 0): "told", ("ibc", 0, "routeless"): "free"}, states)
+    assert len(got) == 2 * 3 + 2 * 1
+    assert got["ibc", 0, 1, "right"] == {"agent": "told", "c": "right"}
+    assert got["ibc", 0, 0, "none"] == {"agent": "free", "c": None}
+    assert ("free", "left") not in calls
+
+
+def test_format_readings_table_counts_two_valleys_and_averages_left_mass():
+    readings = {
+        ("ibc", s, 0, c): {"valleys": 2 if (s, c) == (1, "left") else 1, "left_mass": 0.2 * (s + 1)}
+        for s in (0, 1)
+        for c in ("left", "right", "follow", "none")
+    }
+    lines = format_readings_table(readings, ("ibc",), (0, 1), (7.5,), {"ibc": "IBC"}).splitlines()
+    assert len(lines) == 2 and lines[0].split()[:2] == ["method", "state"]
+    assert lines[1].split()[:4] == [
+        "IBC",
+        "8m",
+        "1/2",
+        "two;",
+    ]  # 7.5 m printed to the metre, as the chapter does
+    assert lines[1].count("left 0.30") == 4 and lines[1].count("0/2 two") == 3
