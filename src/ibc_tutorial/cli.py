@@ -431,6 +431,15 @@ def _routes_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--drives", type=int, default=1, help="drives of every route per driver")
     p.add_argument("--only", nargs="*", default=None, help="drive only these (e.g. da-ibc-seed0 expert)")
+    p.add_argument(
+        "--heldout-seed",
+        type=int,
+        default=None,
+        help="drive routes drawn afresh from this seed instead of the six fixed routes (chapter 11's check)",
+    )
+    p.add_argument(
+        "--heldout-routes", type=int, default=8, help="with --heldout-seed: how many (default: %(default)s)"
+    )
 
 
 def _sweep_steering_arguments(p: argparse.ArgumentParser) -> None:

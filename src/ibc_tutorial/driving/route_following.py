@@ -38,7 +38,7 @@ from ibc_tutorial.driving.commands import COMMANDS, FOLLOW, command_at, distance
 from ibc_tutorial.driving.env import EnvConfig, make_env
 from ibc_tutorial.driving.expert import Expert, ExpertConfig
 from ibc_tutorial.driving.rollout import DrivingPolicy
-from ibc_tutorial.driving.routes import Route
+from ibc_tutorial.driving.routes import Route, random_route, random_start
 from ibc_tutorial.driving.sim import SCORE_PENALTY, score
 from ibc_tutorial.driving.towns import Town, get_town
 from ibc_tutorial.utils import check_choice, check_int, check_positive, progress
@@ -68,6 +68,28 @@ def build_route(name: str) -> Route:
     """The ``Route`` of ``ROUTES[name]``."""
     lane, turns = ROUTES[check_choice("name", name, tuple(ROUTES))]
     return Route(lane, START_S, turns)
+
+
+HELDOUT_TURNS = 6
+"""Turns at T-junctions of every held-out route (``heldout_routes``)."""
+
+
+def heldout_routes(seed: int, n: int = 8, turns: int = HELDOUT_TURNS) -> list[tuple[str, Route]]:
+    """``n`` town02 routes drawn afresh from ``seed``: a random start (``routes.random_start``) and each
+    junction's exit uniformly among its legal ones (``routes.uniform_exit``), ``turns`` T-junctions each,
+    as ``(name, Route)`` pairs named ``h<seed>-<k>`` for ``drive_routes``. The six ``ROUTES`` were chosen to
+    take every exit of the town; these are drawn only after the agents they test were trained, so nothing
+    was chosen or tuned on them (chapter 11's check on routes it never drove)."""
+    seed = check_int("seed", seed, minimum=0)
+    check_int("n", n, minimum=1)
+    check_int("turns", turns, minimum=1)
+    town = get_town(ROUTE_TOWN)
+    out = []
+    for k in range(n):
+        rng = np.random.default_rng([seed, k])
+        lane, s = random_start(town, rng)
+        out.append((f"h{seed}-{k}", random_route(town, rng, n_turns=turns, start=(lane, START_S))))
+    return out
 
 
 def route_lanes(route: Route, town: Town) -> list[int]:

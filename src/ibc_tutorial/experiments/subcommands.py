@@ -293,7 +293,19 @@ def routes(args: argparse.Namespace) -> int:
 
     drives = check_int("--drives", args.drives, minimum=1)
     torch.set_num_threads(1)
-    run_route_drives(args.folder, args.out, drives, args.only, command=getattr(args, "command_line", ""))
+    heldout = getattr(args, "heldout_seed", None)
+    if heldout is not None:
+        check_int("--heldout-seed", heldout, minimum=0)
+    count = check_int("--heldout-routes", getattr(args, "heldout_routes", 8), minimum=1)
+    run_route_drives(
+        args.folder,
+        args.out,
+        drives,
+        args.only,
+        command=getattr(args, "command_line", ""),
+        heldout_seed=heldout,
+        heldout_count=count,
+    )
     return 0
 
 

@@ -74,6 +74,12 @@ class BEVStateEncoder(ObservationEncoder):
     observation also holds ``"command"`` (B,) integer indices, one of CIL's high-level commands
     (``driving.commands``), fed one-hot beside the state into the state MLP: E(x, c, y) for an energy head.
     An observation without a command is refused by such an encoder, one with a command by a routeless one.
+
+    With ``command_branches`` as well, the command also chooses one of ``n_commands`` branch layers on the
+    joint embedding: z_c = ReLU(W_c z + b_c), each W_c (2E, 2E), so the output keeps its size and every head
+    sits on it unchanged. This is the *branched* network of conditional imitation learning (CIL: Codevilla
+    et al., 2018, who put one whole action head per command; here one layer per command under the shared
+    head), where the command as one input among the state's is CIL's *command input* network.
     """
 
     def __init__(
@@ -83,6 +89,7 @@ class BEVStateEncoder(ObservationEncoder):
         embed_dim: int = 256,
         in_channels: int = 5,
         n_commands: int = 0,
+        command_branches: bool = False,
     ):
         super().__init__()
         self.bev_size = check_int("bev_size", bev_size, minimum=8)
@@ -105,6 +112,18 @@ class BEVStateEncoder(ObservationEncoder):
         )
         self.branch_dim = embed_dim
         self.embed_dim = 2 * embed_dim
+        if not isinstance(command_branches, bool):
+            raise ValueError(f"command_branches must be True or False, got {command_branches!r}")
+        if command_branches and not self.n_commands:
+            raise ValueError("command_branches needs n_commands > 0: a routeless encoder has no command")
+        self.command_branches = command_branches
+        # CIL's branches: one (2E -> 2E) layer per command, on the joint embedding (empty when not taken)
+        self.branches = nn.ModuleList(
+            [
+                nn.Linear(self.embed_dim, self.embed_dim)
+                for _ in range(self.n_commands if command_branches else 0)
+            ]
+        )
 
     def batch_size(self, obs) -> int:
         return len(obs["bev"])
@@ -137,7 +156,11 @@ class BEVStateEncoder(ObservationEncoder):
             raise ValueError(
                 "obs holds a 'command', but this encoder is routeless (n_commands=0): it takes none"
             )
-        return torch.cat([self.cnn(x), self.state_mlp(st)], dim=1)  # (B, 2 E)
+        z = torch.cat([self.cnn(x), self.state_mlp(st)], dim=1)  # (B, 2 E)
+        if self.command_branches:
+            every = torch.stack([torch.relu(b(z)) for b in self.branches], dim=1)  # (B, C, 2 E)
+            z = every[torch.arange(len(z), device=z.device), obs["command"].long()]  # (B, 2 E): z_c
+        return z
 
 
 def to_tensor_obs(obs, device: torch.device | str | None = None) -> dict[str, torch.Tensor]:

@@ -82,6 +82,8 @@ def architecture(method: str, preset: Preset) -> dict:
     }
     if preset.commands:  # recorded only when taken: a routeless architecture is that of older checkpoints
         arch["commands"] = N_COMMANDS
+    if preset.command_branches:  # likewise: recorded only when taken
+        arch["command_branches"] = True
     if method == "bc":
         arch.update(min_concentration=BC_MIN_CONCENTRATION)
     else:
@@ -104,7 +106,11 @@ def network_from_architecture(arch: dict) -> nn.Module:
             f"{arch!r}"
         )
     enc = BEVStateEncoder(
-        arch["bev_size"], tuple(arch["cnn_channels"]), arch["embed_dim"], n_commands=arch.get("commands", 0)
+        arch["bev_size"],
+        tuple(arch["cnn_channels"]),
+        arch["embed_dim"],
+        n_commands=arch.get("commands", 0),
+        command_branches=arch.get("command_branches", False),
     )
     if arch["network"] == "BetaPolicy":
         return BetaPolicy(enc, action_dim=arch["action_dim"], min_concentration=arch["min_concentration"])

@@ -217,6 +217,10 @@ class Preset(StoredSettings):
     is commanded about equally often (``driving.command_balance.balanced_routes``: at each junction the
     legal exit commanded least so far); False: random routes, on which "straight" is commanded about half
     as often as each turn (a preset stored before this field existed has random routes)."""
+    command_branches: bool = False
+    """With ``commands``: True, the command also chooses one of four branch layers on the joint embedding
+    (CIL's branched network, ``policies.BEVStateEncoder``); False, the command is only an input of the state
+    MLP (CIL's command-input network; a preset stored before this field existed)."""
     route_episodes: int = 1
     """With ``commands``: drives of every town02 route in the final evaluation (light phases seeded apart)."""
     route_max_steps: int = 0
@@ -252,9 +256,11 @@ class Preset(StoredSettings):
             "flow_samples",
         ):
             check_int(f, getattr(self, f), minimum=1)
-        for f in ("commands", "balanced_routes"):
+        for f in ("commands", "balanced_routes", "command_branches"):
             if not isinstance(getattr(self, f), bool):
                 raise ValueError(f"{f} must be True or False, got {getattr(self, f)!r}")
+        if self.command_branches and not self.commands:
+            raise ValueError("command_branches=True needs commands=True: a routeless agent has no command")
         check_int("route_episodes", self.route_episodes, minimum=1)
         check_int("route_max_steps", self.route_max_steps, minimum=0)
         for f in ("routeless_episodes", "heldout_episodes"):

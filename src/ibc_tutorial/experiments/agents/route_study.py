@@ -16,6 +16,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from ibc_tutorial.driving.route_following import ROUTES, heldout_routes
 from ibc_tutorial.experiments.agents.checkpoints import load_agent, training_seed
 from ibc_tutorial.experiments.agents.route_driving import ROUTE_SEED, evaluate_on_routes, summarize_route_rows
 from ibc_tutorial.experiments.agents.stem_drives import drivers
@@ -24,17 +25,31 @@ from ibc_tutorial.utils import check_int
 
 
 def run_route_drives(
-    folder, out, drives: int = 1, only=None, log=print, command: str = "", max_steps: int | None = None
+    folder,
+    out,
+    drives: int = 1,
+    only=None,
+    log=print,
+    command: str = "",
+    max_steps: int | None = None,
+    heldout_seed: int | None = None,
+    heldout_count: int = 8,
 ) -> list[str]:
     """Drive each driver of ``folder`` without a file in ``out`` on every route; returns the names driven.
 
     ``drives``: drives of every route per driver (drive ``k``: light phases seeded ``ROUTE_SEED + k``);
     ``only``: names to drive (e.g. ``["bc-seed0", "expert"]``), None for all; ``command``: the command line,
     recorded in ``out/provenance.json``; ``max_steps``: cap on every route drive's steps (None: each route's
-    own budget). ValueError if ``out`` holds drives of another protocol."""
+    own budget); ``heldout_seed``: drive ``heldout_count`` routes drawn afresh from this seed
+    (``route_following.heldout_routes``) instead of the six fixed ``ROUTES``. ValueError if ``out`` holds
+    drives of another protocol."""
     drives = check_int("drives", drives, minimum=1)
     if max_steps is not None:
         check_int("max_steps", max_steps, minimum=1)
+    if heldout_seed is None:
+        routes = tuple(ROUTES)
+    else:
+        routes = heldout_routes(check_int("heldout_seed", heldout_seed, minimum=0), heldout_count)
     named = drivers(folder)
     if only:
         unknown = sorted(set(only) - {n for n, _ in named})
@@ -44,6 +59,8 @@ def run_route_drives(
     prov_path = out / PROVENANCE
     prov = json.loads(prov_path.read_text()) if prov_path.exists() else {"invocations": []}
     protocol = {"drives": drives, "seed": ROUTE_SEED, "folder": Path(folder).name, "max_steps": max_steps}
+    if heldout_seed is not None:  # recorded only when taken: fixed-route folders read as before
+        protocol.update(heldout_seed=heldout_seed, heldout_count=heldout_count)
     if prov.get("protocol", protocol) != protocol:
         raise ValueError(
             f"{out} holds route drives of another protocol {prov['protocol']}: use another --out"
@@ -60,7 +77,7 @@ def run_route_drives(
             agent, ckpt = load_agent(ck)
             policy_seed, takes = training_seed(ckpt) or 0, agent.takes_command
         rows = evaluate_on_routes(
-            agent, drives=drives, seed=ROUTE_SEED, policy_seed=policy_seed, max_steps=max_steps
+            agent, routes, drives=drives, seed=ROUTE_SEED, policy_seed=policy_seed, max_steps=max_steps
         )
         checkpoint = None if ck is None else str(Path(ck).relative_to(Path(folder)))
         summary = summarize_route_rows(rows)
