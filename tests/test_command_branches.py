@@ -136,3 +136,36 @@ def test_route_drives_on_heldout_routes_record_their_protocol(tmp_path):
     with pytest.raises(ValueError, match="another protocol"):
         run_route_drives(folder, out, log=None, max_steps=3, heldout_seed=6, heldout_count=2)
     assert np.isfinite([r["completion"] for r in rows]).all()
+
+
+def test_start_drives_resume_and_record_their_protocol(tmp_path):
+    from ibc_tutorial.experiments.agents.evaluate import episode_rows, evaluate_agent
+    from ibc_tutorial.experiments.agents.start_study import load_start_drives, run_start_drives
+
+    folder = tmp_path / "rep"
+    (folder / "runs" / "bc" / "seed0").mkdir(parents=True)
+    torch.manual_seed(0)
+    agent = Agent("bc", build_network("bc", TINY), TINY, torch.rand(20, 2) * 2 - 1)
+    save_checkpoint(
+        folder / "runs" / "bc" / "seed0" / "final.pt", agent, data_sha256="0" * 64, epoch=1, seed=3
+    )
+    out = tmp_path / "starts"
+    done = run_start_drives(folder, out, seed=500, episodes=2, steps=5, log=None)
+    assert done == ["bc-seed0", "expert"]
+    files = load_start_drives(out)
+    rows = files["bc-seed0"]["episodes"]
+    assert [r["seed"] for r in rows] == [500, 501] and files["bc-seed0"]["policy_seed"] == 3
+    # the same rows as evaluate_agent gives from those starts with the agent's training seed
+    loaded, _ = load_agent(folder / "runs" / "bc" / "seed0" / "final.pt")
+    assert rows == episode_rows(evaluate_agent(loaded, "town02", 2, 5, seed=500, policy_seed=3))
+    assert [r["seed"] for r in files["expert"]["episodes"]] == [500, 501]
+    assert run_start_drives(folder, out, seed=500, episodes=2, steps=5, log=None) == []  # resumed: nothing
+    prov = json.loads((out / "provenance.json").read_text())
+    assert prov["protocol"] == {"seed": 500, "episodes": 2, "steps": 5, "folder": "rep"}
+    assert len(prov["invocations"]) == 2
+    with pytest.raises(ValueError, match="another protocol"):
+        run_start_drives(folder, out, seed=600, episodes=2, steps=5, log=None)
+    with pytest.raises(ValueError, match="only must name drivers"):
+        run_start_drives(folder, tmp_path / "x", seed=1, only=["ibc-seed9"], log=None)
+    with pytest.raises(ValueError, match="seed"):
+        run_start_drives(folder, tmp_path / "y", seed=-1, log=None)

@@ -154,6 +154,10 @@ def check_paths(command: str, args: argparse.Namespace) -> None:
         check_output_dir("--out", args.out)
         if args.baseline is not None and not Path(args.baseline, "runs").is_dir():
             raise UserError(f"--baseline must be a replication folder with runs/, got {args.baseline}")
+    elif command == "starts":
+        if not Path(args.folder, "runs").is_dir():
+            raise UserError(f"--folder must be a replication folder with runs/, got {args.folder}")
+        check_output_dir("--out", args.out)
     elif command == "routes":
         if args.drives < 1:
             raise UserError(f"--drives must be a positive integer, got {args.drives}")
@@ -442,6 +446,17 @@ def _routes_arguments(p: argparse.ArgumentParser) -> None:
     )
 
 
+def _starts_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--folder", default="book/results/laptop", help="replication folder with runs/")
+    p.add_argument(
+        "--out", default="book/results/laptop/more-starts", help="where each driver's <name>.json goes"
+    )
+    p.add_argument("--seed", type=int, default=40000, help="seed of the first start (default: %(default)s)")
+    p.add_argument("--episodes", type=int, default=10, help="starts, one episode each (default: %(default)s)")
+    p.add_argument("--steps", type=int, default=3000, help="steps per episode (default: %(default)s)")
+    p.add_argument("--only", nargs="*", default=None, help="drive only these (e.g. da-ibc-seed0 expert)")
+
+
 def _sweep_steering_arguments(p: argparse.ArgumentParser) -> None:
     from ibc_tutorial.experiments.steering.sweep import SWEEP  # deferred: loads torch
 
@@ -522,6 +537,11 @@ SUBCOMMANDS: dict[str, tuple[str, object, str]] = {
         "routes",
         _routes_arguments,
         "every agent of a replication folder, and the expert, driven on the town02 routes (resumable)",
+    ),
+    "starts": (
+        "starts",
+        _starts_arguments,
+        "every agent of a replication folder, and the expert, driven from more town02 starts (resumable)",
     ),
     "sweep-steering": (
         "sweep_steering",

@@ -309,6 +309,20 @@ def routes(args: argparse.Namespace) -> int:
     return 0
 
 
+def starts(args: argparse.Namespace) -> int:
+    """``ibc-tutorial starts``: every agent of ``--folder`` and the expert from more starts (resumable)."""
+    from ibc_tutorial.experiments.agents.start_study import run_start_drives
+
+    seed = check_int("--seed", args.seed, minimum=0)
+    episodes = check_int("--episodes", args.episodes, minimum=1)
+    steps = check_int("--steps", args.steps, minimum=1)
+    torch.set_num_threads(1)
+    run_start_drives(
+        args.folder, args.out, seed, episodes, steps, args.only, command=getattr(args, "command_line", "")
+    )
+    return 0
+
+
 def sweep_steering(args: argparse.Namespace) -> int:
     """``ibc-tutorial sweep-steering``: shares, models, seeds, sessions and the preset checked, the folder
     checked, then the sweep."""
