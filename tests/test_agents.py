@@ -110,7 +110,7 @@ def test_energy_grid_matches_the_energy():
 
 
 def test_presets():
-    assert set(PRESETS) == {"paper", "laptop", "previous-laptop", "two-answers", "tiny"}
+    assert set(PRESETS) == {"paper", "laptop", "ten-routes", "two-answers", "tiny"}
     assert (PAPER.lr, PAPER.epochs, PAPER.batch_size, PAPER.n_neg) == (1e-5, 400, 128, 1024)
     assert (PAPER.dfo_samples, PAPER.dfo_iters, PAPER.dfo_sigma_init, PAPER.dfo_shrink) == (
         16384,
@@ -122,8 +122,8 @@ def test_presets():
     assert LAPTOP.bev_size == 64 and "bev_size" in differences(PAPER, LAPTOP)
     assert Preset.from_dict(LAPTOP.to_dict()) == LAPTOP
     assert get_preset("tiny") is TINY
-    # the laptop preset before chapter 08's stem ablations: the paper's 10 routes, 8 epochs, five agents
-    previous = get_preset("previous-laptop")
+    # the base of chapter 08's ablations: the paper's 10 routes, 8 epochs, five agents
+    previous = get_preset("ten-routes")
     assert differences(LAPTOP, previous) == {
         "routes": (20, 10),
         "epochs": (4, 8),

@@ -18,7 +18,7 @@ from ibc_tutorial.driving.sim import DrivingSim
 from ibc_tutorial.driving.towns import get_town
 
 TOWN01 = get_town("town01")
-CONFIG = CollectConfig(town="town01", routes=10, seed=0, brake_noise=1.0)  # the previous-laptop collection
+CONFIG = CollectConfig(town="town01", routes=10, seed=0, brake_noise=1.0)  # the ten-routes collection
 
 
 def test_turns_within_grow_with_the_distance_and_stop_at_the_route():
@@ -32,7 +32,7 @@ def test_turns_within_grow_with_the_distance_and_stop_at_the_route():
 
 
 def test_balanced_routes_spread_the_commands_where_random_ones_do_not():
-    """On the previous-laptop collection's budgets: random routes plan "straight" about half as often as
+    """On the ten-routes collection's budgets: random routes plan "straight" about half as often as
     each turn; the balanced ones within two of each other."""
     steps = episode_steps(CONFIG)
     sim = DrivingSim("town01")

@@ -46,7 +46,7 @@ def test_the_departure_table_reads_every_ablation_against_its_pair():
     assert data["ibc"].difference.estimate > 0 and data["ibc"].verdict == HOLDS
     assert rows["previous-preset"].methods["bc"].verdict == CANNOT_TELL
     table = departures.departure_table(list(rows.values()))
-    assert table.count("<tr>") == len(rows) + 1 and "ibc-tutorial replicate --preset previous-laptop" in table
+    assert table.count("<tr>") == len(rows) + 1 and "ibc-tutorial replicate --preset ten-routes" in table
 
 
 def test_an_ablation_whose_overrides_are_not_its_folders_settings_is_refused():

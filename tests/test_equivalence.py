@@ -193,3 +193,37 @@ def test_crossed_bootstrap_refuses_bad_input():
         crossed_means(np.ones((2, 3)), 0)
     with pytest.raises(ValueError, match="scores"):
         crossed_means(np.ones(3))
+
+
+def test_fresh_starts_interval_covers_new_sets_of_starts_as_often_as_its_level():
+    """With many observed starts from a known population, 95 % of new 10-start sets fall inside."""
+    from ibc_tutorial.crossed_bootstrap import fresh_starts_interval
+
+    rng = np.random.default_rng(3)
+
+    def population(n):  # (3 agents, n starts), (n,) expert: a start effect shared by all, agent offsets
+        start = rng.gamma(4.0, 250.0, size=n)  # (n,) the expert's score at each start
+        agents = start[None, :] * rng.uniform(0.6, 1.4, size=(1, n)) + np.array([[-50.0], [0.0], [40.0]])
+        return np.clip(agents, 1.0, None), start
+
+    scores, expert = population(400)
+    iv = fresh_starts_interval(scores, expert, 10, n_resamples=4000, seed=0)
+    inside = []
+    for _ in range(2000):
+        s, e = population(10)
+        inside.append(iv.contains(s.mean() / e.mean()))
+    assert 0.92 < np.mean(inside) < 0.98
+    assert iv.contains(scores.mean() / expert.mean()) and iv.estimate == scores.mean() / expert.mean()
+    # the agents are not resampled: identical agents give the same interval as their mean alone
+    same = fresh_starts_interval(np.repeat(scores[:1], 3, axis=0), expert, 10, n_resamples=500, seed=1)
+    alone = fresh_starts_interval(scores[:1], expert, 10, n_resamples=500, seed=1)
+    assert (same.low, same.high) == (alone.low, alone.high)
+    # a prediction for 10 new starts is wider than the crossed interval of the 400 observed ones
+    from ibc_tutorial.crossed_bootstrap import crossed_ratio_interval
+
+    ci = crossed_ratio_interval(scores, expert, n_resamples=500)
+    assert iv.high - iv.low > 3 * (ci.high - ci.low)
+    with pytest.raises(ValueError, match="n_starts"):
+        fresh_starts_interval(scores, expert, 0)
+    with pytest.raises(ValueError, match="expert must be"):
+        fresh_starts_interval(scores, expert[:-1])

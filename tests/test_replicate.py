@@ -15,7 +15,7 @@ from ibc_tutorial.experiments.agents.checkpoints import load_agent
 from ibc_tutorial.experiments.agents.presets import (
     LAPTOP,
     METHODS,
-    PREVIOUS_LAPTOP,
+    TEN_ROUTES,
     TINY,
     Preset,
     differences,
@@ -25,7 +25,7 @@ from ibc_tutorial.experiments.agents.replication_folder import collect_results, 
 from ibc_tutorial.experiments.runs import machine
 
 SHIPPED = Path(__file__).resolve().parents[1] / "book" / "results" / "laptop"
-PREVIOUS = SHIPPED.parent / "previous-laptop"  # the replication of PREVIOUS_LAPTOP, chapter 08's diagnosis
+PREVIOUS = SHIPPED.parent / "previous-laptop"  # the replication of TEN_ROUTES, chapter 08's diagnosis
 
 
 @pytest.fixture
@@ -153,7 +153,7 @@ def test_the_shipped_route_drives_cover_every_shipped_agent_from_a_clean_ancesto
     if not folder.exists():
         pytest.skip("no shipped route drives")
     drives = load_route_drives(folder)
-    assert set(drives) == {f"{m}-seed{s}" for m in METHODS for s in PREVIOUS_LAPTOP.seeds} | {"expert"}
+    assert set(drives) == {f"{m}-seed{s}" for m in METHODS for s in TEN_ROUTES.seeds} | {"expert"}
     for name, d in drives.items():
         assert d["commands"] is False and sorted(r["route"] for r in d["episodes"]) == sorted(ROUTES), name
     prov = json.loads((folder / "provenance.json").read_text())
@@ -173,9 +173,7 @@ def test_the_shipped_crossings_are_clean_runs_of_an_ancestor_commit():
     files = sorted((PREVIOUS / "crossings").glob("*.json"))
     if not files:
         pytest.skip("no shipped crossings")
-    assert [f.name for f in files] == sorted(
-        f"{m}-seed{s}.json" for m in METHODS for s in PREVIOUS_LAPTOP.seeds
-    )
+    assert [f.name for f in files] == sorted(f"{m}-seed{s}.json" for m in METHODS for s in TEN_ROUTES.seeds)
     root = SHIPPED.parents[2]
     for f in files:
         commit = json.loads(f.read_text())["commit"]
@@ -194,11 +192,11 @@ VARIANTS = {  # folder -> the --set overrides of its variant, beside ``ABLATION`
 
 
 @pytest.mark.parametrize("folder", sorted(VARIANTS))
-def test_the_shipped_ablation_folders_are_the_previous_laptop_preset_with_overrides(folder):
+def test_the_shipped_ablation_folders_are_the_ten_routes_preset_with_overrides(folder):
     """Chapter 08 compares each shipped ablation folder with the previous laptop replication: the folder's
-    preset must be ``PREVIOUS_LAPTOP`` with its ``--set`` overrides in every setting (its name aside)."""
+    preset must be ``TEN_ROUTES`` with its ``--set`` overrides in every setting (its name aside)."""
     stored = json.loads((SHIPPED.parent / "ablations" / folder / "provenance.json").read_text())["preset"]
-    variant = with_overrides(PREVIOUS_LAPTOP, ABLATION + VARIANTS[folder])
+    variant = with_overrides(TEN_ROUTES, ABLATION + VARIANTS[folder])
     assert differences(Preset.from_dict(stored), variant) == {}
 
 
@@ -282,7 +280,7 @@ def test_the_shipped_stem_analysis_is_complete_and_from_clean_ancestor_commits(r
     folder = root_folder / "stems"
     if not (folder / "summary.json").exists():
         pytest.skip("no shipped stem analysis")
-    preset = {"laptop": LAPTOP, "previous-laptop": PREVIOUS_LAPTOP}[replication]
+    preset = {"laptop": LAPTOP, "previous-laptop": TEN_ROUTES}[replication]
     names = sorted([f"{m}-seed{s}" for m in METHODS for s in preset.seeds] + ["expert"])
     assert all(drive_file(root_folder, folder, n) is not None for n in names)
     assert sorted(f.stem for f in (folder / "analysis").glob("*.json") if f.stem != "provenance") == names
@@ -414,17 +412,14 @@ STEM_ABLATIONS = {  # folder -> (its --set overrides, its seeds)
 
 
 @pytest.mark.parametrize("name", sorted(STEM_ABLATIONS))
-def test_the_shipped_stem_ablations_are_the_previous_laptop_preset_with_their_overrides(name):
+def test_the_shipped_stem_ablations_are_the_ten_routes_preset_with_their_overrides(name):
     folder = SHIPPED.parent / "ablations" / name
     if not (folder / "provenance.json").exists():
         pytest.skip(f"no shipped {name} ablation")
     prov = json.loads((folder / "provenance.json").read_text())
     overrides, seeds = STEM_ABLATIONS[name]
     assert prov["overrides"] == overrides
-    assert (
-        differences(Preset.from_dict(prov["preset"]), with_overrides(PREVIOUS_LAPTOP, prov["overrides"]))
-        == {}
-    )
+    assert differences(Preset.from_dict(prov["preset"]), with_overrides(TEN_ROUTES, prov["overrides"])) == {}
     assert prov["complete"] and "uncommitted" not in prov["commit"] and len(prov["invocations"]) == 1
     analysed = sorted(p.stem for p in (folder / "stems" / "analysis").glob("*-seed*.json"))
     assert analysed == sorted(f"{m}-seed{s}" for m in METHODS for s in seeds)

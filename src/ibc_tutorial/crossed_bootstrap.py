@@ -156,3 +156,34 @@ def share_per_start(scores, expert) -> np.ndarray:
     """(E,) the method's mean over its agents at each start over the expert's score there."""
     x = check_scores("scores", scores)
     return x.mean(axis=0) / check_expert(expert, x.shape[1])  # (E,)
+
+
+def fresh_starts_interval(
+    scores,
+    expert,
+    n_starts: int = 10,
+    *,
+    n_resamples: int = DEFAULT_RESAMPLES,
+    seed=0,
+    level: float = LEVEL,
+) -> Interval:
+    """Where the *same* agents' share of the expert should fall on ``n_starts`` starts drawn afresh: a
+    bootstrap prediction interval, not a confidence interval.
+
+    ``scores`` (A, E) of the agents at the E observed starts, ``expert`` (E,) the expert's there. Each
+    resample draws ``n_starts`` of the E starts with replacement, the same for every agent and the expert, and
+    takes mean(agents at them) / mean(expert at them); the agents are not resampled, since a check on new
+    starts drives the same agents. The estimate is the share over all E starts. The observed starts stand in
+    for town02's population of starts, so the interval is as good as E is large: with few starts it misses
+    starts unlike any observed one, and its tails come out too short (Efron & Tibshirani 1993, ch. 13's
+    caution for any bootstrap from a small sample)."""
+    x = check_scores("scores", scores)
+    ex = check_expert(expert, x.shape[1])
+    n_starts = check_int("n_starts", n_starts, minimum=1)
+    n_resamples = check_int("n_resamples", n_resamples, minimum=1)
+    level = check_level(level)
+    rng = resampling_generator(seed)
+    agent_means = x.mean(axis=0)  # (E,) the mean over the agents at each start
+    drawn = rng.integers(x.shape[1], size=(n_resamples, n_starts))  # (R, n) the fresh starts
+    reps = agent_means[drawn].mean(axis=1) / ex[drawn].mean(axis=1)  # (R,)
+    return percentile_interval(x.mean() / ex.mean(), reps, level)

@@ -2,7 +2,7 @@
 
 A route's turns are drawn at random among each junction approach's legal exits (``routes.random_route``).
 In a T-junction town "straight" is legal only on the through road, never from a stem, so random routes
-command it least: the ten town01 routes of the ``previous-laptop`` collection command "straight" 9 times
+command it least: the ten town01 routes of the ``ten-routes`` collection command "straight" 9 times
 against 16 lefts and 16 rights, and an agent learns "go straight at the junction" from nine examples.
 
 ``balanced_routes`` draws the same kind of routes (a random start, a legal turn at every junction) but

@@ -1,11 +1,11 @@
 """What each departure from the paper does: the ablation folders read as one table (chapter 08).
 
-Each ablation is a replication of the 10-route preset ``previous-laptop`` with ``--set`` overrides
-(``ibc-tutorial replicate --preset previous-laptop --set ... --out book/results/ablations/FOLDER``), whose
+Each ablation is a replication of the 10-route preset ``ten-routes`` with ``--set`` overrides
+(``ibc-tutorial replicate --preset ten-routes --set ... --out book/results/ablations/FOLDER``), whose
 ``PROVENANCE.md`` records the command. ``ABLATIONS`` lists them, each with
 the folder it is compared with: the two folders differ in the setting the row names (the schedule row in
 two settings, changed together). ``departure_rows`` checks that every folder's stored settings are
-``previous-laptop`` with the row's overrides, then compares the two folders' town02 scores method by
+``ten-routes`` with the row's overrides, then compares the two folders' town02 scores method by
 method (``claims.compare_folders``: the mean score with the row's first setting minus the second's, on the
 seeds and starts both hold, with its 95 % two-level bootstrap interval over agents and episodes).
 """
@@ -17,13 +17,13 @@ from html import escape
 from pathlib import Path
 
 from ibc_tutorial.experiments.agents.claims import FolderComparison, compare_folders
-from ibc_tutorial.experiments.agents.presets import PREVIOUS_LAPTOP, Preset, differences, with_overrides
+from ibc_tutorial.experiments.agents.presets import TEN_ROUTES, Preset, differences, with_overrides
 from ibc_tutorial.experiments.agents.replication_folder import load_results
 
 ABLATION_RUNS = ("methods=bc,da-ibc", "seeds=0,1,2", "heldout_episodes=0", "routeless_episodes=0")
 """The overrides of the first ablations: BC and DA-IBC, seeds 0-2, the table's evaluation only."""
 REFERENCE = "previous-laptop"
-"""The folder (under the results root) of the replication of ``previous-laptop`` itself."""
+"""The folder (under the results root) of the replication of ``ten-routes`` itself."""
 
 
 @dataclass(frozen=True)
@@ -35,7 +35,7 @@ class Ablation:
     departure: str
     """The setting the row measures, in words: the preset's choice against the alternative."""
     overrides: tuple[str, ...]
-    """The ``--set`` overrides of ``previous-laptop`` that made the folder."""
+    """The ``--set`` overrides of ``ten-routes`` that made the folder."""
     other: str
     """The folder (under the results root) it is compared with, one setting away from this one."""
     laptop: str
@@ -92,19 +92,19 @@ ABLATIONS = (
 
 
 def ablation_command(ablation: Ablation) -> str:
-    """The ``replicate`` command that makes ``ablation``'s folder (its overrides of ``previous-laptop``)."""
+    """The ``replicate`` command that makes ``ablation``'s folder (its overrides of ``ten-routes``)."""
     sets = " ".join(f"--set {o}" for o in ablation.overrides)
     out = f"book/results/ablations/{ablation.folder}"
-    return f"ibc-tutorial replicate --preset previous-laptop {sets} --out {out}"
+    return f"ibc-tutorial replicate --preset ten-routes {sets} --out {out}"
 
 
 def check_ablation(results, ablation: Ablation) -> None:
-    """ValueError naming the folder unless its stored settings are ``previous-laptop`` with its overrides."""
+    """ValueError naming the folder unless its stored settings are ``ten-routes`` with its overrides."""
     folder = Path(results) / "ablations" / ablation.folder
     stored = Preset.from_dict(load_results(folder)["provenance"]["preset"])
-    diff = differences(stored, with_overrides(PREVIOUS_LAPTOP, list(ablation.overrides)))
+    diff = differences(stored, with_overrides(TEN_ROUTES, list(ablation.overrides)))
     if diff:
-        raise ValueError(f"{folder}: its settings are not previous-laptop with {ablation.overrides}: {diff}")
+        raise ValueError(f"{folder}: its settings are not ten-routes with {ablation.overrides}: {diff}")
 
 
 @dataclass(frozen=True)

@@ -382,17 +382,16 @@ TWO_ANSWERS = replace(
 --preset two-answers``, chapter 12): the laptop preset's settings, fewer routes, and stem twins recorded
 with an expert that begins each turn 2 m before the junction entry."""
 
-PREVIOUS_LAPTOP = replace(
+TEN_ROUTES = replace(
     LAPTOP,
-    name="previous-laptop",
+    name="ten-routes",
     routes=10,  # the paper's 10 routes
     epochs=8,
     seeds=(0, 1, 2, 3, 4),
 )
-"""The laptop preset until 2026-11-27: the paper's 10 demonstration routes, 8 epochs, five agents per method,
-otherwise today's. Its replication (``book/results/previous-laptop``) is where chapter 08 found the agents
-turning right at the stems of the T-junctions, and what its stem ablations and chapter 11's command agents
-vary; the laptop preset's 20 routes x 4 epochs came out of them."""
+"""The laptop preset with the paper's 10 demonstration routes and 8 epochs (as many gradient steps),
+five agents per method. Its replication (``book/results/previous-laptop``) is the base of chapter 08's
+ablations, each a ``--set`` change of it, and chapter 12 reads its agents at the stems of the T-junctions."""
 
 TINY = Preset(
     name="tiny",
@@ -425,11 +424,11 @@ TINY = Preset(
 )
 """A seconds-long preset for the tests and the chapters' live demonstrations."""
 
-PRESETS = {p.name: p for p in (PAPER, LAPTOP, PREVIOUS_LAPTOP, TWO_ANSWERS, TINY)}
+PRESETS = {p.name: p for p in (PAPER, LAPTOP, TEN_ROUTES, TWO_ANSWERS, TINY)}
 PURPOSES = {
     "paper": "the DA-IBC paper's settings (sec. 4.2), for reference: days of compute on a CPU",
     "laptop": "chapters 08-09's replication: about 60 min on 2 cores (--workers 2 --threads 1)",
-    "previous-laptop": "the paper's 10 routes, 8 epochs, 5 agents per method: about 40 min on 2 cores",
+    "ten-routes": "the paper's 10 routes, 8 epochs, 5 agents per method: about 40 min on 2 cores",
     "two-answers": "chapter 12's study (stem twins): about 55 min on 2 cores",
     "tiny": "a smoke test of the whole pipeline: under a minute",
 }
