@@ -227,3 +227,15 @@ def test_fresh_starts_interval_covers_new_sets_of_starts_as_often_as_its_level()
         fresh_starts_interval(scores, expert, 0)
     with pytest.raises(ValueError, match="expert must be"):
         fresh_starts_interval(scores, expert[:-1])
+
+
+def test_share_levels_are_the_three_bootstraps_side_by_side():
+    from ibc_tutorial.crossed_bootstrap import SHARE_LEVELS, crossed_ratio_interval, share_levels
+
+    rng = np.random.default_rng(0)
+    scores, expert = rng.uniform(500, 1200, size=(5, 8)), rng.uniform(600, 1100, size=8)
+    levels = share_levels(scores, expert)
+    assert tuple(levels) == SHARE_LEVELS
+    assert levels[SHARE_LEVELS[0]] == crossed_ratio_interval(scores, expert, resample_starts=False)
+    assert levels[SHARE_LEVELS[1]] == stats.ratio_interval(scores, expert)
+    assert levels[SHARE_LEVELS[2]] == crossed_ratio_interval(scores, expert)

@@ -35,6 +35,7 @@ from ibc_tutorial.stats import (
     check_level,
     check_scores,
     percentile_interval,
+    ratio_interval,
     resampling_generator,
 )
 from ibc_tutorial.utils import check_int
@@ -187,3 +188,29 @@ def fresh_starts_interval(
     drawn = rng.integers(x.shape[1], size=(n_resamples, n_starts))  # (R, n) the fresh starts
     reps = agent_means[drawn].mean(axis=1) / ex[drawn].mean(axis=1)  # (R,)
     return percentile_interval(x.mean() / ex.mean(), reps, level)
+
+
+SHARE_LEVELS = (
+    "agents only (these starts)",
+    "agents, then each agent's episodes",
+    "agents and starts, crossed",
+)
+"""The three bootstraps of a share of the expert that chapter 09 sets side by side (``share_levels``)."""
+
+
+def share_levels(scores, expert, seed=0) -> dict[str, Interval]:
+    """One method's share of the expert, mean(scores) / mean(expert), with its interval at each level of
+    ``SHARE_LEVELS``: the agents resampled at these starts (``resample_starts=False``), the agents then each
+    drawn agent's episodes (``stats.ratio_interval``, the two-level bootstrap), and agents and starts crossed
+    (``crossed_ratio_interval``). ``scores`` (A, E), ``expert`` (E,)."""
+    return dict(
+        zip(
+            SHARE_LEVELS,
+            (
+                crossed_ratio_interval(scores, expert, resample_starts=False, seed=seed),
+                ratio_interval(scores, expert, seed=seed),
+                crossed_ratio_interval(scores, expert, seed=seed),
+            ),
+            strict=True,
+        )
+    )
