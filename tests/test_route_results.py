@@ -89,3 +89,25 @@ def test_command_drivers_reads_a_replication_folder(tmp_path):
 def test_missed_crossings_count_command_and_exit_taken():
     misses = rr.missed_crossings(rr.by_method(DRIVERS)["bc"])
     assert misses == {("left", "straight"): 1, ("right", "none"): 1, ("left", "none"): 3}
+
+
+def test_group_summary_counts_the_rows_it_is_given():
+    from ibc_tutorial import stats
+    from ibc_tutorial.experiments.agents.route_tables import format_group_table, group_summary
+
+    def row(route, comp, score, red, end, crossings=()):
+        return {"route": route, "seed": 0, "completion": comp, "driving_score": score,
+                "red_light_infractions": red, "end": end, "crossings": list(crossings)}  # fmt: skip
+
+    ended = [{"approach": 10**6, "command": "left", "taken": ""}]
+    drivers = {
+        "ibc-seed0": [row("r1", 1.0, 0.7, 1, "completed"), row("r2", 0.5, 0.5, 0, "wrong_turn")],
+        "ibc-seed1": [row("r1", 0.2, 0.2, 0, "building", ended), row("r2", 1.0, 1.0, 0, "completed")],
+    }
+    g = group_summary(drivers)
+    assert g.agents == 2 and g.red == 0.25 and g.stem_ends == 0  # approach 10**6 is no stem
+    assert g.ends == {"completed": 2, "wrong_turn": 1, "building": 1, "off_road": 0, "timeout": 0}
+    assert g.completion.estimate == np.mean([1.0, 0.5, 0.2, 1.0])
+    assert g.score == stats.mean_interval(np.array([[0.7, 0.5], [0.2, 1.0]]))
+    text = format_group_table({"IBC": g})
+    assert "completed 2 wrong_turn 1 building 1" in text and "timeout" not in text.splitlines()[1]

@@ -19,16 +19,19 @@ from __future__ import annotations
 
 import json
 from collections import Counter
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from ibc_tutorial import stats
 from ibc_tutorial.driving.commands import COMMANDS
 from ibc_tutorial.driving.route_following import ROUTE_TOWN
 from ibc_tutorial.driving.stems import stem_approaches
 from ibc_tutorial.experiments.agents.presets import METHODS
 from ibc_tutorial.experiments.agents.replication_folder import FINAL_EVAL, expert_dir
 from ibc_tutorial.experiments.agents.route_study import load_route_drives
+from ibc_tutorial.stats import Interval
 from ibc_tutorial.utils import check_choice
 
 ROUTE_TOWN_STEMS = frozenset(stem_approaches(ROUTE_TOWN))
@@ -151,3 +154,49 @@ def missed_crossings(drivers: dict[str, list[dict]]) -> Counter:
         for x in r["crossings"]
         if x["taken"] != x["command"]
     )
+
+
+ENDS = ("completed", "wrong_turn", "building", "off_road", "timeout")
+"""How a route drive ends (``driving.route_following``), in the table's order."""
+
+
+@dataclass(frozen=True)
+class GroupSummary:
+    """One group of drivers (one method's agents, say) on the routes: chapter 11's table row."""
+
+    agents: int
+    """Drivers in the group."""
+    completion: Interval
+    """Mean route completion over agents x route drives, with its two-level bootstrap interval."""
+    score: Interval
+    """Mean driving score (completion x 0.7 ** red lights run), likewise."""
+    red: float
+    """Red lights run per route drive."""
+    ends: dict
+    """``{end: route drives}`` for every end of ``ENDS``."""
+    stem_ends: int
+    """Route drives that ended in a building or off the road inside a junction entered from a stem."""
+
+
+def group_summary(drivers: dict[str, list[dict]], seed=0) -> GroupSummary:
+    """The table row of ``drivers`` (``{name: rows}``, all on the same routes)."""
+    rows = [r for rs in drivers.values() for r in rs]
+    return GroupSummary(
+        agents=len(drivers),
+        completion=stats.mean_interval(route_table(drivers, "completion"), seed=seed),
+        score=stats.mean_interval(route_table(drivers, "driving_score"), seed=seed),
+        red=float(route_table(drivers, "red_light_infractions").mean()),
+        ends={e: sum(r["end"] == e for r in rows) for e in ENDS},
+        stem_ends=len(stem_ends(rows)),
+    )
+
+
+def format_group_table(groups: dict[str, GroupSummary]) -> str:
+    """The rows of ``groups`` as chapter 11's fixed-width table (completion, score, red lights, ends)."""
+    lines = [f"{'drivers':>18} {'agents':>6} {'completion':>19} {'driving score':>19} {'red/route':>9}  ends"]
+    for name, g in groups.items():
+        ends = " ".join(f"{e} {n}" for e, n in g.ends.items() if n)
+        lines.append(
+            f"{name:>18} {g.agents:6d} {str(g.completion):>19} {str(g.score):>19} {g.red:9.2f}  {ends}"
+        )
+    return "\n".join(lines)
