@@ -12,11 +12,14 @@ agent):
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import torch
 
 from ibc_tutorial.driving.commands import command_index
 from ibc_tutorial.driving.energy_profiles import beta_shape, read_grid
+from ibc_tutorial.experiments.agents.checkpoints import load_agent
 from ibc_tutorial.optimizers.grid import symmetric_axis
 from ibc_tutorial.policies.encoders import to_tensor_obs
 
@@ -97,4 +100,35 @@ def format_readings_table(readings: dict, methods, seeds, distances, label: dict
                 lm = np.mean([readings[m, s, k, c]["left_mass"] for s in seeds])
                 cells.append(f"{sum(x >= 2 for x in v)}/{len(v)} two; left {lm:4.2f}")
             lines.append(f"{label[m]:>7} {d:5.0f}m " + " ".join(f"{x:>22}" for x in cells))
+    return "\n".join(lines)
+
+
+def load_command_agents(command_folder, routeless_folder, methods, seeds) -> dict:
+    """``readings_by_command``'s ``agents``: ``(method, seed)`` -> the agent of ``command_folder``,
+    ``(method, seed, "routeless")`` -> the agent of the same method and seed in ``routeless_folder``
+    (``runs/<method>/seed<k>/final.pt`` in each, loaded with ``checkpoints.load_agent``)."""
+    agents = {}
+    for m in methods:
+        for s in seeds:
+            for folder, key in ((command_folder, (m, s)), (routeless_folder, (m, s, "routeless"))):
+                agents[key] = load_agent(Path(folder) / "runs" / m / f"seed{s}" / "final.pt")[0]
+    return agents
+
+
+BETA_COLUMNS = ("left", "right", "follow", "none")
+"""The commands of BC's table (``format_beta_table``); "none": the routeless agent."""
+
+
+def format_beta_table(readings: dict, seeds, distances) -> str:
+    """Chapter 11's table of BC's Beta over steering: per state and command, the mean over ``seeds`` of its
+    mean steering, and the shapes its agents' Betas have (``energy_profiles.beta_shape``)."""
+    head = ("left", "right", "follow", "none (routeless)")
+    lines = [f"{'state':>6} " + " ".join(f"{c:>30}" for c in head)]
+    for k, d in enumerate(distances):
+        cells = []
+        for c in BETA_COLUMNS:
+            rs = [readings["bc", s, k, c] for s in seeds]
+            shapes = "/".join(sorted({r["shape"] for r in rs}))
+            cells.append(f"mean {np.mean([r['mean'] for r in rs]):+.2f}, {shapes}")
+        lines.append(f"{d:5.0f}m " + " ".join(f"{x:>30}" for x in cells))
     return "\n".join(lines)
