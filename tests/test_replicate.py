@@ -121,7 +121,8 @@ SHIPPED_RUNS = [
     "ablations/previous-preset",
     "ablations/intensity-lights",
     "steering-laptop",
-    "commands",
+    "commands-branched",
+    "commands-input",
 ]
 """Every replication folder the book ships (each made by one clean run of a committed state)."""
 
@@ -143,17 +144,16 @@ def test_the_shipped_results_are_a_clean_run_of_an_ancestor_commit(name):
 
 
 def test_the_shipped_route_drives_cover_every_shipped_agent_from_a_clean_ancestor_commit():
-    """Chapter 11's route drives: every agent of the previous laptop replication and the expert on the town02
-    routes, without commands, from clean ancestor commits, each driver's every route once (made when that
-    replication's folder was ``laptop``)."""
+    """Chapter 11's route drives: every agent of the laptop replication and the expert on the six town02
+    routes, without commands, from clean ancestor commits, each driver's every route once."""
     from ibc_tutorial.driving.route_following import ROUTES
     from ibc_tutorial.experiments.agents.route_study import load_route_drives
 
-    folder = SHIPPED.parent / "previous-laptop-on-routes"
+    folder = SHIPPED / "on-routes"
     if not folder.exists():
         pytest.skip("no shipped route drives")
     drives = load_route_drives(folder)
-    assert set(drives) == {f"{m}-seed{s}" for m in METHODS for s in TEN_ROUTES.seeds} | {"expert"}
+    assert set(drives) == {f"{m}-seed{s}" for m in METHODS for s in LAPTOP.seeds} | {"expert"}
     for name, d in drives.items():
         assert d["commands"] is False and sorted(r["route"] for r in d["episodes"]) == sorted(ROUTES), name
     prov = json.loads((folder / "provenance.json").read_text())
