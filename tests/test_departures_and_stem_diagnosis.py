@@ -25,7 +25,7 @@ from ibc_tutorial.plotting.stems import plot_minority_by_change
 from ibc_tutorial.stats import CANNOT_TELL, HOLDS
 
 RESULTS = Path(__file__).resolve().parents[1] / "book" / "results"
-TEN_ROUTES = RESULTS / "previous-laptop"
+TEN_ROUTES = RESULTS / "ten-routes"
 
 
 def _need(*folders: Path) -> None:

@@ -25,7 +25,7 @@ from ibc_tutorial.experiments.agents.replication_folder import collect_results, 
 from ibc_tutorial.experiments.runs import machine
 
 SHIPPED = Path(__file__).resolve().parents[1] / "book" / "results" / "laptop"
-PREVIOUS = SHIPPED.parent / "previous-laptop"  # the replication of TEN_ROUTES, chapter 08's diagnosis
+PREVIOUS = SHIPPED.parent / "ten-routes"  # the replication of TEN_ROUTES, chapter 08's diagnosis
 
 
 @pytest.fixture
@@ -115,8 +115,8 @@ def test_the_shipped_results_load():
 
 SHIPPED_RUNS = [
     "laptop",
-    "previous-laptop",
-    "previous-laptop-emulated",
+    "ten-routes",
+    "ten-routes-emulated",
     "ablations/flag-lights",
     "ablations/previous-preset",
     "ablations/intensity-lights",
@@ -269,7 +269,7 @@ def test_compare_folders_reads_shared_seeds_and_counts_standstills(tmp_path):
         compare_folders(var, lone, methods=("bc",))
 
 
-@pytest.mark.parametrize("replication", ["laptop", "previous-laptop"])
+@pytest.mark.parametrize("replication", ["laptop", "ten-routes"])
 def test_the_shipped_stem_analysis_is_complete_and_from_clean_ancestor_commits(replication):
     """``book/results/<replication>/stems``: a drive (its own, or the one ``replicate`` recorded) and an
     analysis file for every shipped agent and the expert, every invocation (drives, their resumption, the
@@ -280,7 +280,7 @@ def test_the_shipped_stem_analysis_is_complete_and_from_clean_ancestor_commits(r
     folder = root_folder / "stems"
     if not (folder / "summary.json").exists():
         pytest.skip("no shipped stem analysis")
-    preset = {"laptop": LAPTOP, "previous-laptop": TEN_ROUTES}[replication]
+    preset = {"laptop": LAPTOP, "ten-routes": TEN_ROUTES}[replication]
     names = sorted([f"{m}-seed{s}" for m in METHODS for s in preset.seeds] + ["expert"])
     assert all(drive_file(root_folder, folder, n) is not None for n in names)
     assert sorted(f.stem for f in (folder / "analysis").glob("*.json") if f.stem != "provenance") == names

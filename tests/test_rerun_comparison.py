@@ -18,7 +18,7 @@ from ibc_tutorial.experiments.agents.rerun_comparison import (
 )
 
 RESULTS = Path(__file__).resolve().parents[1] / "book" / "results"
-NATIVE, EMULATED = RESULTS / "previous-laptop", RESULTS / "previous-laptop-emulated"
+NATIVE, EMULATED = RESULTS / "ten-routes", RESULTS / "ten-routes-emulated"
 
 
 def test_expert_shares_are_each_runs_ratio_over_the_second_runs_expert():

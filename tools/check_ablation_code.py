@@ -1,7 +1,7 @@
 """Does the code of each ablation folder's commit compute what today's code computes? (chapter 08)
 
 The book's ablation folders (``book/results/ablations``) and the replication they are compared with
-(``book/results/previous-laptop``, called ``laptop`` in ``code_check.json``, which was made before that
+(``book/results/ten-routes``, called ``laptop`` in ``code_check.json``, which was made before that
 folder was renamed) were made as the preset changed, at the commits their ``PROVENANCE.md`` names.
 A difference between two folders should come from the setting that differs, not from code that changed
 in between. This script checks that, run by run: for each folder, and for BC and DA-IBC at seed 0, it
@@ -35,7 +35,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "book" / "results"
 FOLDERS = {  # folder -> where its demonstrations are (the ablations share one collection: checked below)
-    "previous-laptop": "previous-laptop",
+    "ten-routes": "ten-routes",
     "ablations/flag-lights": "ablations/flag-lights",
     "ablations/intensity-lights": "ablations/flag-lights",
     "ablations/previous-preset": "ablations/previous-preset",

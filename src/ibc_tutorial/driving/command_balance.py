@@ -23,7 +23,7 @@ TURNS = ("left", "straight", "right")
 """The turns a route command names at a junction."""
 EXPERT_SPEED_MPS = 3.0
 """The expert's mean speed over a route, stops included, to estimate how far it gets: 3.08 m/s over the ten
-town01 routes of ``book/results/previous-laptop/data`` (6477.5 m in 2105.2 s), rounded down."""
+town01 routes of ``book/results/ten-routes/data`` (6477.5 m in 2105.2 s), rounded down."""
 STEPS_PER_SECOND = 10
 """Simulation steps per second."""
 

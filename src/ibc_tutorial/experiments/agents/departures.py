@@ -22,7 +22,7 @@ from ibc_tutorial.experiments.agents.replication_folder import load_results
 
 ABLATION_RUNS = ("methods=bc,da-ibc", "seeds=0,1,2", "heldout_episodes=0", "routeless_episodes=0")
 """The overrides of the first ablations: BC and DA-IBC, seeds 0-2, the table's evaluation only."""
-REFERENCE = "previous-laptop"
+REFERENCE = "ten-routes"
 """The folder (under the results root) of the replication of ``ten-routes`` itself."""
 
 

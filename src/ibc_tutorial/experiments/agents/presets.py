@@ -390,7 +390,7 @@ TEN_ROUTES = replace(
     seeds=(0, 1, 2, 3, 4),
 )
 """The laptop preset with the paper's 10 demonstration routes and 8 epochs (as many gradient steps),
-five agents per method. Its replication (``book/results/previous-laptop``) is the base of chapter 08's
+five agents per method. Its replication (``book/results/ten-routes``) is the base of chapter 08's
 ablations, each a ``--set`` change of it, and chapter 12 reads its agents at the stems of the T-junctions."""
 
 TINY = Preset(
