@@ -506,3 +506,32 @@ def test_a_finished_replication_run_again_says_nothing_was_left_to_do(tiny_repli
     printed = capsys.readouterr().out
     assert "nothing left to do: all 3 training runs of this replication were already finished" in printed
     assert "training run to do" not in printed and "run 1 of" not in printed
+
+
+@pytest.mark.parametrize("name", ["commands-branched", "commands-input"])
+def test_the_shipped_heldout_route_drives_cover_every_command_agent_from_a_clean_ancestor_commit(name):
+    """Chapter 11's routes drawn afresh: every agent of the command folder and the expert drove every one of
+    the routes its protocol draws, with commands exactly when the agent takes them, from clean commits."""
+    from ibc_tutorial.driving.route_following import heldout_routes
+    from ibc_tutorial.experiments.agents.route_study import load_route_drives
+
+    folder = SHIPPED.parent / name
+    if not (folder / "heldout-routes").exists():
+        pytest.skip("no shipped held-out route drives")
+    prov = json.loads((folder / "heldout-routes" / "provenance.json").read_text())
+    protocol = prov["protocol"]
+    assert protocol["folder"] == name and protocol["max_steps"] is None
+    routes = sorted(n for n, _ in heldout_routes(protocol["heldout_seed"], protocol["heldout_count"]))
+    drives = load_route_drives(folder / "heldout-routes")
+    seeds = json.loads((folder / "results.json").read_text())["preset"]["seeds"]
+    assert set(drives) == {f"{m}-seed{s}" for m in METHODS for s in seeds} | {"expert"}
+    for driver, d in drives.items():
+        assert d["commands"] is (driver != "expert") and sorted(r["route"] for r in d["episodes"]) == routes
+    root = SHIPPED.parents[2]
+    for inv in prov["invocations"]:
+        assert "uncommitted" not in inv["commit"] and re.fullmatch(r"[0-9a-f]{40}", inv["commit"])
+        if (root / ".git").exists():
+            ancestor = subprocess.run(
+                ["git", "-C", str(root), "merge-base", "--is-ancestor", inv["commit"], "HEAD"]
+            )
+            assert ancestor.returncode == 0, f"commit {inv['commit']} is not an ancestor of HEAD"

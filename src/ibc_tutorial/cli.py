@@ -19,8 +19,9 @@ here raise ``UserError``, and ``main`` prints either. Ctrl-C prints one line too
     ibc-tutorial replicate --preset laptop --out book/results/laptop
     ibc-tutorial replicate --preset tiny --set dfo.n_samples=64 --out /tmp/tiny
     ibc-tutorial sweep-steering --preset laptop --out book/results/steering-sweep --workers 2 --threads 1
-    ibc-tutorial replicate --preset laptop --commands --out book/results/commands
-    ibc-tutorial routes --folder book/results/laptop --out book/results/routeless-on-routes
+    ibc-tutorial replicate --preset laptop --commands --set command_branches=true \
+        --out book/results/commands-branched
+    ibc-tutorial routes --folder book/results/laptop --out book/results/laptop/on-routes
 """
 
 from __future__ import annotations
@@ -431,7 +432,7 @@ def _families_arguments(p: argparse.ArgumentParser) -> None:
 def _routes_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--folder", default="book/results/laptop", help="replication folder with runs/")
     p.add_argument(
-        "--out", default="book/results/routeless-on-routes", help="where each driver's <name>.json goes"
+        "--out", default="book/results/laptop/on-routes", help="where each driver's <name>.json goes"
     )
     p.add_argument("--drives", type=int, default=1, help="drives of every route per driver")
     p.add_argument("--only", nargs="*", default=None, help="drive only these (e.g. da-ibc-seed0 expert)")

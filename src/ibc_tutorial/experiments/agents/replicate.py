@@ -1,7 +1,8 @@
 """One command from data to every table and figure of chapters 08-09: the closed-loop replication.
 
     ibc-tutorial replicate --preset laptop --out book/results/laptop
-    ibc-tutorial replicate --preset laptop --commands --out book/results/commands
+    ibc-tutorial replicate --preset laptop --commands --set command_branches=true \
+        --out book/results/commands-branched
 
 With ``--commands`` (``Preset.commands``: chapter 11) every method's agents take a route command, are
 trained on the same town01 demonstrations with their commands (``driving.commands``), and their final

@@ -3,7 +3,7 @@
 A command replication (``replicate --commands``) drives its own agents on the routes in its final
 evaluation. Chapter 11 also needs the routeless agents of chapter 09 on the same routes, without a command:
 their completion shows what luck at the junctions gives. ``run_route_drives`` does that for any folder
-(``ibc-tutorial routes --folder book/results/laptop --out book/results/routeless-on-routes``): each driver
+(``ibc-tutorial routes --folder book/results/laptop --out book/results/laptop/on-routes``): each driver
 (``stem_drives.drivers``: every ``runs/<method>/seed<k>/final.pt``, then the expert) drives every route
 ``drives`` times, given a command exactly when its checkpoint takes one, with the light phases of
 ``route_driving.ROUTE_SEED`` and the DFO draws of its training seed, as the command replication's evaluation.
