@@ -13,14 +13,13 @@ exists is skipped, so an interrupted run resumes, and ``provenance.json`` record
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 from ibc_tutorial.driving.route_following import ROUTES, heldout_routes
 from ibc_tutorial.experiments.agents.checkpoints import load_agent, training_seed
 from ibc_tutorial.experiments.agents.route_driving import ROUTE_SEED, evaluate_on_routes, summarize_route_rows
 from ibc_tutorial.experiments.agents.stem_drives import drivers
-from ibc_tutorial.experiments.runs import PROVENANCE, git_commit, machine, now, run_missing, write_json
+from ibc_tutorial.experiments.runs import read_driver_files, run_missing_recorded, write_json
 from ibc_tutorial.utils import check_int
 
 
@@ -55,20 +54,9 @@ def run_route_drives(
         unknown = sorted(set(only) - {n for n, _ in named})
         if unknown:
             raise ValueError(f"only must name drivers of {folder} ({[n for n, _ in named]}), got {unknown}")
-    out = Path(out)
-    prov_path = out / PROVENANCE
-    prov = json.loads(prov_path.read_text()) if prov_path.exists() else {"invocations": []}
     protocol = {"drives": drives, "seed": ROUTE_SEED, "folder": Path(folder).name, "max_steps": max_steps}
     if heldout_seed is not None:  # recorded only when taken: fixed-route folders read as before
         protocol.update(heldout_seed=heldout_seed, heldout_count=heldout_count)
-    if prov.get("protocol", protocol) != protocol:
-        raise ValueError(
-            f"{out} holds route drives of another protocol {prov['protocol']}: use another --out"
-        )
-    prov["protocol"] = protocol
-    inv = {"command": command, "commit": git_commit(), "machine": machine(), "started": now()}
-    prov["invocations"].append(inv)
-    write_json(prov_path, prov)
 
     def drive(name, ck, path):
         if ck is None:
@@ -84,20 +72,10 @@ def run_route_drives(
         meta = {"driver": name, "checkpoint": checkpoint, "commands": takes, "policy_seed": policy_seed}
         write_json(path, {**meta, "summary": summary, "episodes": rows})
 
-    def record(name, cpu):
-        inv.setdefault("cpu_seconds", {})[name] = round(cpu, 1)
-        write_json(prov_path, prov)
-
-    done = run_missing(named, lambda name: out / f"{name}.json", drive, only=only, on_done=record, log=log)
-    inv["finished"] = now()
-    write_json(prov_path, prov)
-    return done
+    path_of = lambda name: Path(out) / f"{name}.json"  # noqa: E731
+    return run_missing_recorded(named, out, protocol, path_of, drive, only=only, log=log, command=command)
 
 
 def load_route_drives(out) -> dict[str, dict]:
     """name -> the JSON of every driver's file in ``out`` (``run_route_drives``'s), by file name."""
-    out = Path(out)
-    files = sorted(p for p in out.glob("*.json") if p.name != PROVENANCE)
-    if not files:
-        raise ValueError(f"out must hold route drives (<name>.json), found none in {out}")
-    return {p.stem: json.loads(p.read_text()) for p in files}
+    return read_driver_files(out, "route drives")

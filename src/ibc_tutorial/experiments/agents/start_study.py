@@ -15,13 +15,12 @@ records every invocation, its command, commit, machine and CPU seconds per drive
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 from ibc_tutorial.experiments.agents.checkpoints import load_agent, training_seed
 from ibc_tutorial.experiments.agents.evaluate import episode_rows, evaluate_agent, summarize_episodes
 from ibc_tutorial.experiments.agents.stem_drives import drivers
-from ibc_tutorial.experiments.runs import PROVENANCE, git_commit, machine, now, run_missing, write_json
+from ibc_tutorial.experiments.runs import read_driver_files, run_missing_recorded, write_json
 from ibc_tutorial.utils import check_int
 
 
@@ -39,16 +38,7 @@ def run_start_drives(
         unknown = sorted(set(only) - {n for n, _ in named})
         if unknown:
             raise ValueError(f"only must name drivers of {folder} ({[n for n, _ in named]}), got {unknown}")
-    out = Path(out)
-    prov_path = out / PROVENANCE
-    prov = json.loads(prov_path.read_text()) if prov_path.exists() else {"invocations": []}
     protocol = {"seed": seed, "episodes": episodes, "steps": steps, "folder": Path(folder).name}
-    if prov.get("protocol", protocol) != protocol:
-        raise ValueError(f"{out} holds drives of another protocol {prov['protocol']}: use another --out")
-    prov["protocol"] = protocol
-    inv = {"command": command, "commit": git_commit(), "machine": machine(), "started": now()}
-    prov["invocations"].append(inv)
-    write_json(prov_path, prov)
 
     def drive(name, ck, path):
         if ck is None:
@@ -62,20 +52,10 @@ def run_start_drives(
         meta = {"driver": name, "checkpoint": checkpoint, "policy_seed": policy_seed}
         write_json(path, {**meta, "summary": summarize_episodes(rows), "episodes": rows})
 
-    def record(name, cpu):
-        inv.setdefault("cpu_seconds", {})[name] = round(cpu, 1)
-        write_json(prov_path, prov)
-
-    done = run_missing(named, lambda name: out / f"{name}.json", drive, only=only, on_done=record, log=log)
-    inv["finished"] = now()
-    write_json(prov_path, prov)
-    return done
+    path_of = lambda name: Path(out) / f"{name}.json"  # noqa: E731
+    return run_missing_recorded(named, out, protocol, path_of, drive, only=only, log=log, command=command)
 
 
 def load_start_drives(out) -> dict[str, dict]:
     """name -> the JSON of every driver's file in ``out`` (``run_start_drives``'s), by file name."""
-    out = Path(out)
-    files = sorted(p for p in out.glob("*.json") if p.name != PROVENANCE)
-    if not files:
-        raise ValueError(f"out must hold start drives (<name>.json), found none in {out}")
-    return {p.stem: json.loads(p.read_text()) for p in files}
+    return read_driver_files(out, "start drives")

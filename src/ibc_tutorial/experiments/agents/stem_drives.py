@@ -39,7 +39,7 @@ from ibc_tutorial.experiments.agents.checkpoints import load_agent
 from ibc_tutorial.experiments.agents.evaluate import EVAL_SEED, EVAL_TOWN, episode_rows, evaluate_agent
 from ibc_tutorial.experiments.agents.presets import METHODS
 from ibc_tutorial.experiments.agents.replication_folder import STEM_DRIVE, expert_dir, run_dir
-from ibc_tutorial.experiments.runs import git_commit, machine, now, run_missing, write_json, write_npz
+from ibc_tutorial.experiments.runs import run_missing_recorded, write_npz
 from ibc_tutorial.optimizers.dfo import DFOConfig
 from ibc_tutorial.utils import check_int
 
@@ -228,15 +228,6 @@ def run_drives(
     if not isinstance(protocol, DriveProtocol):
         raise ValueError(f"protocol must be a DriveProtocol, got {type(protocol).__name__}")
     out = Path(out)
-    prov_path = out / "provenance.json"
-    prov = json.loads(prov_path.read_text()) if prov_path.exists() else {"invocations": []}
-    same = protocol.record()
-    if prov.get("protocol", same) != same:
-        raise ValueError(f"{out} holds drives of another protocol {prov['protocol']}: use another --out")
-    prov["protocol"] = same
-    inv = {"command": command, "commit": git_commit(), "machine": machine(), "started": now()}
-    prov["invocations"].append(inv)
-    write_json(prov_path, prov)
 
     def drive_one(name, ck, path):
         drive_arrays = drive(
@@ -244,15 +235,10 @@ def run_drives(
         )
         write_npz(path, drive_arrays)
 
-    def record(name, cpu):
-        inv.setdefault("cpu_seconds", {})[name] = round(cpu, 1)
-        write_json(prov_path, prov)
-
     path_of = lambda name: out / "drives" / f"{name}.npz"  # noqa: E731
-    done = run_missing(drivers(folder), path_of, drive_one, only=only, on_done=record, log=log)
-    inv["finished"] = now()
-    write_json(prov_path, prov)
-    return done
+    return run_missing_recorded(
+        drivers(folder), out, protocol.record(), path_of, drive_one, only=only, log=log, command=command
+    )
 
 
 def drive_file(folder, out, name: str) -> Path | None:

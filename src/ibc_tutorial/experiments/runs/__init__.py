@@ -5,7 +5,8 @@
 - ``provenance``: the machine, the commit, and ``Provenance``, every invocation of a resumable command
   with its heartbeat, written to ``provenance.json`` and ``PROVENANCE.md``;
 - ``folder``: the lifecycle of a study's folder (``StudyFolder``: its layout, checks, ``--force``,
-  resuming, ``results.json`` after every run, loading), ``run_dir``, ``DATA``, and ``run_missing``.
+  resuming, ``results.json`` after every run, loading), ``run_dir``, ``DATA``, ``run_missing``,
+  ``run_missing_recorded`` and ``read_driver_files``.
 
 Everything is importable from here: ``from ibc_tutorial.experiments.runs import StudyFolder``.
 """
@@ -29,9 +30,11 @@ from ibc_tutorial.experiments.runs.folder import (
     check_folder_entries,
     clear_entries,
     differing,
+    read_driver_files,
     read_folder,
     run_dir,
     run_missing,
+    run_missing_recorded,
 )
 from ibc_tutorial.experiments.runs.provenance import (
     CPU_ENVIRONMENT,
@@ -72,6 +75,8 @@ __all__ = [
     "read_torch_file",
     "run_dir",
     "run_missing",
+    "run_missing_recorded",
+    "read_driver_files",
     "write_json",
     "write_npz",
 ]

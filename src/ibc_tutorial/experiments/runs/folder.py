@@ -39,7 +39,7 @@ from ibc_tutorial.experiments.runs.files import (
     read_npz,
     write_json,
 )
-from ibc_tutorial.experiments.runs.provenance import Provenance, now
+from ibc_tutorial.experiments.runs.provenance import Provenance, git_commit, machine, now
 
 DATA = "data/town01.npz"
 """The demonstrations, relative to a study's folder (or to one part of it)."""
@@ -276,3 +276,42 @@ def run_missing(named, path_of, work, *, only=None, on_done=None, log=print) -> 
         if log:
             log(f"{now()} {name}: {cpu:.0f} s of CPU", flush=True)
     return done
+
+
+def run_missing_recorded(
+    named, out, protocol: dict, path_of, work, *, only=None, log=print, command: str = ""
+) -> list[str]:
+    """``run_missing`` into the folder ``out``, with every invocation recorded in ``out/provenance.json``:
+    its command, commit, machine, start, finish and each name's CPU seconds, under one ``protocol`` (a dict
+    that every invocation on ``out`` must share; ValueError naming ``out`` otherwise, before any work).
+    What the driving commands that write one file per driver share (``routes``, ``starts``,
+    ``stems drive``)."""
+    out = Path(out)
+    prov_path = out / PROVENANCE
+    prov = read_json_dict(prov_path, "use another --out") if prov_path.exists() else {"invocations": []}
+    if prov.get("protocol", protocol) != protocol:
+        raise ValueError(f"{out} holds drives of another protocol {prov['protocol']}: use another --out")
+    prov["protocol"] = protocol
+    inv = {"command": command, "commit": git_commit(), "machine": machine(), "started": now()}
+    prov["invocations"].append(inv)
+    write_json(prov_path, prov)
+
+    def record(name, cpu):
+        inv.setdefault("cpu_seconds", {})[name] = round(cpu, 1)
+        write_json(prov_path, prov)
+
+    done = run_missing(named, path_of, work, only=only, on_done=record, log=log)
+    inv["finished"] = now()
+    write_json(prov_path, prov)
+    return done
+
+
+def read_driver_files(out, what: str) -> dict[str, dict]:
+    """name -> the JSON of every ``<name>.json`` in ``out`` but the provenance (one file per driver, as the
+    ``routes`` and ``starts`` commands write them); ValueError naming ``out`` and ``what`` it should hold if
+    there is none."""
+    out = Path(out)
+    files = sorted(p for p in out.glob("*.json") if p.name != PROVENANCE)
+    if not files:
+        raise ValueError(f"out must hold {what} (<name>.json), found none in {out}")
+    return {p.stem: read_json_dict(p, "drive it again") for p in files}
