@@ -44,7 +44,7 @@ def test_the_departure_table_reads_every_ablation_against_its_pair():
     )
     data = rows["more-routes"].methods  # the first setting is the folder's own: 20 routes score higher
     assert data["ibc"].difference.estimate > 0 and data["ibc"].verdict == HOLDS
-    assert rows["previous-preset"].methods["bc"].verdict == CANNOT_TELL
+    assert rows["constant-schedule"].methods["bc"].verdict == CANNOT_TELL
     table = departures.departure_table(list(rows.values()))
     assert table.count("<tr>") == len(rows) + 1 and "ibc-tutorial replicate --preset ten-routes" in table
 

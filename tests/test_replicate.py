@@ -118,7 +118,7 @@ SHIPPED_RUNS = [
     "ten-routes",
     "ten-routes-emulated",
     "ablations/flag-lights",
-    "ablations/previous-preset",
+    "ablations/constant-schedule",
     "ablations/intensity-lights",
     "steering-laptop",
     "commands-branched",
@@ -187,7 +187,7 @@ ABLATION = ["methods=bc,da-ibc", "seeds=0,1,2", "heldout_episodes=0", "routeless
 """What every ablation of chapter 08's chain sets: BC and DA-IBC, three seeds, the table's evaluation only."""
 VARIANTS = {  # folder -> the --set overrides of its variant, beside ``ABLATION``
     "flag-lights": ["brake_noise=0"],
-    "previous-preset": ["brake_noise=0", "epochs=6", "lr_schedule=constant"],
+    "constant-schedule": ["brake_noise=0", "epochs=6", "lr_schedule=constant"],
 }
 
 

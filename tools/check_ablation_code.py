@@ -38,7 +38,7 @@ FOLDERS = {  # folder -> where its demonstrations are (the ablations share one c
     "ten-routes": "ten-routes",
     "ablations/flag-lights": "ablations/flag-lights",
     "ablations/intensity-lights": "ablations/flag-lights",
-    "ablations/previous-preset": "ablations/previous-preset",
+    "ablations/constant-schedule": "ablations/constant-schedule",
     "ablations/turn-hold": "ablations/turn-hold",
 }
 METHODS = ("bc", "da-ibc")

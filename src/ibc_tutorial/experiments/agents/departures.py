@@ -60,7 +60,7 @@ ABLATIONS = (
         "one bit",
     ),
     Ablation(
-        "previous-preset",
+        "constant-schedule",
         "8 epochs on a cosine schedule vs 6 at a constant step (no held brakes)",
         (*ABLATION_RUNS, "brake_noise=0", "epochs=6", "lr_schedule=constant"),
         "ablations/flag-lights",
