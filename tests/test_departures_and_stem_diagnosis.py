@@ -13,11 +13,13 @@ import numpy as np
 import pytest
 
 from ibc_tutorial.experiments.agents import departures, run_times
-from ibc_tutorial.experiments.agents.presets import LAPTOP
+from ibc_tutorial.experiments.agents.presets import LAPTOP, differences, with_overrides
+from ibc_tutorial.experiments.agents.presets import TEN_ROUTES as TEN_ROUTES_PRESET
 from ibc_tutorial.experiments.agents.stem_diagnosis import (
     KINDS,
     change_counts,
     ended_energies,
+    episode_agreement,
     stem_approaches,
     stem_crossings,
 )
@@ -35,24 +37,28 @@ def _need(*folders: Path) -> None:
 
 
 def test_the_departure_table_reads_every_ablation_against_its_pair():
-    _need(*(RESULTS / "ablations" / a.folder for a in departures.ABLATIONS), TEN_ROUTES)
-    rows = {r.ablation.folder: r for r in departures.departure_rows(RESULTS)}
-    assert set(rows) == {a.folder for a in departures.ABLATIONS}
-    held = rows["flag-lights"].methods
-    assert (
-        set(held) == {"bc", "da-ibc"} and held["bc"].verdict == HOLDS and held["bc"].standing_still == (0, 6)
-    )
-    data = rows["more-routes"].methods  # the first setting is the folder's own: 20 routes score higher
-    assert data["ibc"].difference.estimate > 0 and data["ibc"].verdict == HOLDS
-    assert rows["constant-schedule"].methods["bc"].verdict == CANNOT_TELL
-    table = departures.departure_table(list(rows.values()))
-    assert table.count("<tr>") == len(rows) + 1 and "ibc-tutorial replicate --preset ten-routes" in table
+    _need(*(RESULTS / a.folder for a in departures.ABLATIONS), RESULTS / "laptop")
+    table_rows = departures.departure_rows(RESULTS)
+    rows = {r.ablation.label: r for r in table_rows}
+    assert list(rows) == [a.label for a in departures.ABLATIONS]
+    held = rows["held brakes"].methods
+    assert set(held) == {"bc", "da-ibc"} and held["bc"].difference.estimate > 0
+    assert held["bc"].standing_still[0] <= held["bc"].standing_still[1]
+    epochs = rows["the epochs"].methods  # ten-routes minus half-epochs: 8 epochs minus 4
+    assert epochs["ibc"].difference.estimate > 0 and epochs["ibc"].verdict == HOLDS
+    table = departures.departure_table(table_rows)
+    assert table.count("<tr>") == len(rows) + 1
+    assert "ibc-tutorial replicate --preset laptop" in table and "--preset ten-routes" in table
+
+
+def test_ten_routes_is_the_laptop_preset_with_its_three_overrides():
+    assert differences(with_overrides(LAPTOP, list(departures.TEN_ROUTE_CHANGES)), TEN_ROUTES_PRESET) == {}
 
 
 def test_an_ablation_whose_overrides_are_not_its_folders_settings_is_refused():
-    _need(RESULTS / "ablations" / "flag-lights")
+    _need(RESULTS / "ablations" / "no-held-brakes")
     wrong = replace(departures.ABLATIONS[0], overrides=("brake_noise=0",))
-    with pytest.raises(ValueError, match="flag-lights"):
+    with pytest.raises(ValueError, match="no-held-brakes"):
         departures.check_ablation(RESULTS, wrong)
 
 
@@ -78,17 +84,45 @@ def test_stem_crossings_sort_every_crossing_from_a_stem_and_every_end():
     assert all(np.isclose(e.energies.min(), 0) for e in ended)  # nats above each state's minimum
 
 
-def test_a_crossings_file_of_other_episodes_is_refused(tmp_path):
-    _need(TEN_ROUTES / "crossings")
+def _one_crossings_file(tmp_path: Path, change) -> Path:
+    """A replication folder holding one agent's table and its crossings file, changed by ``change``."""
     folder = tmp_path / "rep"
     (folder / "crossings").mkdir(parents=True)
     shutil.copytree(TEN_ROUTES / "runs" / "bc" / "seed0", folder / "runs" / "bc" / "seed0",
                     ignore=shutil.ignore_patterns("*.pt", "*.npz"))  # fmt: skip
     ev = json.loads((TEN_ROUTES / "crossings" / "bc-seed0.json").read_text())
-    ev["episodes"][0]["distance_m"] += 1.0
+    change(ev["episodes"])
     (folder / "crossings" / "bc-seed0.json").write_text(json.dumps(ev))
+    return folder
+
+
+def test_a_crossings_file_of_other_episodes_is_refused_unless_asked_and_counted(tmp_path):
+    _need(TEN_ROUTES / "crossings")
+
+    def a_metre_further(episodes):
+        episodes[0]["distance_m"] += 1.0
+
+    folder = _one_crossings_file(tmp_path, a_metre_further)
     with pytest.raises(ValueError, match="did not drive the episodes"):
         stem_crossings(folder, "bc", [0])
+    assert episode_agreement(folder, "bc", [0]) == (9, 10)
+    kept = stem_crossings(folder, "bc", [0], same_episodes=False)
+    assert sum(len(v) for v in kept.steering.values()) > 0
+
+
+def test_a_crossings_file_from_other_starts_is_refused_even_when_asked(tmp_path):
+    _need(TEN_ROUTES / "crossings")
+
+    def another_start(episodes):
+        episodes[3]["seed"] += 100
+
+    folder = _one_crossings_file(tmp_path, another_start)
+    for read in (
+        lambda: stem_crossings(folder, "bc", [0], same_episodes=False),
+        lambda: episode_agreement(folder, "bc", [0]),
+    ):
+        with pytest.raises(ValueError, match="from the starts"):
+            read()
 
 
 def test_bad_turn_limits_and_empty_analyses_are_refused(tmp_path):

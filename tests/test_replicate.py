@@ -117,7 +117,7 @@ SHIPPED_RUNS = [
     "laptop",
     "ten-routes",
     "ten-routes-emulated",
-    "ablations/flag-lights",
+    "ablations/no-held-brakes",
     "ablations/constant-schedule",
     "ablations/intensity-lights",
     "steering-laptop",
@@ -184,19 +184,22 @@ def test_the_shipped_crossings_are_clean_runs_of_an_ancestor_commit():
 
 
 ABLATION = ["methods=bc,da-ibc", "seeds=0,1,2", "heldout_episodes=0", "routeless_episodes=0"]
-"""What every ablation of chapter 08's chain sets: BC and DA-IBC, three seeds, the table's evaluation only."""
-VARIANTS = {  # folder -> the --set overrides of its variant, beside ``ABLATION``
-    "flag-lights": ["brake_noise=0"],
-    "constant-schedule": ["brake_noise=0", "epochs=6", "lr_schedule=constant"],
+"""What the smaller ablations of chapter 08 set: BC and DA-IBC, three seeds, the table's evaluation only."""
+VARIANTS = {  # folder -> the --set overrides of its variant of the laptop preset, beside ``ABLATION``
+    "no-held-brakes": ["brake_noise=0"],
+    "intensity-lights": ["light_encoding=intensity"],
+    "constant-schedule": ["lr_schedule=constant"],
 }
 
 
 @pytest.mark.parametrize("folder", sorted(VARIANTS))
-def test_the_shipped_ablation_folders_are_the_ten_routes_preset_with_overrides(folder):
-    """Chapter 08 compares each shipped ablation folder with the previous laptop replication: the folder's
-    preset must be ``TEN_ROUTES`` with its ``--set`` overrides in every setting (its name aside)."""
-    stored = json.loads((SHIPPED.parent / "ablations" / folder / "provenance.json").read_text())["preset"]
-    variant = with_overrides(TEN_ROUTES, ABLATION + VARIANTS[folder])
+def test_the_shipped_ablation_folders_are_the_laptop_preset_with_overrides(folder):
+    """Chapter 08 compares each of these ablation folders with the canonical replication: the folder's
+    preset must be ``LAPTOP`` with its ``--set`` overrides in every setting (its name aside)."""
+    prov = json.loads((SHIPPED.parent / "ablations" / folder / "provenance.json").read_text())
+    stored = prov["preset"]
+    variant = with_overrides(LAPTOP, ABLATION + VARIANTS[folder])
+    assert prov["overrides"] == ABLATION + VARIANTS[folder]
     assert differences(Preset.from_dict(stored), variant) == {}
 
 
@@ -399,10 +402,6 @@ STEM_ABLATIONS = {  # folder -> (its --set overrides, its seeds)
     "turn-hold": (
         ["turn_hold_m=0.5", "seeds=0,1,2", "heldout_episodes=0", "routeless_episodes=0"],
         (0, 1, 2),
-    ),
-    "more-routes": (
-        ["collect.routes=20", "epochs=4", "heldout_episodes=0", "routeless_episodes=0"],
-        (0, 1, 2, 3, 4),
     ),
     "half-epochs": (
         ["epochs=4", "heldout_episodes=0", "routeless_episodes=0"],

@@ -1,22 +1,23 @@
-"""Does the code of each ablation folder's commit compute what today's code computes? (chapter 08)
+"""Does the code of each replication folder's commit compute what the checked code computes? (chapter 08)
 
-The book's ablation folders (``book/results/ablations``) and the replication they are compared with
-(``book/results/ten-routes``, called ``laptop`` in ``code_check.json``, which was made before that
-folder was renamed) were made as the preset changed, at the commits their ``PROVENANCE.md`` names.
-A difference between two folders should come from the setting that differs, not from code that changed
-in between. This script checks that, run by run: for each folder, and for BC and DA-IBC at seed 0, it
-trains the run on this machine until its first periodic evaluation (epoch ``eval_every``, with the
-folder's stored preset and demonstrations), twice:
+Chapter 08 compares the canonical replication (``book/results/laptop``) with ablation folders, each one
+``replicate --set`` change of it or of the 10-route replication (``book/results/ten-routes``), and the
+folders were made at the commits their ``PROVENANCE.md`` names, on the machines it names. A difference
+between two folders should come from the setting that differs, not from code that changed in between.
+This script checks that, run by run: for each folder, and for BC and DA-IBC at seed 0, it trains the run
+on this machine until its first periodic evaluation (epoch ``eval_every``, with the folder's stored
+preset and demonstrations), twice:
 
 - with the code of the folder's own commit (a temporary ``git worktree``);
-- with today's code (this checkout's ``src``);
+- with the checked code (this checkout's ``src``: the ``today`` keys of the output);
 
 and compares the two bit for bit: the training loss at that epoch and every episode of the evaluation
 (distance, red lights, how it ended). It also compares both with what the folder stored, which was made
-on the machine its provenance names. A folder whose stored first evaluation today's code reproduces on
-this machine needs no second run (``--skip-old`` for those).
+on the machine its provenance names. A folder made with the checked code needs no second run
+(``--skip-old`` for those).
 
-    python tools/check_ablation_code.py --out book/results/ablations/code_check.json
+    ATEN_CPU_CAPABILITY=avx2 python tools/check_ablation_code.py --out book/results/ablations/code_check.json \
+        --skip-old ablations/no-held-brakes ablations/intensity-lights ablations/constant-schedule
 
 About 2 minutes of one core per run (two at a time); the worktrees are removed afterwards.
 """
@@ -34,12 +35,14 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "book" / "results"
-FOLDERS = {  # folder -> where its demonstrations are (the ablations share one collection: checked below)
+FOLDERS = {  # folder -> where its demonstrations are
+    "laptop": "laptop",
     "ten-routes": "ten-routes",
-    "ablations/flag-lights": "ablations/flag-lights",
-    "ablations/intensity-lights": "ablations/flag-lights",
-    "ablations/constant-schedule": "ablations/constant-schedule",
+    "ablations/half-epochs": "ablations/half-epochs",
     "ablations/turn-hold": "ablations/turn-hold",
+    "ablations/no-held-brakes": "ablations/no-held-brakes",
+    "ablations/intensity-lights": "ablations/intensity-lights",
+    "ablations/constant-schedule": "ablations/constant-schedule",
 }
 METHODS = ("bc", "da-ibc")
 

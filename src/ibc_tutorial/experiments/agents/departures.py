@@ -1,13 +1,13 @@
 """What each departure from the paper does: the ablation folders read as one table (chapter 08).
 
-Each ablation is a replication of the 10-route preset ``ten-routes`` with ``--set`` overrides
-(``ibc-tutorial replicate --preset ten-routes --set ... --out book/results/ablations/FOLDER``), whose
-``PROVENANCE.md`` records the command. ``ABLATIONS`` lists them, each with
-the folder it is compared with: the two folders differ in the setting the row names (the schedule row in
-two settings, changed together). ``departure_rows`` checks that every folder's stored settings are
-``ten-routes`` with the row's overrides, then compares the two folders' town02 scores method by
-method (``claims.compare_folders``: the mean score with the row's first setting minus the second's, on the
-seeds and starts both hold, with its 95 % two-level bootstrap interval over agents and episodes).
+An **ablation** is one ``replicate --set`` change of a preset: each folder here is the canonical ``laptop``
+preset, or the 10-route variant ``ten-routes`` (the ``laptop`` preset with the paper's 10 routes and 8
+epochs), with the overrides its row lists; its ``PROVENANCE.md`` records the command. ``ABLATIONS`` lists
+them, each with the folder it is compared with: the two differ in the setting the row names.
+``departure_rows`` checks that every folder's stored settings are its base preset with the row's
+overrides, then compares the two folders' town02 scores method by method (``claims.compare_folders``:
+the mean score with the row's first setting minus the second's, on the seeds and starts both hold, with
+its 95 % two-level bootstrap interval over agents and episodes).
 """
 
 from __future__ import annotations
@@ -17,25 +17,29 @@ from html import escape
 from pathlib import Path
 
 from ibc_tutorial.experiments.agents.claims import FolderComparison, compare_folders
-from ibc_tutorial.experiments.agents.presets import TEN_ROUTES, Preset, differences, with_overrides
+from ibc_tutorial.experiments.agents.presets import LAPTOP, TEN_ROUTES, Preset, differences, with_overrides
 from ibc_tutorial.experiments.agents.replication_folder import load_results
 
 ABLATION_RUNS = ("methods=bc,da-ibc", "seeds=0,1,2", "heldout_episodes=0", "routeless_episodes=0")
-"""The overrides of the first ablations: BC and DA-IBC, seeds 0-2, the table's evaluation only."""
-REFERENCE = "ten-routes"
-"""The folder (under the results root) of the replication of ``ten-routes`` itself."""
+"""The overrides of the smaller ablations: BC and DA-IBC, seeds 0-2, the table's evaluation only."""
+BASES = {"laptop": LAPTOP, "ten-routes": TEN_ROUTES}
+"""The presets an ablation may change, by name; each one's replication is the folder of that name."""
 
 
 @dataclass(frozen=True)
 class Ablation:
     """One ablation folder and the comparison that reads it."""
 
+    label: str
+    """The row's short name (``"held brakes"``), by which chapter 08 reads it."""
     folder: str
-    """Its folder under ``ablations/`` of the results root."""
+    """Its folder under the results root (``ablations/no-held-brakes``)."""
     departure: str
-    """The setting the row measures, in words: the preset's choice against the alternative."""
+    """The setting the row measures, in words: the first setting against the second."""
+    base: str
+    """The preset (a key of ``BASES``) that the overrides change."""
     overrides: tuple[str, ...]
-    """The ``--set`` overrides of ``ten-routes`` that made the folder."""
+    """The ``--set`` overrides of ``base`` that made the folder."""
     other: str
     """The folder (under the results root) it is compared with, one setting away from this one."""
     laptop: str
@@ -44,67 +48,90 @@ class Ablation:
     """Whether the row's effect is this folder minus ``other`` (True) or ``other`` minus this folder."""
 
 
+TEN_ROUTE_CHANGES = ("collect.routes=10", "epochs=8", "seeds=0,1,2,3,4")
+"""The overrides of ``laptop`` that ``ten-routes`` is (checked by a test)."""
+
 ABLATIONS = (
     Ablation(
-        "flag-lights",
+        "held brakes",
+        "ablations/no-held-brakes",
         "held brakes in the demonstrations (brake_noise 1 vs 0)",
+        "laptop",
         (*ABLATION_RUNS, "brake_noise=0"),
-        REFERENCE,
+        "laptop",
         "held brakes (1.0)",
     ),
     Ablation(
-        "intensity-lights",
-        "lights as one bit vs by intensity (no held brakes)",
-        ("brake_noise=0", "light_encoding=intensity"),
-        "ablations/flag-lights",
+        "lights",
+        "ablations/intensity-lights",
+        "lights as one bit vs drawn by intensity",
+        "laptop",
+        (*ABLATION_RUNS, "light_encoding=intensity"),
+        "laptop",
         "one bit",
     ),
     Ablation(
-        "constant-schedule",
-        "8 epochs on a cosine schedule vs 6 at a constant step (no held brakes)",
-        (*ABLATION_RUNS, "brake_noise=0", "epochs=6", "lr_schedule=constant"),
-        "ablations/flag-lights",
-        "4 epochs, cosine",
+        "schedule",
+        "ablations/constant-schedule",
+        "a cosine schedule vs a constant step size",
+        "laptop",
+        (*ABLATION_RUNS, "lr_schedule=constant"),
+        "laptop",
+        "cosine",
     ),
     Ablation(
-        "half-epochs",
-        "8 epochs vs 4 (10 routes)",
-        ("epochs=4", "heldout_episodes=0", "routeless_episodes=0"),
-        REFERENCE,
-        "4 epochs, on 20 routes",
+        "routes and epochs",
+        "ten-routes",
+        "20 routes for 4 epochs vs the paper's 10 for 8 (as many gradient steps)",
+        "laptop",
+        TEN_ROUTE_CHANGES,
+        "laptop",
+        "20 routes, 4 epochs",
     ),
     Ablation(
-        "more-routes",
-        "20 routes vs 10 (4 epochs)",
-        ("collect.routes=20", "epochs=4", "heldout_episodes=0", "routeless_episodes=0"),
+        "the data",
         "ablations/half-epochs",
+        "20 routes vs 10, both for 4 epochs (the data alone)",
+        "ten-routes",
+        ("epochs=4", "heldout_episodes=0", "routeless_episodes=0"),
+        "laptop",
         "20 routes",
-        first=True,
     ),
     Ablation(
-        "turn-hold",
+        "the epochs",
+        "ablations/half-epochs",
+        "8 epochs vs 4, both on 10 routes (the epochs alone)",
+        "ten-routes",
+        ("epochs=4", "heldout_episodes=0", "routeless_episodes=0"),
+        "ten-routes",
+        "4 epochs",
+    ),
+    Ablation(
+        "turns held",
+        "ablations/turn-hold",
         "the expert's turns as it steers them vs begun together (turn_hold_m 0 vs 0.5)",
+        "ten-routes",
         ("turn_hold_m=0.5", "seeds=0,1,2", "heldout_episodes=0", "routeless_episodes=0"),
-        REFERENCE,
+        "ten-routes",
         "turns not held (0)",
     ),
 )
 
 
 def ablation_command(ablation: Ablation) -> str:
-    """The ``replicate`` command that makes ``ablation``'s folder (its overrides of ``ten-routes``)."""
+    """The ``replicate`` command that makes ``ablation``'s folder (its overrides of its base preset)."""
     sets = " ".join(f"--set {o}" for o in ablation.overrides)
-    out = f"book/results/ablations/{ablation.folder}"
-    return f"ibc-tutorial replicate --preset ten-routes {sets} --out {out}"
+    return f"ibc-tutorial replicate --preset {ablation.base} {sets} --out book/results/{ablation.folder}"
 
 
 def check_ablation(results, ablation: Ablation) -> None:
-    """ValueError naming the folder unless its stored settings are ``ten-routes`` with its overrides."""
-    folder = Path(results) / "ablations" / ablation.folder
+    """ValueError naming the folder unless its stored settings are its base preset with its overrides."""
+    folder = Path(results) / ablation.folder
     stored = Preset.from_dict(load_results(folder)["provenance"]["preset"])
-    diff = differences(stored, with_overrides(TEN_ROUTES, list(ablation.overrides)))
+    wanted = with_overrides(BASES[ablation.base], list(ablation.overrides))
+    diff = differences(stored, wanted)
     if diff:
-        raise ValueError(f"{folder}: its settings are not ten-routes with {ablation.overrides}: {diff}")
+        raise ValueError(f"{folder}: its settings are not {ablation.base} with {ablation.overrides}: {diff}")
 
 
 @dataclass(frozen=True)
@@ -126,7 +153,7 @@ def departure_rows(results, ablations: tuple[Ablation, ...] = ABLATIONS) -> list
     rows = []
     for a in ablations:
         check_ablation(results, a)
-        first, second = results / a.other, results / "ablations" / a.folder
+        first, second = results / a.other, results / a.folder
         if a.first:
             first, second = second, first
         shared = [m for m in ("bc", "ibc", "da-ibc") if _has(first, m) and _has(second, m)]

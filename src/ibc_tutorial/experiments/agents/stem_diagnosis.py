@@ -4,6 +4,8 @@
 - ``stem_crossings``: from ``evaluate --crossings`` files (``FOLDER/crossings/<method>-seed<k>.json``), every
   crossing from a stem of town02 by how it ended (a completed left or right turn, or the episode's end), with
   the most leftward and most rightward steering applied in it, and where each ended episode ended;
+- ``episode_agreement``: how many of the episodes driven again are the table's, row for row (a CPU other
+  than the one that trained the agents may drive some of them a few metres otherwise);
 - ``ended_energies``: in the crossings that ended an episode, the energy over steering the crossings file
   kept at every state, with where its lowest point lies and what steering as far as a turn costs;
 - ``change_counts``: a method's exits at the stems (``claims.stem_counts``) in several stem analyses, one per
@@ -43,24 +45,47 @@ class StemCrossings:
     """``{where: episodes}`` for each of ``WHERE``: the episodes that ended in a building or off the road."""
 
 
-def _crossings_file(folder: Path, method: str, seed: int) -> dict:
-    path = folder / "crossings" / f"{method}-seed{seed}.json"
+def _episode_rows(path: Path, folder: Path, method: str, seed: int) -> tuple[dict, list, list]:
+    """The crossings file, its episodes without their crossings, and the table's episodes."""
     ev = json.loads(path.read_text())
     table = read_final_eval(run_dir(folder, method, seed) / "final_eval.json")["episodes"]
     drove = [{k: v for k, v in e.items() if k != "junction_crossings"} for e in ev["episodes"]]
-    if drove != table:
+    return ev, drove, table
+
+
+def _crossings_file(folder: Path, method: str, seed: int, same_episodes: bool = True) -> dict:
+    path = folder / "crossings" / f"{method}-seed{seed}.json"
+    ev, drove, table = _episode_rows(path, folder, method, seed)
+    if same_episodes and drove != table:
         raise ValueError(f"{path} did not drive the episodes of the table's final_eval.json again")
+    if [e["seed"] for e in drove] != [e["seed"] for e in table]:
+        raise ValueError(f"{path} did not drive from the starts of the table's final_eval.json")
     return ev
 
 
-def stem_crossings(folder, method: str, seeds) -> StemCrossings:
-    """``StemCrossings`` of ``method``'s agents ``seeds`` in ``folder`` (a replication with ``crossings/``);
-    ValueError if a crossings file's episodes are not the table's (the episode rows must be identical)."""
+def episode_agreement(folder, method: str, seeds) -> tuple[int, int]:
+    """(identical, all): how many episodes of ``method``'s crossings files in ``folder`` are the table's
+    row for row (score, distance, lights, ending), of all those driven again; ValueError if a file drove
+    from other starts than its table."""
+    folder, same, total = Path(folder), 0, 0
+    for s in seeds:
+        _crossings_file(folder, method, s, same_episodes=False)  # the starts must be the table's
+        _, drove, table = _episode_rows(folder / "crossings" / f"{method}-seed{s}.json", folder, method, s)
+        same += sum(a == b for a, b in zip(drove, table, strict=True))
+        total += len(table)
+    return same, total
+
+
+def stem_crossings(folder, method: str, seeds, same_episodes: bool = True) -> StemCrossings:
+    """``StemCrossings`` of ``method``'s agents ``seeds`` in ``folder`` (a replication with ``crossings/``).
+    With ``same_episodes`` (the default), ValueError if a crossings file's episodes are not the table's, row
+    for row; with ``same_episodes=False``, only the starts must be the table's (``episode_agreement`` counts
+    the rows that agree)."""
     folder, stems = Path(folder), stem_approaches("town02")
     steering: dict[str, list] = {k: [] for k in KINDS}
     ends = dict.fromkeys(WHERE, 0)
     for s in seeds:
-        for e in _crossings_file(folder, method, s)["episodes"]:
+        for e in _crossings_file(folder, method, s, same_episodes)["episodes"]:
             crossed = e["junction_crossings"]
             for c in crossed:
                 if c["finished"] and c["approach"] in stems:
@@ -94,14 +119,17 @@ class EndedCrossing:
     """The least energy, over the states, of steering as far as a left turn and as far as a right turn."""
 
 
-def ended_energies(folder, method: str, seeds, left_turn: float, right_turn: float) -> list[EndedCrossing]:
+def ended_energies(
+    folder, method: str, seeds, left_turn: float, right_turn: float, same_episodes: bool = True
+) -> list[EndedCrossing]:
     """Every crossing of ``method``'s agents whose energies the crossings files kept (those that ended an
-    episode); "a turn" is steering at or left of ``left_turn``, at or right of ``right_turn``."""
+    episode); "a turn" is steering at or left of ``left_turn``, at or right of ``right_turn``;
+    ``same_episodes`` as in ``stem_crossings``."""
     if not left_turn < 0 < right_turn:
         raise ValueError(f"left_turn must be < 0 < right_turn, got {left_turn}, {right_turn}")
     out = []
     for s in seeds:
-        ev = _crossings_file(Path(folder), method, s)
+        ev = _crossings_file(Path(folder), method, s, same_episodes)
         steer = np.array(ev.get("energy_steer_grid", []), dtype=float)  # (G,)
         for e in ev["episodes"]:
             for c in e["junction_crossings"]:
