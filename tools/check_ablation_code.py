@@ -16,7 +16,8 @@ and compares the two bit for bit: the training loss at that epoch and every epis
 on the machine its provenance names. A folder made with the checked code needs no second run
 (``--skip-old`` for those).
 
-    ATEN_CPU_CAPABILITY=avx2 python tools/check_ablation_code.py --out book/results/ablations/code_check.json \
+    ATEN_CPU_CAPABILITY=avx2 python tools/check_ablation_code.py \
+        --out book/results/ablations/code_check.json \
         --skip-old ablations/no-held-brakes ablations/intensity-lights ablations/constant-schedule
 
 About 2 minutes of one core per run (two at a time); the worktrees are removed afterwards.

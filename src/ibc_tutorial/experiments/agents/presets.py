@@ -341,10 +341,10 @@ given for reference."""
 
 LAPTOP = Preset(
     name="laptop",
-    routes=20,  # twice the paper's 10: more stems seen taken both ways (chapter 08's more-routes ablation)
+    routes=20,  # twice the paper's 10: more stems seen taken both ways; higher scores (chapter 08)
     brake_noise=1.0,  # held brakes while collecting: the data show the car leaving from rest (chapter 08)
     bev_size=64,  # 9x fewer pixels than 192; the same 5 channels and field of view (OR-pooled)
-    light_encoding="flag",  # the paper's one bit: DA-IBC drives better with it, BC cannot tell (ch. 08)
+    light_encoding="flag",  # the paper's one bit; against intensities, chapter 08 cannot tell them apart
     cnn_channels=(16, 32, 32, 64),  # a small CNN: 64 -> 4 x 4 x 64 after four stride-2 convolutions
     embed_dim=256,  # as the paper: 256-d BEV and 256-d state embeddings
     head_hidden=128,  # the energy head runs N_neg times per sample and N_samples times per decision
@@ -390,8 +390,10 @@ TEN_ROUTES = replace(
     seeds=(0, 1, 2, 3, 4),
 )
 """The laptop preset with the paper's 10 demonstration routes and 8 epochs (as many gradient steps),
-five agents per method. Its replication (``book/results/ten-routes``) is the base of chapter 08's
-ablations, each a ``--set`` change of it, and chapter 12 reads its agents at the stems of the T-junctions."""
+five agents per method: ``laptop`` with ``--set collect.routes=10 --set epochs=8 --set seeds=0,1,2,3,4``.
+Its replication (``book/results/ten-routes``) is a row of chapter 08's table of departures and the base
+of two more (the epochs alone, the expert's turns begun together); chapter 12 reads its agents at the
+stems of the T-junctions as one of five changes."""
 
 TINY = Preset(
     name="tiny",
