@@ -25,7 +25,6 @@ from ibc_tutorial.experiments.agents.replication_folder import collect_results, 
 from ibc_tutorial.experiments.runs import machine
 
 SHIPPED = Path(__file__).resolve().parents[1] / "book" / "results" / "laptop"
-PREVIOUS = SHIPPED.parent / "ten-routes"  # the replication of TEN_ROUTES, chapter 08's diagnosis
 
 
 @pytest.fixture
@@ -168,12 +167,10 @@ def test_the_shipped_route_drives_cover_every_shipped_agent_from_a_clean_ancesto
 
 
 def test_the_shipped_crossings_are_clean_runs_of_an_ancestor_commit():
-    """Chapter 08's ``evaluate --crossings`` files: one per agent of the previous laptop replication, each
-    from a clean ancestor commit."""
-    files = sorted((PREVIOUS / "crossings").glob("*.json"))
-    if not files:
-        pytest.skip("no shipped crossings")
-    assert [f.name for f in files] == sorted(f"{m}-seed{s}.json" for m in METHODS for s in TEN_ROUTES.seeds)
+    """Chapter 12's ``evaluate --crossings`` files: one per agent of the laptop replication, each from a
+    clean ancestor commit."""
+    files = sorted((SHIPPED / "crossings").glob("*.json"))
+    assert [f.name for f in files] == sorted(f"{m}-seed{s}.json" for m in METHODS for s in LAPTOP.seeds)
     root = SHIPPED.parents[2]
     for f in files:
         commit = json.loads(f.read_text())["commit"]
