@@ -27,10 +27,10 @@ def test_format_readings_table_counts_two_valleys_and_averages_left_mass():
     assert len(lines) == 2 and lines[0].split()[:2] == ["method", "state"]
     assert lines[1].split()[:4] == [
         "IBC",
-        "8m",
+        "7.5m",
         "1/2",
         "two;",
-    ]  # 7.5 m printed to the metre, as the chapter does
+    ]  # the distance asked for, as given
     assert lines[1].count("left 0.30") == 4 and lines[1].count("0/2 two") == 3
 
 

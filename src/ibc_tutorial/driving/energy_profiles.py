@@ -102,8 +102,8 @@ def valleys(steer, energy, depth: float = DEPTH, barrier: float = BARRIER) -> li
 
 def read_profile(steer, low, marg) -> dict:
     """The one reading of an energy over steering at a state, used by every chapter that reads one (the stem
-    analysis of chapters 08-09, the command readings of chapter 11, the forks and stem approaches of chapter
-    12).
+    analysis of chapters 09 and 12, the command readings of chapter 11, the forks and stem approaches of
+    chapter 12).
 
     ``steer`` (G,) the grid's steering values (straight exactly 0: ``optimizers.grid.symmetric_axis``),
     ``low`` (G,) the lowest energy over acceleration at each (``steering_profile``) and ``marg`` (G,) the

@@ -99,7 +99,7 @@ def format_readings_table(readings: dict, methods, seeds, distances, label: dict
                 v = [readings[m, s, k, c]["valleys"] for s in seeds]
                 lm = np.mean([readings[m, s, k, c]["left_mass"] for s in seeds])
                 cells.append(f"{sum(x >= 2 for x in v)}/{len(v)} two; left {lm:4.2f}")
-            lines.append(f"{label[m]:>7} {d:5.0f}m " + " ".join(f"{x:>22}" for x in cells))
+            lines.append(f"{label[m]:>7} {f'{d:g}m':>6} " + " ".join(f"{x:>22}" for x in cells))
     return "\n".join(lines)
 
 
@@ -130,5 +130,5 @@ def format_beta_table(readings: dict, seeds, distances) -> str:
             rs = [readings["bc", s, k, c] for s in seeds]
             shapes = "/".join(sorted({r["shape"] for r in rs}))
             cells.append(f"mean {np.mean([r['mean'] for r in rs]):+.2f}, {shapes}")
-        lines.append(f"{d:5.0f}m " + " ".join(f"{x:>30}" for x in cells))
+        lines.append(f"{f'{d:g}m':>6} " + " ".join(f"{x:>30}" for x in cells))
     return "\n".join(lines)
