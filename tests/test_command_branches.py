@@ -117,16 +117,21 @@ def test_heldout_routes_are_drawn_from_their_seed_and_are_legal():
         heldout_routes(0, 0)
 
 
+def _folder_with_one_bc_agent(folder, preset, seed):
+    """A replication-like folder holding one untrained BC agent, ``runs/bc/seed0/final.pt``."""
+    (folder / "runs" / "bc" / "seed0").mkdir(parents=True)
+    torch.manual_seed(0)
+    agent = Agent("bc", build_network("bc", preset), preset, torch.rand(20, 2) * 2 - 1)
+    save_checkpoint(
+        folder / "runs" / "bc" / "seed0" / "final.pt", agent, data_sha256="0" * 64, epoch=1, seed=seed
+    )
+    return folder
+
+
 def test_route_drives_on_heldout_routes_record_their_protocol(tmp_path):
     from ibc_tutorial.experiments.agents.route_study import load_route_drives, run_route_drives
 
-    folder = tmp_path / "cmd"
-    (folder / "runs" / "bc" / "seed0").mkdir(parents=True)
-    torch.manual_seed(0)
-    agent = Agent("bc", build_network("bc", BRANCHED), BRANCHED, torch.rand(20, 2) * 2 - 1)
-    save_checkpoint(
-        folder / "runs" / "bc" / "seed0" / "final.pt", agent, data_sha256="0" * 64, epoch=1, seed=0
-    )
+    folder = _folder_with_one_bc_agent(tmp_path / "cmd", BRANCHED, seed=0)
     out = tmp_path / "out"
     run_route_drives(folder, out, log=None, max_steps=3, heldout_seed=5, heldout_count=2, only=["bc-seed0"])
     rows = load_route_drives(out)["bc-seed0"]["episodes"]
@@ -142,13 +147,7 @@ def test_start_drives_resume_and_record_their_protocol(tmp_path):
     from ibc_tutorial.experiments.agents.evaluate import episode_rows, evaluate_agent
     from ibc_tutorial.experiments.agents.start_study import load_start_drives, run_start_drives
 
-    folder = tmp_path / "rep"
-    (folder / "runs" / "bc" / "seed0").mkdir(parents=True)
-    torch.manual_seed(0)
-    agent = Agent("bc", build_network("bc", TINY), TINY, torch.rand(20, 2) * 2 - 1)
-    save_checkpoint(
-        folder / "runs" / "bc" / "seed0" / "final.pt", agent, data_sha256="0" * 64, epoch=1, seed=3
-    )
+    folder = _folder_with_one_bc_agent(tmp_path / "rep", TINY, seed=3)
     out = tmp_path / "starts"
     done = run_start_drives(folder, out, seed=500, episodes=2, steps=5, log=None)
     assert done == ["bc-seed0", "expert"]
