@@ -380,6 +380,25 @@ def compare_few(values_a, values_b, claim: str = "A > B", *, level: float = LEVE
     return Judgement(str(claim), interval, 0.0, verdict(interval, 0.0))
 
 
+VERDICTS = (HOLDS, DOES_NOT_HOLD, EQUIVALENT, CANNOT_TELL)
+"""The four verdicts a claim, or a part of one, gets."""
+
+
+def combine_verdicts(*verdicts: str) -> str:
+    """The verdict of a claim made of several parts (each a verdict of ``VERDICTS``): it holds if every
+    part does, does not hold if one part does not, is equivalent within ±δ if every part is, and else
+    cannot be told."""
+    for v in verdicts:
+        if v not in VERDICTS:
+            raise ValueError(f"verdicts must be one of {', '.join(map(repr, VERDICTS))}, got {v!r}")
+    if DOES_NOT_HOLD in verdicts:
+        return DOES_NOT_HOLD
+    for whole in (HOLDS, EQUIVALENT):
+        if verdicts and all(v == whole for v in verdicts):
+            return whole
+    return CANNOT_TELL
+
+
 # --------------------------------------------------------------------------- the verdict
 def verdict(interval: Interval, threshold: float = 0.0) -> str:
     """The claim "the quantity is above ``threshold``", judged by an interval of it.

@@ -103,22 +103,11 @@ RANGE_KEY = "range_extent"
 
 
 # --------------------------------------------------------------------------- the pieces
-VERDICTS = (stats.HOLDS, stats.DOES_NOT_HOLD, stats.EQUIVALENT, stats.CANNOT_TELL)
+VERDICTS = stats.VERDICTS
 """The four verdicts a claim or a part gets."""
-
-
-def combine(*verdicts: str) -> str:
-    """A claim made of several parts holds if every part does, does not hold if one part does not, is
-    equivalent within ±δ if every part is, else cannot tell."""
-    for v in verdicts:
-        if v not in VERDICTS:
-            raise ValueError(f"verdicts must be one of {', '.join(map(repr, VERDICTS))}, got {v!r}")
-    if stats.DOES_NOT_HOLD in verdicts:
-        return stats.DOES_NOT_HOLD
-    for whole in (stats.HOLDS, stats.EQUIVALENT):
-        if verdicts and all(v == whole for v in verdicts):
-            return whole
-    return stats.CANNOT_TELL
+combine = stats.combine_verdicts
+"""A claim of several parts: holds if every part does, does not hold if one part does not, equivalent
+within ±δ if every part is, else cannot tell (``stats.combine_verdicts``)."""
 
 
 def stem_files(folder) -> dict[str, dict]:
