@@ -68,3 +68,34 @@ def test_bad_config_and_arguments_raise():
             .sum()
         )
     )
+
+
+def test_expert_energy_is_minus_the_log_density_and_floored():
+    world = JunctionWorld(JunctionConfig(expert_noise=0.05))
+    y = torch.rand(1, 50, 2) * 2 - 1  # (1, N, 2)
+    for x in ([0.1, 0.0, 0.0, 0.5], [0.0, 1.0, 0.0, 0.5], [0.0, 0.0, 1.0, 0.8]):
+        obs = torch.tensor([x])
+        exact = world.log_density(obs.expand(50, 4), y[0])  # (N,)
+        assert torch.allclose(-world.expert_energy(obs)(y)[0], exact, atol=1e-3)
+        floored = world.expert_energy(obs, 0.01)(y)[0]
+        assert torch.allclose(floored, -torch.log(exact.exp() + 0.01), atol=1e-4)
+        assert float(floored.max()) <= -math.log(0.01) + 1e-6  # the floor caps the energy
+    with pytest.raises(ValueError, match="floor must be"):
+        world.expert_energy(torch.tensor([[0.0, 1.0, 0.0, 0.5]]), -1.0)
+    with pytest.raises(ValueError, match="obs must"):
+        world.expert_energy(torch.zeros(2, 4))
+
+
+def test_hits_counts_actions_near_each_valid_action():
+    world = JunctionWorld()
+    junction = torch.tensor([[0.0, 1.0, 0.0, 0.5]])
+    modes, _ = world.modes(junction)  # (1, 3, 2): left, straight, right
+    actions = torch.cat([modes[0, [0, 0, 2]], torch.tensor([[0.35, -0.9]])])  # 2 left, 1 right, 1 far
+    share, per_mode = world.hits(actions, junction)
+    assert share == 0.75 and per_mode.tolist() == [0.5, 0.0, 0.25]
+    cruise = torch.tensor([[0.0, 0.0, 0.0, 0.5]])  # one valid action: turning is no hit there
+    assert world.hits(modes[0, [0, 2]], cruise)[0] == 0.0
+    with pytest.raises(ValueError, match="radius must be"):
+        world.hits(actions, junction, radius=0)
+    with pytest.raises(ValueError, match="actions must"):
+        world.hits(torch.zeros(3), junction)

@@ -26,6 +26,7 @@ dimension, so the expert's conditional density p(y|x) is a known mixture of Gaus
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import torch
@@ -109,6 +110,48 @@ class JunctionWorld:
         log_n = -0.5 * sq / s**2 - math.log(2 * math.pi * s**2)  # (B, 3)
         log_w = torch.where(valid, -torch.log(valid.sum(1, keepdim=True).float()), torch.tensor(-math.inf))
         return torch.logsumexp(log_n + log_w, dim=1)
+
+    def expert_energy(self, obs: torch.Tensor, floor: float = 0.0) -> Callable[[torch.Tensor], torch.Tensor]:
+        """The expert's own density at one observation as an energy, E(y) = −log(p(y|x) + ``floor``)
+        (chapter 06): ``obs`` (1, 4) -> a function (B, N, 2) -> (B, N).
+
+        With ``floor`` = 0 it is −``log_density``; a ``floor`` > 0 makes the landscape flat away from the
+        valid actions, with narrow valleys at them: the hard case for DFO.
+        """
+        check_tensor("obs", obs, shape=(1, self.obs_dim))
+        floor = float(floor)
+        if not (math.isfinite(floor) and floor >= 0):
+            raise ValueError(f"floor must be a finite number >= 0, got {floor!r}")
+        modes, valid = self.modes(obs)  # (1, 3, 2) the valid actions, (1, 3) which are valid
+        s = self.config.expert_noise
+        log_w = torch.log(
+            valid[0].float() / valid.sum()
+        )  # (3,): equal shares of the valid actions, −inf else
+
+        def energy(y: torch.Tensor) -> torch.Tensor:
+            sq = ((y[..., None, :] - modes[0]) ** 2).sum(-1)  # (B, N, 3)
+            log_terms = log_w - sq / (2 * s**2) - math.log(2 * math.pi * s**2)  # (B, N, 3): the mixture
+            if floor == 0:
+                return -torch.logsumexp(log_terms, dim=-1)  # (B, N)
+            return -torch.log(log_terms.exp().sum(-1) + floor)  # (B, N)
+
+        return energy
+
+    def hits(
+        self, actions: torch.Tensor, obs: torch.Tensor, radius: float = 0.15
+    ) -> tuple[float, torch.Tensor]:
+        """Of ``actions`` (B, 2) taken at one observation ``obs`` (1, 4): the share within ``radius`` of a
+        valid action, and (3,) the share near each valid action (left, straight, right; chapter 06)."""
+        check_tensor("actions", actions, shape=(None, self.action_dim))
+        check_tensor("obs", obs, shape=(1, self.obs_dim))
+        if not (math.isfinite(radius) and radius > 0):
+            raise ValueError(f"radius must be a finite number > 0, got {radius!r}")
+        modes, valid = self.modes(obs)  # (1, 3, 2), (1, 3)
+        d = (actions[:, None, :] - modes[0][None]).norm(dim=-1)  # (B, 3)
+        d = d.masked_fill(~valid[0][None], math.inf)
+        near = d.min(1).values < radius  # (B,)
+        per_mode = torch.bincount(d.argmin(1)[near], minlength=3).float() / len(actions)  # (3,)
+        return float(near.float().mean()), per_mode
 
     def sample(self, n: int, generator: torch.Generator) -> dict[str, torch.Tensor]:
         """n observations with expert actions: {obs (n, 4), actions (n, 2), situation (n,) int64}."""
