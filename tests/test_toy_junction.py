@@ -82,6 +82,8 @@ def test_expert_energy_is_minus_the_log_density_and_floored():
         assert float(floored.max()) <= -math.log(0.01) + 1e-6  # the floor caps the energy
     with pytest.raises(ValueError, match="floor must be"):
         world.expert_energy(torch.tensor([[0.0, 1.0, 0.0, 0.5]]), -1.0)
+    with pytest.raises(ValueError, match="floor must be"):
+        world.expert_energy(torch.tensor([[0.0, 1.0, 0.0, 0.5]]), "a little")
     with pytest.raises(ValueError, match="obs must"):
         world.expert_energy(torch.zeros(2, 4))
 

@@ -31,7 +31,13 @@ from dataclasses import dataclass
 
 import torch
 
-from ibc_tutorial.utils import check_int, check_positive_fields, check_probability, check_tensor
+from ibc_tutorial.utils import (
+    check_int,
+    check_positive,
+    check_positive_fields,
+    check_probability,
+    check_tensor,
+)
 
 SITUATIONS = ("cruise", "junction", "red light")
 """Names of the situations, indexed by ``JunctionWorld.sample(...)["situation"]``."""
@@ -119,14 +125,11 @@ class JunctionWorld:
         valid actions, with narrow valleys at them: the hard case for DFO.
         """
         check_tensor("obs", obs, shape=(1, self.obs_dim))
-        floor = float(floor)
-        if not (math.isfinite(floor) and floor >= 0):
-            raise ValueError(f"floor must be a finite number >= 0, got {floor!r}")
+        floor = check_positive("floor", floor, allow_zero=True)
         modes, valid = self.modes(obs)  # (1, 3, 2) the valid actions, (1, 3) which are valid
         s = self.config.expert_noise
-        log_w = torch.log(
-            valid[0].float() / valid.sum()
-        )  # (3,): equal shares of the valid actions, −inf else
+        # (3,): equal shares of the valid actions, −inf for the others
+        log_w = torch.log(valid[0].float() / valid.sum())
 
         def energy(y: torch.Tensor) -> torch.Tensor:
             sq = ((y[..., None, :] - modes[0]) ** 2).sum(-1)  # (B, N, 3)
@@ -144,8 +147,7 @@ class JunctionWorld:
         valid action, and (3,) the share near each valid action (left, straight, right; chapter 06)."""
         check_tensor("actions", actions, shape=(None, self.action_dim))
         check_tensor("obs", obs, shape=(1, self.obs_dim))
-        if not (math.isfinite(radius) and radius > 0):
-            raise ValueError(f"radius must be a finite number > 0, got {radius!r}")
+        radius = check_positive("radius", radius)
         modes, valid = self.modes(obs)  # (1, 3, 2), (1, 3)
         d = (actions[:, None, :] - modes[0][None]).norm(dim=-1)  # (B, 3)
         d = d.masked_fill(~valid[0][None], math.inf)
